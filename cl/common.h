@@ -1,0 +1,39 @@
+/* common.h: definitions every pyclpt kernel shares.
+ *
+ * Floating-point contraction is off so that the same expression compiles to the
+ * same arithmetic in every kernel: the megakernel and the wavefront stages must
+ * produce bit-identical paths from the same random numbers. */
+#ifndef PYCLPT_COMMON_H
+#define PYCLPT_COMMON_H
+
+#pragma OPENCL FP_CONTRACT OFF
+
+#define PI_F 3.14159265358979323846f
+#define INV_PI_F 0.31830988618379067154f
+#define INV_2PI_F 0.15915494309189533577f
+#define INF_F INFINITY
+
+/* Ray offset from a surface, scaled by the hit point's magnitude. */
+#define RAY_EPS 1e-4f
+
+static inline float3 load3(__global const float* p, int i) {
+    return (float3)(p[3 * i + 0], p[3 * i + 1], p[3 * i + 2]);
+}
+
+static inline void store3(__global float* p, int i, float3 v) {
+    p[3 * i + 0] = v.x;
+    p[3 * i + 1] = v.y;
+    p[3 * i + 2] = v.z;
+}
+
+static inline float max3(float3 v) { return fmax(v.x, fmax(v.y, v.z)); }
+
+static inline float luminance(float3 c) {
+    return 0.212671f * c.x + 0.715160f * c.y + 0.072169f * c.z;
+}
+
+static inline bool all_finite3(float3 v) {
+    return isfinite(v.x) && isfinite(v.y) && isfinite(v.z);
+}
+
+#endif

@@ -1,0 +1,37 @@
+"""The megakernel integrator: one work-item runs one whole path (``cl/megakernel.cl``).
+
+The baseline against which the wavefront integrator is measured; it runs the
+same estimator (``cl/path.h``) on the same random numbers.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from .device import Device
+from .film import Film
+from .profile import KernelProfile
+from .program import build_program
+from .scene_buffers import SceneBuffers
+
+
+class Megakernel:
+    name = "megakernel"
+
+    def __init__(self, device: Device, scene: SceneBuffers, film: Film, max_depth: int,
+                 wave_size: int = 1 << 20) -> None:
+        self.device, self.scene, self.film = device, scene, film
+        self.max_depth = max_depth
+        self.wave_size = wave_size
+        self.kernel = build_program(device, ["megakernel.cl"]).megakernel
+        self.profile = KernelProfile()
+
+    def render_frame(self, seed: int, sample: int) -> None:
+        """Render sample ``sample`` of every pixel into the film's frame buffer."""
+        args = self.scene.args(self.film.width, self.film.height)
+        for offset in range(0, self.film.pixels, self.wave_size):
+            count = min(self.wave_size, self.film.pixels - offset)
+            ev = self.kernel(self.device.queue, (count,), None, *args, self.film.frame, self.film.dropped,
+                             np.uint32(seed), np.uint32(sample), np.int32(offset), np.int32(count),
+                             np.int32(self.max_depth))
+            self.profile.record("megakernel", ev)

@@ -1,0 +1,122 @@
+"""Rendering a scene: scene buffers + an integrator + the film, one sample per
+pixel per frame, frames averaged on the device.
+
+Seed contract: the image is a pure function of (scene, seed, spp, max_depth,
+resolution). Sample ``s`` of pixel ``p`` draws its random numbers from the
+counter-based generator keyed by (seed, p, s, bounce, dimension) whatever
+integrator, layout or wave size renders it, so integrators can be compared
+image to image.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from .device import Device, get_device
+from .film import Film
+from .megakernel import Megakernel
+from .program import compile_seconds
+from .scene import Scene
+from .scene_buffers import SceneBuffers
+
+log = logging.getLogger("pyclpt")
+
+INTEGRATORS = ("megakernel", "wavefront")
+LAYOUTS = ("soa", "aos")
+
+
+@dataclass
+class RenderStats:
+    spp: int = 0
+    seconds: float = 0.0  # device + host time of the frames, compile and scene setup excluded
+    compile_seconds: float = 0.0
+    setup_seconds: float = 0.0  # scene packing (BVH build or cache load) and upload
+    dropped_samples: int = 0  # NaN/inf samples dropped
+    kernels: list[dict] = field(default_factory=list)
+    bounces: list[dict] = field(default_factory=list)
+
+
+class Renderer:
+    """A scene prepared on a device for one integrator and resolution."""
+
+    def __init__(self, scene: Scene, *, integrator: str = "megakernel", layout: str = "soa",
+                 max_depth: int | None = None, width: int | None = None, height: int | None = None,
+                 device: Device | str | None = None, wave_size: int | None = None) -> None:
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+        if layout not in LAYOUTS:
+            raise ValueError(f"unknown layout {layout!r} (choose from {', '.join(LAYOUTS)})")
+        self.scene = scene
+        self.device = get_device(device)
+        self.max_depth = scene.max_depth if max_depth is None else int(max_depth)
+        if self.max_depth < -1:
+            raise ValueError(f"max_depth must be -1 (unlimited) or >= 0, got {self.max_depth}")
+        self.width = int(width or scene.film.width)
+        self.height = int(height or scene.film.height)
+        if not (0 < self.width <= 65536 and 0 < self.height <= 65536):
+            raise ValueError(f"resolution must be 1..65536 pixels a side, got {self.width}x{self.height}")
+        self.stats = RenderStats()
+        t0, c0 = time.perf_counter(), compile_seconds()
+        self.scene_buffers = SceneBuffers(scene, self.device)
+        self.film = Film(self.device, self.width, self.height)
+        if integrator == "megakernel":
+            self.integrator = Megakernel(self.device, self.scene_buffers, self.film, self.max_depth,
+                                         **({"wave_size": wave_size} if wave_size else {}))
+        else:
+            from .wavefront import Wavefront
+
+            self.integrator = Wavefront(self.device, self.scene_buffers, self.film, self.max_depth,
+                                        layout=layout, **({"wave_size": wave_size} if wave_size else {}))
+        self.device.queue.finish()
+        self.stats.compile_seconds = compile_seconds() - c0
+        self.stats.setup_seconds = time.perf_counter() - t0 - self.stats.compile_seconds
+
+    def render(self, spp: int, seed: int = 0, progress: bool | None = None, first_sample: int = 0) -> np.ndarray:
+        """Average of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float32."""
+        if int(spp) < 1:
+            raise ValueError(f"spp must be >= 1, got {spp}")
+        if not 0 <= int(seed) < 2**32:
+            raise ValueError(f"seed must be in [0, 2**32), got {seed}")
+        self.film.clear()
+        self.integrator.profile.clear()
+        start = time.perf_counter()
+        bar = tqdm(total=spp, desc=f"{self.scene.name} {self.integrator.name}", unit="spp",
+                   disable=(progress is False), delay=0 if progress else 3.0, leave=False)
+        with bar:
+            for s in range(first_sample, first_sample + spp):
+                self.integrator.render_frame(int(seed), s)
+                self.film.add_frame()
+                if progress is not False:
+                    self.device.queue.finish()
+                    bar.update(1)
+        image = self.film.image()
+        self.stats.spp = spp
+        self.stats.seconds = time.perf_counter() - start
+        self.stats.dropped_samples = self.film.dropped_samples()
+        self.stats.kernels = self.integrator.profile.table()
+        self.stats.bounces = getattr(self.integrator, "bounce_stats", lambda: [])()
+        if self.stats.dropped_samples:
+            log.warning("%s: dropped %d NaN/inf samples", self.scene.name, self.stats.dropped_samples)
+        return image
+
+
+def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = None, seed: int = 0,
+           integrator: str = "megakernel", width: int | None = None, height: int | None = None,
+           device: Device | str | None = None, layout: str = "soa", progress: bool | None = None,
+           wave_size: int | None = None) -> np.ndarray:
+    """Render ``scene`` (a Scene or a built-in scene name / file) to a (H, W, 3) float32 linear image.
+
+    ``spp`` and ``max_depth`` default to the scene's; ``width``/``height`` override its film.
+    ``progress``: True shows a bar, False never, None shows one on renders longer than a few seconds.
+    """
+    if isinstance(scene, str):
+        from .scene_library import load
+
+        scene = load(scene)
+    r = Renderer(scene, integrator=integrator, layout=layout, max_depth=max_depth, width=width,
+                 height=height, device=device, wave_size=wave_size)
+    return r.render(scene.spp if spp is None else spp, seed=seed, progress=progress)
