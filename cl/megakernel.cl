@@ -15,7 +15,7 @@ __kernel void megakernel(SCENE_PARAMS, __global float* frame, volatile __global 
     int pixel = pixel_offset + i;
     RngKey key = rng_key(seed, (uint)pixel, sample);
     PathState ps;
-    path_init(&sc, key, pixel, &ps);
+    camera_path(&sc, key, pixel, &ps);
     if (max_depth != 0) {
         for (;;) {
             Hit hit;

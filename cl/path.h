@@ -44,7 +44,7 @@ typedef struct {
 static inline bool depth_allows(int depth, int max_depth) { return max_depth < 0 || depth < max_depth; }
 
 /* path init: the camera ray of (pixel, sample) with a jittered position in the pixel. */
-static inline void path_init(const Scene* sc, RngKey key, int pixel, PathState* ps) {
+static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
     __global const float* c = sc->consts;
     int width = (int)c[CONST_WIDTH], height = (int)c[CONST_HEIGHT];
     int px = pixel % width, py = pixel / width;

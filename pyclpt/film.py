@@ -23,7 +23,7 @@ class Film:
         self.frame = alloc(device, 4 * n, f"frame buffer {width}x{height}")
         self.sum = alloc(device, 4 * n, f"film {width}x{height}")
         self.dropped = alloc(device, 4, "dropped-sample counter")
-        self._accumulate = build_program(device, ["accumulate.cl"]).accumulate
+        self._accumulate = cl.Kernel(build_program(device, ["accumulate.cl"]), "accumulate")
         self.frames = 0
         self.clear()
 
@@ -37,7 +37,12 @@ class Film:
     def add_frame(self) -> cl.Event:
         n = self.pixels * 3
         self.frames += 1
-        return self._accumulate(self.device.queue, (n,), None, self.sum, self.frame, np.int32(n))
+        g = -(-n // 64) * 64
+        return self._accumulate(self.device.queue, (g,), (64,), self.sum, self.frame, np.int32(n))
+
+    def warm_up(self) -> None:
+        self._accumulate(self.device.queue, (64,), (64,), self.sum, self.frame, np.int32(0))
+        self.device.queue.finish()
 
     def read_frame(self) -> np.ndarray:
         out = np.empty((self.height, self.width, 3), np.float32)

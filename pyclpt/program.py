@@ -50,17 +50,27 @@ def _display_name(path: Path) -> str:
         return path.as_posix()
 
 
-def assemble(files: Sequence[str] = (), source: str | None = None, source_name: str = "<source>") -> str:
-    """Concatenate ``files`` (names under cl/) and ``source``, resolving includes, with #line markers."""
+def assemble(files: Sequence[str] = (), source: str | None = None, source_name: str = "<source>",
+             generated: Mapping[str, str] | None = None) -> str:
+    """Concatenate ``files`` (names under cl/) and ``source``, resolving includes, with #line markers.
+
+    ``generated`` maps include names to text made by Python (e.g. the path-state accessors);
+    such an include is emitted under the name ``<generated NAME>``."""
     root = cl_dir()
     seen: set[Path] = set()
+    seen_generated: set[str] = set()
     out: list[str] = []
 
     def emit(text: str, name: str, origin: Path | None) -> None:
         out.append(f'#line 1 "{name}"')
         for lineno, line in enumerate(text.splitlines(), start=1):
             m = _INCLUDE.match(line)
-            if m:
+            if m and generated and m.group(1) in generated:
+                if m.group(1) not in seen_generated:
+                    seen_generated.add(m.group(1))
+                    emit(generated[m.group(1)], f"<generated {m.group(1)}>", None)
+                out.append(f'#line {lineno + 1} "{name}"')
+            elif m:
                 base = origin.parent if origin is not None else root
                 inc = (base / m.group(1)).resolve()
                 if not inc.is_file():
@@ -116,13 +126,14 @@ def build_program(
     defines: Mapping[str, object] | None = None,
     options: Iterable[str] = (),
     name: str | None = None,
+    generated: Mapping[str, str] | None = None,
 ) -> cl.Program:
     """Build (or fetch from the device's in-process cache) a program from cl/ files and/or source text.
 
     No fast-math options are ever added here: callers pass the options they need.
     """
     global _compile_seconds
-    text = assemble(files, source, source_name=name or "<source>")
+    text = assemble(files, source, source_name=name or "<source>", generated=generated)
     opts = ["-cl-std=CL1.2", *define_options(defines), *options]
     key = (text, tuple(opts))
     prog = device.programs.get(key)

@@ -19,13 +19,14 @@ from tqdm.auto import tqdm
 from .device import Device, get_device
 from .film import Film
 from .megakernel import Megakernel
-from .program import compile_seconds
 from .scene import Scene
 from .scene_buffers import SceneBuffers
 
 log = logging.getLogger("pyclpt")
 
 INTEGRATORS = ("megakernel", "wavefront")
+# max_depth -1 (unlimited: paths end by Russian roulette) runs as this many bounces at most.
+UNLIMITED_DEPTH = 1024
 LAYOUTS = ("soa", "aos")
 
 
@@ -59,21 +60,27 @@ class Renderer:
         self.height = int(height or scene.film.height)
         if not (0 < self.width <= 65536 and 0 < self.height <= 65536):
             raise ValueError(f"resolution must be 1..65536 pixels a side, got {self.width}x{self.height}")
+        self.depth_limit = UNLIMITED_DEPTH if self.max_depth == -1 else self.max_depth
         self.stats = RenderStats()
-        t0, c0 = time.perf_counter(), compile_seconds()
+        t0 = time.perf_counter()
         self.scene_buffers = SceneBuffers(scene, self.device)
+        self.device.queue.finish()
+        t1 = time.perf_counter()
         self.film = Film(self.device, self.width, self.height)
+        options = {"wave_size": wave_size} if wave_size else {}
         if integrator == "megakernel":
-            self.integrator = Megakernel(self.device, self.scene_buffers, self.film, self.max_depth,
-                                         **({"wave_size": wave_size} if wave_size else {}))
+            self.integrator = Megakernel(self.device, self.scene_buffers, self.film, self.depth_limit, **options)
         else:
             from .wavefront import Wavefront
 
-            self.integrator = Wavefront(self.device, self.scene_buffers, self.film, self.max_depth,
-                                        layout=layout, **({"wave_size": wave_size} if wave_size else {}))
-        self.device.queue.finish()
-        self.stats.compile_seconds = compile_seconds() - c0
-        self.stats.setup_seconds = time.perf_counter() - t0 - self.stats.compile_seconds
+            self.integrator = Wavefront(self.device, self.scene_buffers, self.film, self.depth_limit,
+                                        layout=layout, **options)
+        self.integrator.warm_up()
+        self.film.warm_up()
+        # setup: scene packing (BVH build or cache load) and upload;
+        # compile: program builds plus the driver's lazy compilation on the first launches
+        self.stats.setup_seconds = t1 - t0
+        self.stats.compile_seconds = time.perf_counter() - t1
 
     def render(self, spp: int, seed: int = 0, progress: bool | None = None, first_sample: int = 0) -> np.ndarray:
         """Average of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float32."""
@@ -83,6 +90,8 @@ class Renderer:
             raise ValueError(f"seed must be in [0, 2**32), got {seed}")
         self.film.clear()
         self.integrator.profile.clear()
+        if hasattr(self.integrator, "reset_stats"):
+            self.integrator.reset_stats()
         start = time.perf_counter()
         bar = tqdm(total=spp, desc=f"{self.scene.name} {self.integrator.name}", unit="spp",
                    disable=(progress is False), delay=0 if progress else 3.0, leave=False)
