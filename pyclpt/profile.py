@@ -9,14 +9,17 @@ import pyopencl as cl
 @dataclass
 class KernelProfile:
     events: dict[str, list[cl.Event]] = field(default_factory=dict)
+    sequence: list[str] = field(default_factory=list)  # kernel names in launch order
     enabled: bool = True
 
     def record(self, name: str, event: cl.Event) -> None:
         if self.enabled:
             self.events.setdefault(name, []).append(event)
+            self.sequence.append(name)
 
     def clear(self) -> None:
         self.events.clear()
+        self.sequence.clear()
 
     def table(self) -> list[dict[str, float | int | str]]:
         """One row per kernel: launches, total_ms, mean_ms, share (of all kernels' time)."""
