@@ -27,7 +27,8 @@ TRI_HAS_UVS = 1 << 25
 
 
 def luminance(c) -> float:
-    return 0.212671 * c[0] + 0.715160 * c[1] + 0.072169 * c[2]
+    r, g, b = (float(x) for x in c)  # in double: radiance near FLT_MAX must not overflow
+    return 0.212671 * r + 0.715160 * g + 0.072169 * b
 
 
 def pack_material(mat: Material) -> np.ndarray:
@@ -105,7 +106,8 @@ def pack_scene(scene: Scene) -> SceneArrays:
     area = 0.5 * np.linalg.norm(np.cross(tris[emissive, 3:6], tris[emissive, 6:9]), axis=1)
     keep = area > 0
     emissive, area = emissive[keep], area[keep]
-    lum = np.array([max(luminance(c), float(np.mean(c))) for c in tri_emission[emissive]], np.float64)
+    em64 = tri_emission[emissive].astype(np.float64)  # double: radiance near FLT_MAX must not overflow
+    lum = np.maximum(em64 @ np.array([0.212671, 0.715160, 0.072169]), em64.mean(axis=1))
     power = list(area * lum)
     bounds = np.stack([P.min(0), P.max(0)])
     env_light = -1
@@ -113,7 +115,7 @@ def pack_scene(scene: Scene) -> SceneArrays:
         radius = 0.5 * float(np.linalg.norm(bounds[1] - bounds[0]))
         env_light = len(emissive)
         power.append(np.pi * np.pi * max(radius, 1e-3) ** 2 *
-                     max(luminance(scene.environment), float(np.mean(scene.environment))))
+                     max(luminance(scene.environment), float(np.mean(scene.environment, dtype=np.float64))))
     power_arr = np.asarray(power, np.float64)
     lights = np.zeros((len(power_arr), LIGHT_STRIDE), np.float32)
     if len(power_arr):

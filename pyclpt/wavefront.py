@@ -29,6 +29,7 @@ QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")  # counter orde
 Q_COUNT = len(QUEUES)
 SCHEDULES = ("readback", "capacity")
 DEFAULT_WAVE_SIZE = 1 << 18
+CAPACITY_CHECK = 4
 
 
 class Wavefront:
@@ -139,7 +140,11 @@ class Wavefront:
                     if rays == 0:
                         break
                 else:
+                    # launch at capacity; kernels read their counts on the device. The host
+                    # looks at the ray count only every CAPACITY_CHECK bounces to stop early.
                     rays = n
+                    if bounce and bounce % CAPACITY_CHECK == 0 and self._read_count(bounce, 0) == 0:
+                        break
                 self.intersect(rays, bounce)
                 self.miss(rays, bounce)
                 self.process_hit(rays, bounce, seed, sample)
