@@ -7,6 +7,7 @@ import logging
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 
 def _positive(text: str) -> int:
@@ -70,6 +71,11 @@ def _cmd_render(a: argparse.Namespace) -> int:
 
     scene = load(a.scene)
     out = a.output or f"{scene.name}.png"
+    # Fail before a possibly long render rather than when writing its result.
+    if not Path(out).suffix:
+        raise ValueError(f"{out}: no file extension to choose the image format from (.exr, .png, .jpg)")
+    if not Path(out).resolve().parent.is_dir():
+        raise OSError(f"{out}: the output folder {Path(out).resolve().parent} does not exist")
     t0 = time.perf_counter()
     r = Renderer(scene, integrator=a.integrator, layout=a.layout, max_depth=a.max_depth,
                  width=a.width, height=a.height, device=a.device)

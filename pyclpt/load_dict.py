@@ -174,37 +174,48 @@ class _Loader:
         kind = d.get("type")
         where = name
         used = {"to_world", "bsdf", "emitter", "flip_normals", "face_normals"}
-        m = tf.from_spec(d.get("to_world"))
+        try:
+            m = tf.from_spec(d.get("to_world"))
+        except (ValueError, KeyError, TypeError) as exc:
+            raise self.fail(f"{where}.to_world", f"bad transform: {exc}") from None
         if kind in shape_lib.SHAPES:
             base = shape_lib.SHAPES[kind]()
             positions, indices, normals, uvs = base.positions, base.indices, base.normals, base.uvs
             if kind == "sphere":
                 used |= {"center", "radius"}
                 r = self.number(d, "radius", 1.0, where)
-                c = np.asarray(d.get("center", (0.0, 0.0, 0.0)), np.float64)
-                m = m @ tf.translate(c) @ tf.scale(r)
+                try:
+                    m = m @ tf.translate(d.get("center", (0.0, 0.0, 0.0))) @ tf.scale(r)
+                except (ValueError, TypeError) as exc:
+                    raise self.fail(f"{where}.center", str(exc)) from None
         elif kind in ("obj", "ply"):
             used |= {"filename"}
             if "filename" not in d:
                 raise self.fail(where, f"{kind} shape needs a filename")
+            mesh_path = self.path(d["filename"], f"{where}.filename")
             try:
-                data = load_mesh(self.path(d["filename"], f"{where}.filename"))
+                data = load_mesh(mesh_path)
             except (OSError, ValueError) as exc:
                 raise self.fail(where, str(exc)) from None
             positions, indices, normals, uvs = data.positions, data.indices, data.normals, data.uvs
         elif kind == "mesh":
             used |= {"positions", "indices", "normals", "uvs"}
+            if "positions" not in d or "indices" not in d:
+                raise self.fail(where, "a mesh shape needs positions and indices")
             positions, indices = d["positions"], d["indices"]
             normals, uvs = d.get("normals"), d.get("uvs")
         else:
             raise self.fail(where, f"unsupported shape type {kind!r} (rectangle, cube, disk, sphere, obj, ply, mesh)")
         self.note_unused(where, d, used)
-        positions = tf.apply_points(m, np.asarray(positions, np.float64))
-        if normals is not None and not d.get("face_normals", False):
-            normals = tf.apply_normals(m, np.asarray(normals, np.float64))
-        else:
-            normals = None
-        indices = np.asarray(indices, np.int32)
+        try:
+            positions = tf.apply_points(m, np.asarray(positions, np.float64).reshape(-1, 3))
+            if normals is not None and not d.get("face_normals", False):
+                normals = tf.apply_normals(m, np.asarray(normals, np.float64).reshape(-1, 3))
+            else:
+                normals = None
+            indices = np.asarray(indices, np.int32).reshape(-1, 3)
+        except (ValueError, TypeError) as exc:
+            raise self.fail(where, f"bad mesh data: {exc}") from None
         if d.get("flip_normals", False):
             indices = indices[:, ::-1].copy()
             if normals is not None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 from .load_dict import SceneDictError, load_dict
@@ -81,6 +82,11 @@ def load(name_or_path: str | os.PathLike) -> Scene:
                 f"scene {name!r} needs files from the shared scene folder (e.g. meshes/bunny.ply), "
                 "which was not found: set PYCLPT_SCENES to it (e.g. ../shared/scenes)")
         d = json.loads(text_d.replace("${PYCLPT_SCENES}", root.as_posix()))
+        for rel in re.findall(r'\$\{PYCLPT_SCENES\}/([^"]*)"', text_d):
+            if not (root / rel).exists():
+                raise FileNotFoundError(
+                    f"scene {name!r} needs {rel} from the shared scene folder, but {root / rel} does not "
+                    f"exist: set PYCLPT_SCENES to the folder holding meshes/ (e.g. ../shared/scenes)")
     scene = load_dict(d, base_dir=path.parent, name=name, origin=str(path))
     scene.source = path
     return scene
