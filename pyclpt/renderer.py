@@ -46,7 +46,8 @@ class Renderer:
 
     def __init__(self, scene: Scene, *, integrator: str = "megakernel", layout: str = "soa",
                  max_depth: int | None = None, width: int | None = None, height: int | None = None,
-                 device: Device | str | None = None, wave_size: int | None = None) -> None:
+                 device: Device | str | None = None, wave_size: int | None = None,
+                 local_size: int | None = None, schedule: str | None = None) -> None:
         if integrator not in INTEGRATORS:
             raise ValueError(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
         if layout not in LAYOUTS:
@@ -67,12 +68,16 @@ class Renderer:
         self.device.queue.finish()
         t1 = time.perf_counter()
         self.film = Film(self.device, self.width, self.height)
-        options = {"wave_size": wave_size} if wave_size else {}
+        options: dict = {"wave_size": wave_size} if wave_size else {}
+        if local_size:
+            options["local_size"] = int(local_size)
         if integrator == "megakernel":
             self.integrator = Megakernel(self.device, self.scene_buffers, self.film, self.depth_limit, **options)
         else:
             from .wavefront import Wavefront
 
+            if schedule:
+                options["schedule"] = schedule
             self.integrator = Wavefront(self.device, self.scene_buffers, self.film, self.depth_limit,
                                         layout=layout, **options)
         self.integrator.warm_up()
