@@ -1,0 +1,203 @@
+"""Time BVH builds (no cache) and device traversal throughput.
+
+    python bench/bvh_build.py                 # bunny + dragon res2, default settings
+    python bench/bvh_build.py --full-dragon   # also the 871k-triangle dragon (once)
+    python bench/bvh_build.py --compare       # several build settings (* = the default)
+    python bench/bvh_build.py --full-dragon --trace-full --meshes ""   # full dragon, traced too
+
+Meshes come from ``$PYCLPT_SCENES/meshes`` (default ``../shared/scenes`` next
+to the repository). Rays: half start on a sphere around the mesh and aim at a
+random point of its bounding box, half start inside the box in a random
+direction; closest-hit and any-hit kernels are timed with OpenCL profiling
+events (second run, so compilation is excluded).
+"""
+from __future__ import annotations
+
+import argparse
+import gzip
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import pyopencl as cl  # noqa: E402
+
+from pyclpt import embree  # noqa: E402
+from pyclpt.bvh import DEFAULT_SETTINGS, BuildSettings, build_bvh  # noqa: E402
+
+KERNELS = r"""
+#include "bvh.h"
+__kernel void closest(__global const float* nodes, __global const float* tris,
+                      __global const float* org, __global const float* dir,
+                      __global float* out_t, __global int* out_prim) {
+    int i = get_global_id(0);
+    Hit h;
+    bool ok = bvh_closest(nodes, tris, load3(org, i), load3(dir, i), INFINITY, &h);
+    out_t[i] = ok ? h.t : -1.0f;
+    out_prim[i] = h.prim;
+}
+__kernel void any_hit(__global const float* nodes, __global const float* tris,
+                  __global const float* org, __global const float* dir,
+                  __global int* out_any) {
+    int i = get_global_id(0);
+    out_any[i] = bvh_any(nodes, tris, load3(org, i), load3(dir, i), INFINITY) ? 1 : 0;
+}
+"""
+
+
+def scenes_dir() -> Path:
+    return Path(os.environ.get("PYCLPT_SCENES", ROOT.parent / "shared" / "scenes"))
+
+
+def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    if path.suffix == ".gz":
+        with gzip.open(path, "rb") as f:
+            mesh = trimesh.load(f, file_type=path.with_suffix("").suffix.lstrip("."), process=False)
+    else:
+        mesh = trimesh.load(path, process=False)
+    return np.asarray(mesh.vertices, dtype=np.float32), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def random_rays(pos: np.ndarray, n: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    lo, hi = pos.min(axis=0), pos.max(axis=0)
+    c, radius = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
+    h = n // 2
+    s = rng.normal(size=(h, 3))
+    o1 = c + 2 * radius * s / np.linalg.norm(s, axis=1, keepdims=True)
+    d1 = lo + rng.random((h, 3)) * (hi - lo) - o1
+    o2 = lo + rng.random((n - h, 3)) * (hi - lo)
+    d2 = rng.normal(size=(n - h, 3))
+    org = np.concatenate([o1, o2]).astype(np.float32)
+    dirs = np.concatenate([d1, d2])
+    dirs = (dirs / np.linalg.norm(dirs, axis=1, keepdims=True)).astype(np.float32)
+    return org, dirs
+
+
+class Tracer:
+    def __init__(self) -> None:
+        try:
+            from pyclpt.device import default_device
+            from pyclpt.program import build_program
+
+            self.dev = default_device()
+            self.ctx, self.queue = self.dev.context, self.dev.queue
+            self.prog = build_program(self.dev, source=KERNELS, name="bench_bvh")
+        except ImportError:
+            plat = next(p for p in cl.get_platforms() if "Portable" in p.name)
+            self.ctx = cl.Context(plat.get_devices())
+            self.queue = cl.CommandQueue(
+                self.ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
+            self.prog = cl.Program(self.ctx, KERNELS).build(
+                options=["-cl-std=CL1.2", "-I", str(ROOT / "cl")])
+
+    def throughput(self, bvh, org: np.ndarray, dirs: np.ndarray, repeats: int = 3):
+        mf = cl.mem_flags
+        ctx, q = self.ctx, self.queue
+        n = org.shape[0]
+        b_nodes = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=bvh.nodes)
+        b_tris = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=bvh.tris)
+        b_org = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=org)
+        b_dir = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=dirs)
+        b_t = cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)
+        b_p = cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)
+        b_a = cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)
+        kc = cl.Kernel(self.prog, "closest")
+        ka = cl.Kernel(self.prog, "any_hit")
+        kc.set_args(b_nodes, b_tris, b_org, b_dir, b_t, b_p)
+        ka.set_args(b_nodes, b_tris, b_org, b_dir, b_a)
+        # Best of `repeats` for wall time (profiling events) and, separately,
+        # for process CPU time (all PoCL threads): on a shared machine the
+        # latter is the steadier comparison.
+        wall = {"c": float("inf"), "a": float("inf")}
+        cpu = dict(wall)
+        for _ in range(repeats):
+            for key, k in (("c", kc), ("a", ka)):
+                c0 = time.process_time()
+                ev = cl.enqueue_nd_range_kernel(q, k, (n,), None)
+                ev.wait()
+                cpu[key] = min(cpu[key], time.process_time() - c0)
+                wall[key] = min(wall[key], (ev.profile.end - ev.profile.start) * 1e-9)
+        prim = np.empty(n, np.int32)
+        cl.enqueue_copy(q, prim, b_p).wait()
+        mr = {k: n / v / 1e6 for k, v in wall.items()}
+        mc = {k: n / v / 1e6 for k, v in cpu.items()}
+        return mr["c"], mr["a"], mc["c"], mc["a"], float((prim >= 0).mean())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--full-dragon", action="store_true", help="also build the 871k-triangle dragon")
+    ap.add_argument("--compare", action="store_true", help="compare build settings")
+    ap.add_argument("--trace-full", action="store_true", help="also trace rays against the full dragon")
+    ap.add_argument("--rays", type=int, default=400_000)
+    ap.add_argument("--meshes", default="bunny.ply,dragon_vrip_res2.ply.gz")
+    a = ap.parse_args()
+
+    meshes = [scenes_dir() / "meshes" / m for m in a.meshes.split(",") if m]
+    if a.full_dragon:
+        meshes.append(scenes_dir() / "meshes" / "dragon_vrip.ply.gz")
+    meshes = [m for m in meshes if m.is_file()]
+    if not meshes:
+        sys.exit(f"no meshes under {scenes_dir() / 'meshes'}")
+
+    if a.compare:
+        M, LOW = embree.RTC_BUILD_QUALITY_MEDIUM, embree.RTC_BUILD_QUALITY_LOW
+        # name: (quality, min leaf, max leaf, traversal cost, intersection cost)
+        settings = {
+            "MED 1-2 1/1": BuildSettings(M, 1, 2, 1.0, 1.0),
+            "MED 1-4 1/1": BuildSettings(M, 1, 4, 1.0, 1.0),
+            "MED 1-8 1/1": BuildSettings(M, 1, 8, 1.0, 1.0),
+            "MED 4-8 1/1": BuildSettings(M, 4, 8, 1.0, 1.0),
+            "MED 1-16 1/0.5": BuildSettings(M, 1, 16, 1.0, 0.5),
+            "MED 1-16 1/0.35": BuildSettings(M, 1, 16, 1.0, 0.35),
+            "MED 1-16 1/0.25": BuildSettings(M, 1, 16, 1.0, 0.25),
+            "MED 1-31 1/0.1": BuildSettings(M, 1, 31, 1.0, 0.1),
+            "LOW 1-8 1/1": BuildSettings(LOW, 1, 8, 1.0, 1.0),
+        }
+        settings = {(f"{k} *" if v == DEFAULT_SETTINGS else k): v for k, v in settings.items()}
+    else:
+        settings = {"default": DEFAULT_SETTINGS}
+
+    tracer = Tracer()
+    print(f"embree: {embree.library_path()}")
+    print("build s: wall, cpu-s: process CPU time of the (single-threaded) build; Mr/s: million\n"
+          "rays per second (wall); Mr/cpu-s: per CPU-second of all PoCL threads")
+    print(f"{'mesh':24s} {'setting':18s} {'tris':>7s} {'build s':>7s} {'cpu-s':>6s} {'nodes':>7s} "
+          f"{'leaf':>5s} {'closest Mr/s':>12s} {'any Mr/s':>8s} "
+          f"{'closest Mr/cpu-s':>16s} {'any Mr/cpu-s':>12s} {'hit %':>5s}")
+    for path in meshes:
+        t0 = time.perf_counter()
+        pos, idx = load_mesh(path)
+        load_s = time.perf_counter() - t0
+        full = "dragon_vrip.ply" in path.name
+        org, dirs = random_rays(pos, a.rays)
+        for name, s in settings.items():
+            if full and s != DEFAULT_SETTINGS:
+                continue
+            c0 = time.process_time()
+            bvh = build_bvh(pos, idx, use_cache=False, settings=s)
+            build_cpu = time.process_time() - c0
+            links = bvh.nodes.view(np.int32)[:, 12:14].ravel()
+            leaves = links[links < 0]
+            counts = leaves & 31
+            avg_leaf = counts[counts > 0].mean()
+            if full and not a.trace_full:
+                c = an = cc = ac = hit = float("nan")
+            else:
+                c, an, cc, ac, hit = tracer.throughput(bvh, org, dirs)
+            print(f"{path.name:24s} {name:18s} {len(idx):7d} {bvh.build_seconds:7.2f} {build_cpu:6.2f} "
+                  f"{bvh.node_count:7d} {avg_leaf:5.2f} {c:12.2f} {an:8.2f} "
+                  f"{cc:16.2f} {ac:12.2f} {100 * hit:5.1f}", flush=True)
+        print(f"  (mesh load {load_s:.2f} s)")
+
+
+if __name__ == "__main__":
+    main()

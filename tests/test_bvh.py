@@ -1,0 +1,439 @@
+"""BVH build (pyclpt/bvh.py via Embree) and traversal (cl/bvh.h) against Embree's own ray queries."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pyclpt.bvh import EMPTY_LINK, FlatBVH, build_bvh
+
+pyopencl = pytest.importorskip("pyopencl")
+rtcs = pytest.importorskip("embreex.rtcore_scene")
+from embreex.mesh_construction import TriangleMesh  # noqa: E402
+
+N_RAYS = 100_000
+AGREE = 0.9999
+
+KERNELS = r"""
+#include "bvh.h"
+__kernel void trace_closest(__global const float* nodes, __global const float* tris,
+                            __global const float* org, __global const float* dir, float tmax,
+                            __global float* out_tuv, __global int* out_prim) {
+    int i = get_global_id(0);
+    Hit h;
+    bool ok = bvh_closest(nodes, tris, load3(org, i), load3(dir, i), tmax, &h);
+    out_tuv[3 * i + 0] = h.t;
+    out_tuv[3 * i + 1] = h.u;
+    out_tuv[3 * i + 2] = h.v;
+    out_prim[i] = ok ? h.prim : -2 - h.prim; /* -1 on a consistent miss */
+}
+__kernel void trace_any(__global const float* nodes, __global const float* tris,
+                        __global const float* org, __global const float* dir, float tmax,
+                        __global int* out_any) {
+    int i = get_global_id(0);
+    out_any[i] = bvh_any(nodes, tris, load3(org, i), load3(dir, i), tmax) ? 1 : 0;
+}
+"""
+
+
+def scenes_dir() -> Path:
+    return Path(os.environ.get("PYCLPT_SCENES", Path(__file__).resolve().parents[1].parent / "shared" / "scenes"))
+
+
+# --------------------------------------------------------------------------
+# Fixtures
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _cache_dir(tmp_path_factory):
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PYCLPT_CACHE_DIR", str(tmp_path_factory.mktemp("pyclpt-cache")))
+        yield
+
+
+class Tracer:
+    def __init__(self) -> None:
+        try:
+            from pyclpt.device import default_device
+            from pyclpt.program import build_program
+        except ImportError:  # before the lead's modules exist
+            plat = next(p for p in pyopencl.get_platforms() if "Portable" in p.name)
+            self.ctx = pyopencl.Context(plat.get_devices())
+            self.queue = pyopencl.CommandQueue(self.ctx)
+            cl_dir = Path(__file__).resolve().parents[1] / "cl"
+            self.prog = pyopencl.Program(self.ctx, KERNELS).build(
+                options=["-cl-std=CL1.2", "-I", str(cl_dir)])
+        else:
+            dev = default_device()
+            self.ctx, self.queue = dev.context, dev.queue
+            self.prog = build_program(dev, source=KERNELS, name="test_bvh")
+        self.k_closest = pyopencl.Kernel(self.prog, "trace_closest")
+        self.k_any = pyopencl.Kernel(self.prog, "trace_any")
+
+    def trace(self, bvh: FlatBVH, org: np.ndarray, dirs: np.ndarray, tmax: float = np.inf):
+        mf = pyopencl.mem_flags
+        ctx, q = self.ctx, self.queue
+        n = org.shape[0]
+
+        def ro(a):
+            return pyopencl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+
+        b_nodes, b_tris, b_org, b_dir = ro(bvh.nodes), ro(bvh.tris), ro(org), ro(dirs)
+        tuv = np.empty((n, 3), np.float32)
+        prim = np.empty(n, np.int32)
+        anyhit = np.empty(n, np.int32)
+        b_tuv = pyopencl.Buffer(ctx, mf.WRITE_ONLY, tuv.nbytes)
+        b_prim = pyopencl.Buffer(ctx, mf.WRITE_ONLY, prim.nbytes)
+        b_any = pyopencl.Buffer(ctx, mf.WRITE_ONLY, anyhit.nbytes)
+        t = np.float32(tmax)
+        self.k_closest(q, (n,), None, b_nodes, b_tris, b_org, b_dir, t, b_tuv, b_prim)
+        self.k_any(q, (n,), None, b_nodes, b_tris, b_org, b_dir, t, b_any)
+        pyopencl.enqueue_copy(q, tuv, b_tuv)
+        pyopencl.enqueue_copy(q, prim, b_prim)
+        pyopencl.enqueue_copy(q, anyhit, b_any).wait()
+        return tuv, prim, anyhit.astype(bool)
+
+
+@pytest.fixture(scope="session")
+def tracer() -> Tracer:
+    return Tracer()
+
+
+def soup_mesh(n=3000, seed=7):
+    rng = np.random.default_rng(seed)
+    centers = rng.random((n, 1, 3)) * 10.0
+    size = rng.random((n, 1, 1)) ** 3 * 1.5 + 0.01
+    pos = (centers + rng.normal(size=(n, 3, 3)) * size).reshape(-1, 3)
+    if n > 11:  # degenerate triangles: collapsed to a point, and collinear
+        pos[3 * 10 + 1] = pos[3 * 10 + 2] = pos[3 * 10]
+        pos[3 * 11 + 2] = 0.5 * (pos[3 * 11] + pos[3 * 11 + 1])
+    return pos.astype(np.float32), np.arange(3 * n, dtype=np.int64).reshape(n, 3)
+
+
+def sphere_grid_mesh(rings=40, segs=80, grid=60):
+    # UV sphere of radius 1 at (0, 0, 1.2) (with degenerate pole triangles)
+    # above a height-field grid on [-3, 3]^2.
+    th = np.linspace(0, np.pi, rings + 1)
+    ph = np.linspace(0, 2 * np.pi, segs + 1)
+    t, f = np.meshgrid(th, ph, indexing="ij")
+    sp = np.stack([np.sin(t) * np.cos(f), np.sin(t) * np.sin(f), np.cos(t) + 1.2], -1).reshape(-1, 3)
+    w = segs + 1
+    r, s = np.meshgrid(np.arange(rings), np.arange(segs), indexing="ij")
+    a = (r * w + s).ravel()
+    quads = np.stack([a, a + w, a + 1, a + 1, a + w, a + w + 1], 1).reshape(-1, 3)
+    g = np.linspace(-3, 3, grid + 1)
+    gx, gy = np.meshgrid(g, g, indexing="ij")
+    gz = 0.1 * np.sin(2 * gx) * np.cos(3 * gy)
+    gp = np.stack([gx, gy, gz], -1).reshape(-1, 3)
+    gw = grid + 1
+    r, s = np.meshgrid(np.arange(grid), np.arange(grid), indexing="ij")
+    b = (r * gw + s).ravel()
+    gq = np.stack([b, b + gw, b + 1, b + 1, b + gw, b + gw + 1], 1).reshape(-1, 3) + len(sp)
+    return np.concatenate([sp, gp]).astype(np.float32), np.concatenate([quads, gq]).astype(np.int64)
+
+
+def bunny_mesh():
+    path = scenes_dir() / "meshes" / "bunny.ply"
+    if not path.is_file():
+        pytest.skip(f"{path} not present")
+    trimesh = pytest.importorskip("trimesh")
+    m = trimesh.load(path, process=False)
+    return np.asarray(m.vertices, np.float32), np.asarray(m.faces, np.int64)
+
+
+MESHES = {"soup": soup_mesh, "sphere_grid": sphere_grid_mesh, "bunny": bunny_mesh}
+
+
+@pytest.fixture(scope="session", params=list(MESHES))
+def mesh_case(request):
+    pos, idx = MESHES[request.param]()
+    bvh = build_bvh(pos, idx, use_cache=False)
+    return request.param, pos, idx, bvh
+
+
+def random_rays(pos, n, seed=3):
+    """Half from a sphere around the mesh towards its box, half from inside the box."""
+    rng = np.random.default_rng(seed)
+    lo, hi = pos.min(0), pos.max(0)
+    c, radius = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
+    h = n // 2
+    s = rng.normal(size=(h, 3))
+    o1 = c + 2 * radius * s / np.linalg.norm(s, axis=1, keepdims=True)
+    d1 = lo + rng.random((h, 3)) * (hi - lo) - o1
+    o2 = lo + rng.random((n - h, 3)) * (hi - lo)
+    d2 = rng.normal(size=(n - h, 3))
+    # A few axis-aligned directions (zero components) to exercise the reciprocal handling.
+    d2[:1000] = np.eye(3)[rng.integers(0, 3, 1000)] * rng.choice([-1, 1], (1000, 1))
+    d = np.concatenate([d1, d2])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return np.concatenate([o1, o2]).astype(np.float32), d.astype(np.float32)
+
+
+def embree_reference(pos, idx, org, dirs):
+    scene = rtcs.EmbreeScene()
+    TriangleMesh(scene, pos[idx].astype(np.float32))
+    return scene.run(org, dirs, output=1)
+
+
+# --------------------------------------------------------------------------
+# Traversal vs Embree
+
+
+def test_traversal_matches_embree(mesh_case, tracer):
+    name, pos, idx, bvh = mesh_case
+    org, dirs = random_rays(pos, N_RAYS)
+    ref = embree_reference(pos, idx, org, dirs)
+    tuv, prim, anyhit = tracer.trace(bvh, org, dirs)
+
+    assert np.all(prim >= -1), "bvh_closest's return value disagrees with hit.prim"
+    ref_hit = ref["primID"] >= 0
+    hit = prim >= 0
+    mapped = np.where(hit, bvh.tri_order[np.maximum(prim, 0)], -1)
+    both = hit & ref_hit
+    t_ref = ref["tfar"]
+    same_tri = mapped == ref["primID"]
+    close_t = np.abs(tuv[:, 0] - t_ref) <= 1e-4 * np.maximum(np.abs(t_ref), 1e-6)
+    agree = (hit == ref_hit) & (~both | same_tri | close_t)
+    frac = agree.mean()
+    assert frac >= AGREE, (
+        f"{name}: {np.count_nonzero(~agree)} of {N_RAYS} rays disagree with Embree "
+        f"(hit/miss mismatches {np.count_nonzero(hit != ref_hit)})")
+    assert 0.05 < hit.mean() < 0.95, f"{name}: degenerate ray set ({hit.mean():.2f} hit)"
+
+    # Barycentrics where both found the same triangle.
+    st = both & same_tri
+    duv = np.maximum(np.abs(tuv[st, 1] - ref["u"][st]), np.abs(tuv[st, 2] - ref["v"][st]))
+    assert np.mean(duv < 1e-3) >= AGREE, f"{name}: u,v disagree with Embree"
+    assert np.all((tuv[hit, 1] >= 0) & (tuv[hit, 2] >= 0) & (tuv[hit, 1] + tuv[hit, 2] <= 1 + 1e-6))
+    assert np.all(tuv[hit, 0] > 0)
+    assert np.all(tuv[~hit, 0] == np.inf)
+
+    # Any-hit agrees with closest-hit's hit/miss (and with Embree).
+    assert np.mean(anyhit == hit) >= AGREE
+    assert np.mean(anyhit == ref_hit) >= AGREE
+
+
+def test_tmax_limits_hits(mesh_case, tracer):
+    name, pos, idx, bvh = mesh_case
+    org, dirs = random_rays(pos, 20_000, seed=11)
+    tuv, prim, _ = tracer.trace(bvh, org, dirs)
+    hit = prim >= 0
+    # A tmax half-way to the closest hit must produce no hit in closest or any.
+    tmax = float(np.median(tuv[hit, 0]))
+    tuv2, prim2, any2 = tracer.trace(bvh, org, dirs, tmax=tmax)
+    near = hit & (tuv[:, 0] < tmax * 0.999)
+    far = ~hit | (tuv[:, 0] > tmax * 1.001)
+    assert np.all(prim2[far] == -1) and not any2[far].any()
+    assert np.mean(prim2[near] == prim[near]) >= 0.999
+    assert any2[near].all()
+    assert np.all(tuv2[prim2 < 0, 0] == np.float32(tmax))
+
+
+def test_single_triangle_and_tiny_meshes(tracer):
+    for n in (1, 2, 3, 5, 33):
+        pos, idx = soup_mesh(n, seed=n)
+        bvh = build_bvh(pos, idx, use_cache=False)
+        check_structure(bvh, pos, idx)
+        org, dirs = random_rays(pos, 4000, seed=n)
+        ref = embree_reference(pos, idx, org, dirs)
+        _, prim, anyhit = tracer.trace(bvh, org, dirs)
+        assert np.mean((prim >= 0) == (ref["primID"] >= 0)) >= 0.999
+        assert np.mean(anyhit == (ref["primID"] >= 0)) >= 0.999
+    pos, idx = soup_mesh(1)
+    bvh = build_bvh(pos, idx, use_cache=False)
+    links = bvh.nodes.view(np.int32)[0, 12:14]
+    assert bvh.nodes.shape == (1, 16)
+    assert links[0] == np.int32(-(2**31) + 1) and links[1].view(np.uint32) == EMPTY_LINK
+    assert np.all(bvh.nodes[0, 6:9] == np.inf) and np.all(bvh.nodes[0, 9:12] == -np.inf)
+
+
+# --------------------------------------------------------------------------
+# Structure
+
+
+def check_structure(bvh: FlatBVH, pos: np.ndarray, idx: np.ndarray) -> None:
+    T = idx.shape[0]
+    nodes, tris, order = bvh.nodes, bvh.tris, bvh.tri_order
+    assert nodes.dtype == np.float32 and nodes.ndim == 2 and nodes.shape[1] == 16
+    assert tris.dtype == np.float32 and tris.shape == (T, 9)
+    assert order.dtype == np.int32 and order.shape == (T,)
+    assert np.array_equal(np.sort(order), np.arange(T)), "tri_order is not a permutation"
+    # tris hold v0, v1 - v0, v2 - v0 of the original triangles.
+    p = pos.astype(np.float32)[idx[order]]
+    assert np.array_equal(tris[:, 0:3], p[:, 0])
+    assert np.array_equal(tris[:, 3:6], p[:, 1] - p[:, 0])
+    assert np.array_equal(tris[:, 6:9], p[:, 2] - p[:, 0])
+    assert np.all(nodes.view(np.uint32)[:, 14:16] == 0)
+
+    N = nodes.shape[0]
+    links = nodes.view(np.int32)[:, 12:14]
+    lo = nodes[:, [0, 1, 2, 6, 7, 8]].reshape(N, 2, 3)
+    hi = nodes[:, [3, 4, 5, 9, 10, 11]].reshape(N, 2, 3)
+    internal = links >= 0
+    assert np.all(links[internal] < N)
+    # Depth-first order: an internal left child comes right after its parent.
+    li = np.flatnonzero(internal[:, 0])
+    assert np.array_equal(links[li, 0], li + 1)
+    # Every internal node but the root is linked exactly once, and reachable.
+    indeg = np.bincount(links[internal], minlength=N)
+    assert indeg[0] == 0 and np.all(indeg[1:] == 1)
+    depth_seen = np.zeros(N, bool)
+    frontier, depth = np.array([0]), 0
+    while frontier.size:
+        assert not depth_seen[frontier].any()
+        depth_seen[frontier] = True
+        c = links[frontier].ravel()
+        frontier = c[c >= 0]
+        depth += 1
+    assert depth_seen.all() and depth < 64
+    # Internal children: the parent's box for the child contains the child's boxes.
+    pi, side = np.nonzero(internal)
+    child = links[pi, side]
+    assert np.all(lo[pi, side][:, None, :] <= lo[child])
+    assert np.all(hi[pi, side][:, None, :] >= hi[child])
+    # Leaves: ranges cover 0..T-1 exactly once; boxes contain their triangles.
+    leaf = links[~internal].view(np.uint32)
+    count = (leaf & 31).astype(np.int64)
+    start = ((leaf & 0x7FFFFFFF) >> 5).astype(np.int64)
+    llo, lhi = lo[~internal], hi[~internal]
+    empty = count == 0
+    assert np.all(leaf[empty] == EMPTY_LINK)
+    assert np.all(llo[empty] == np.inf) and np.all(lhi[empty] == -np.inf)
+    within = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    slots = np.repeat(start, count) + within
+    assert np.array_equal(np.bincount(slots, minlength=T), np.ones(T, np.int64)), \
+        "leaves do not cover every triangle exactly once"
+    slot_leaf = np.repeat(np.arange(len(leaf)), count)
+    v0 = tris[slots, 0:3]
+    # p is in leaf order, so p[slots] is the triangle stored in that slot.
+    pts = np.stack([v0, v0 + tris[slots, 3:6], v0 + tris[slots, 6:9], p[slots, 1], p[slots, 2]], 1)
+    assert np.all(llo[slot_leaf][:, None, :] <= pts)
+    assert np.all(lhi[slot_leaf][:, None, :] >= pts)
+
+
+def test_structure(mesh_case):
+    _, pos, idx, bvh = mesh_case
+    check_structure(bvh, pos, idx)
+    assert bvh.build_seconds > 0
+
+
+# --------------------------------------------------------------------------
+# Cache and errors
+
+
+def test_cache_roundtrip(tmp_path, monkeypatch):
+    monkeypatch.setenv("PYCLPT_CACHE_DIR", str(tmp_path))
+    pos, idx = soup_mesh(500, seed=5)
+    a = build_bvh(pos, idx)
+    assert a.build_seconds > 0
+    files = list((tmp_path / "bvh").glob("*.npz"))
+    assert len(files) == 1
+    b = build_bvh(pos, idx)
+    assert b.build_seconds == 0
+    for name in ("nodes", "tris", "tri_order"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype and np.array_equal(x.view(np.uint8), y.view(np.uint8))
+    # Same content in other dtypes hits the same entry; bypassing the cache rebuilds.
+    assert build_bvh(pos.astype(np.float64), idx.astype(np.int32)).build_seconds == 0
+    assert build_bvh(pos, idx, use_cache=False).build_seconds > 0
+    # A changed mesh is a different entry.
+    pos2 = pos.copy()
+    pos2[0, 0] += 1.0
+    assert build_bvh(pos2, idx).build_seconds > 0
+    assert len(list((tmp_path / "bvh").glob("*.npz"))) == 2
+    # A corrupt entry is rebuilt, not trusted.
+    files[0].write_bytes(b"garbage")
+    c = build_bvh(pos, idx)
+    assert c.build_seconds > 0 and np.array_equal(c.nodes, a.nodes)
+
+
+def test_errors():
+    pos, idx = soup_mesh(10)
+    with pytest.raises(ValueError, match="zero triangles"):
+        build_bvh(pos, np.zeros((0, 3), np.int64), use_cache=False)
+    with pytest.raises(ValueError, match="zero triangles"):
+        build_bvh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32), use_cache=False)
+    bad = pos.copy()
+    bad[3 * 4 + 1, 2] = np.nan
+    with pytest.raises(ValueError, match="triangle 4"):
+        build_bvh(bad, idx, use_cache=False)
+    bad = pos.copy()
+    bad[3 * 7, 0] = np.inf
+    with pytest.raises(ValueError, match="triangle 7"):
+        build_bvh(bad, idx, use_cache=False)
+    bad = pos.astype(np.float64)
+    bad[3 * 2, 0] = 1e300  # overflows float32
+    with pytest.raises(ValueError, match="triangle 2"):
+        build_bvh(bad, idx, use_cache=False)
+    bad_idx = idx.copy()
+    bad_idx[5, 1] = len(pos)
+    with pytest.raises(ValueError, match="triangle 5"):
+        build_bvh(pos, bad_idx, use_cache=False)
+    with pytest.raises(ValueError):
+        build_bvh(pos, idx.reshape(-1), use_cache=False)
+    # A NaN in a vertex no triangle uses is harmless.
+    extra = np.concatenate([pos, [[np.nan, 0, 0]]]).astype(np.float32)
+    build_bvh(extra, idx, use_cache=False)
+
+
+def test_build_with_parallel_embree_threads():
+    # A live embreex device raises TBB's (process-wide) thread limit, so Embree's
+    # worker threads run our Python callbacks concurrently with the caller.
+    pos, idx = soup_mesh(20000, seed=9)
+    serial = build_bvh(pos, idx, use_cache=False)
+    scene = rtcs.EmbreeScene()
+    TriangleMesh(scene, pos[idx[:10]])
+    scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
+    parallel = build_bvh(pos, idx, use_cache=False)
+    del scene
+    check_structure(parallel, pos, idx)
+    assert abs(parallel.node_count - serial.node_count) <= 0.05 * serial.node_count
+
+
+def test_low_quality_build(tracer):
+    # RTC_BUILD_QUALITY_LOW (Morton builder) hands leaves copies of the
+    # primitives rather than slices of the input array: the copy path.
+    from pyclpt import embree
+    from pyclpt.bvh import BuildSettings
+
+    pos, idx = soup_mesh(3000, seed=21)
+    bvh = build_bvh(pos, idx, use_cache=False,
+                    settings=BuildSettings(quality=embree.RTC_BUILD_QUALITY_LOW))
+    check_structure(bvh, pos, idx)
+    org, dirs = random_rays(pos, 20_000, seed=4)
+    ref = embree_reference(pos, idx, org, dirs)
+    _, prim, _ = tracer.trace(bvh, org, dirs)
+    hit = prim >= 0
+    assert np.mean(hit == (ref["primID"] >= 0)) >= 0.999
+    assert np.mean(np.where(hit, bvh.tri_order[np.maximum(prim, 0)], -1) == ref["primID"]) >= 0.999
+
+
+def test_embree_library_errors(monkeypatch):
+    from pyclpt import embree
+
+    assert embree.library_path()  # found in the embreex wheel (or PYCLPT_EMBREE_LIB)
+    monkeypatch.setenv("PYCLPT_EMBREE_LIB", "/nonexistent/libembree4.so.4")
+    with pytest.raises(embree.EmbreeError, match="PYCLPT_EMBREE_LIB"):
+        embree.library_path()
+
+
+def test_build_failure_is_reported():
+    # Embree's own error (here its depth limit) surfaces as EmbreeError, and the
+    # device stays usable afterwards.
+    from pyclpt import embree
+    from pyclpt.bvh import BuildSettings
+
+    pos, idx = soup_mesh(20000, seed=2)
+    with pytest.raises(embree.EmbreeError, match="rtcBuildBVH"):
+        build_bvh(pos, idx, use_cache=False, settings=BuildSettings(max_depth=8, max_leaf=2))
+    check_structure(build_bvh(pos[:300], idx[:100], use_cache=False), pos[:300], idx[:100])
+
+
+def test_degenerate_only():
+    # All triangles degenerate (zero area) and many identical ones: builds fine.
+    pos = np.zeros((3 * 200, 3), np.float32)
+    pos[:, 0] = np.repeat(np.arange(200) % 3, 3)
+    bvh = build_bvh(pos, np.arange(600).reshape(200, 3), use_cache=False)
+    check_structure(bvh, pos, np.arange(600).reshape(200, 3))
