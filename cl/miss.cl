@@ -10,12 +10,7 @@ __kernel void miss(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* mi
     Scene sc = SCENE_INIT;
     PathStore P = PATH_INIT;
     int slot = miss_queue[i];
-    PathState ps;
-    ps.dir = path_get_dir(&P, slot);
-    ps.beta = path_get_beta(&P, slot);
-    ps.L = path_get_L(&P, slot);
-    ps.flags = path_get_flags(&P, slot);
-    ps.prev_pdf = path_get_prev_pdf(&P, slot);
+    PathState ps = path_load_shading(&P, slot, bounce);
     path_miss(&sc, &ps);
     film_commit(frame, dropped, path_get_pixel(&P, slot), ps.L);
 }

@@ -18,13 +18,7 @@ __kernel void path_init(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global int* ray
         return;
     }
     path_set_pixel(&P, slot, pixel);
-    path_set_depth(&P, slot, ps.depth);
-    path_set_flags(&P, slot, ps.flags);
-    path_set_org(&P, slot, ps.org);
-    path_set_dir(&P, slot, ps.dir);
-    path_set_beta(&P, slot, ps.beta);
     path_set_L(&P, slot, ps.L);
-    path_set_prev_pdf(&P, slot, ps.prev_pdf);
-    path_set_eta_scale(&P, slot, ps.eta_scale);
+    path_store_ray(&P, slot, &ps);
     queue_push(ray_queue, counters, bounce, Q_RAY, slot);
 }

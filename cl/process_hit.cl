@@ -13,13 +13,7 @@ __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     Scene sc = SCENE_INIT;
     PathStore P = PATH_INIT;
     int slot = hit_queue[i];
-    PathState ps;
-    ps.dir = path_get_dir(&P, slot);
-    ps.beta = path_get_beta(&P, slot);
-    ps.L = path_get_L(&P, slot);
-    ps.flags = path_get_flags(&P, slot);
-    ps.prev_pdf = path_get_prev_pdf(&P, slot);
-    ps.depth = bounce;
+    PathState ps = path_load_shading(&P, slot, bounce);
     Surface s = surface_at(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
     path_hit_emission(&sc, &s, path_get_hit_t(&P, slot), &ps);
     path_set_L(&P, slot, ps.L);

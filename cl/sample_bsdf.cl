@@ -19,13 +19,7 @@ __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     ps.depth = bounce;
     Surface s = surface_at(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
     if (path_sample_bsdf(&sc, path_key(&P, slot, seed, sample), &s, &ps, max_depth)) {
-        path_set_org(&P, slot, ps.org);
-        path_set_dir(&P, slot, ps.dir);
-        path_set_beta(&P, slot, ps.beta);
-        path_set_eta_scale(&P, slot, ps.eta_scale);
-        path_set_prev_pdf(&P, slot, ps.prev_pdf);
-        path_set_flags(&P, slot, ps.flags);
-        path_set_depth(&P, slot, ps.depth);
+        path_store_ray(&P, slot, &ps);
         queue_push(next_ray_queue, counters, bounce + 1, Q_RAY, slot);
     } else {
         film_commit(frame, dropped, path_get_pixel(&P, slot), path_get_L(&P, slot));

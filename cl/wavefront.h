@@ -37,4 +37,29 @@ static inline RngKey path_key(const PathStore* P, int slot, uint seed, uint samp
     return rng_key(seed, (uint)path_get_pixel(P, slot), sample);
 }
 
+/* What shading needs of a path: the incoming ray, throughput, radiance and the
+ * previous BSDF sample (miss and process_hit). */
+static inline PathState path_load_shading(const PathStore* P, int slot, int bounce) {
+    PathState ps;
+    ps.dir = path_get_dir(P, slot);
+    ps.beta = path_get_beta(P, slot);
+    ps.L = path_get_L(P, slot);
+    ps.flags = path_get_flags(P, slot);
+    ps.prev_pdf = path_get_prev_pdf(P, slot);
+    ps.depth = bounce;
+    return ps;
+}
+
+/* Store the next ray of a path and what the next bounce needs to weight it
+ * (path_init and sample_bsdf). */
+static inline void path_store_ray(const PathStore* P, int slot, const PathState* ps) {
+    path_set_org(P, slot, ps->org);
+    path_set_dir(P, slot, ps->dir);
+    path_set_beta(P, slot, ps->beta);
+    path_set_eta_scale(P, slot, ps->eta_scale);
+    path_set_prev_pdf(P, slot, ps->prev_pdf);
+    path_set_flags(P, slot, ps->flags);
+    path_set_depth(P, slot, ps->depth);
+}
+
 #endif

@@ -90,7 +90,7 @@ def _cmd_render(a: argparse.Namespace) -> int:
     if st.dropped_samples:
         print(f"dropped {st.dropped_samples} NaN/inf samples")
     if a.stats:
-        print(json.dumps({"kernels": st.kernels, "bounces": st.bounces,
+        print(json.dumps({"kernels": st.kernels, "bounces": st.bounces, "memory": st.memory,
                           "dropped_samples": st.dropped_samples}, indent=1))
     return 0
 

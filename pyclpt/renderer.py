@@ -39,6 +39,7 @@ class RenderStats:
     dropped_samples: int = 0  # NaN/inf samples dropped
     kernels: list[dict] = field(default_factory=list)
     bounces: list[dict] = field(default_factory=list)
+    memory: dict = field(default_factory=dict)  # wavefront: wave size, bytes per path, path-state bytes
 
 
 class Renderer:
@@ -113,6 +114,10 @@ class Renderer:
         self.stats.dropped_samples = self.film.dropped_samples()
         self.stats.kernels = self.integrator.profile.table()
         self.stats.bounces = getattr(self.integrator, "bounce_stats", lambda: [])()
+        if hasattr(self.integrator, "paths"):
+            self.stats.memory = {"wave_size": self.integrator.capacity,
+                                 "bytes_per_path": self.integrator.bytes_per_path,
+                                 "path_state_bytes": self.integrator.paths.nbytes}
         if self.stats.dropped_samples:
             log.warning("%s: dropped %d NaN/inf samples", self.scene.name, self.stats.dropped_samples)
         return image

@@ -128,3 +128,6 @@ def test_wavefront_memory_does_not_grow_with_image_or_spp(cornell_box):
     r = pyclpt.Renderer(cornell_box, integrator="wavefront", width=64, height=64, wave_size=512)
     assert r.integrator.capacity == 512
     assert r.integrator.paths.nbytes == 512 * bytes_per_path()
+    r.render(1, progress=False)
+    assert r.stats.memory == {"wave_size": 512, "bytes_per_path": bytes_per_path() + 24,
+                              "path_state_bytes": 512 * bytes_per_path()}
