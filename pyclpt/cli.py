@@ -10,34 +10,25 @@ from collections.abc import Sequence
 from pathlib import Path
 
 
-def _positive(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
+def _int_in(lo: int, hi: int | None, note: str = ""):
+    """An argparse type: an integer in [lo, hi) (hi None: no upper bound); argparse names the option."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if v < lo or (hi is not None and v >= hi):
+            bound = f">= {lo}" if hi is None else f"in [{lo}, {hi})"
+            raise argparse.ArgumentTypeError(f"must be {bound}{note}, got {v}")
+        return v
+
+    return parse
 
 
-def _depth(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer (-1 = unlimited), got {text!r}") from None
-    if v < -1:
-        raise argparse.ArgumentTypeError(f"max depth must be -1 (unlimited) or >= 0, got {v}")
-    return v
-
-
-def _seed(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer seed, got {text!r}") from None
-    if not 0 <= v < 2**32:
-        raise argparse.ArgumentTypeError(f"seed must be in [0, 2**32), got {v}")
-    return v
+_positive = _int_in(1, None)
+_depth = _int_in(-1, None, " (-1 = unlimited)")
+_seed = _int_in(0, 2**32)
 
 
 def build_parser() -> argparse.ArgumentParser:
