@@ -14,25 +14,26 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
-import time
+import sys
+from pathlib import Path
 
-import pyclpt
+if not __package__:  # run as a script (python bench/frame_time.py): import this folder as the package `bench`
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+    __package__ = "bench"
+
+import pyclpt  # noqa: E402
+
+from .runner import time_frames as _time_frames  # noqa: E402
 
 CONFIGS = [("megakernel", "soa"), ("wavefront", "aos"), ("wavefront", "soa")]
 
 
 def time_frames(renderer: pyclpt.Renderer, repeats: int) -> dict:
-    renderer.render(1, seed=0, progress=False)  # warm-up frame
-    host, device = [], []
-    for i in range(repeats):
-        t = time.perf_counter()
-        renderer.render(1, seed=i + 1, progress=False)
-        host.append(1e3 * (time.perf_counter() - t))
-        device.append(sum(k["total_ms"] for k in renderer.stats.kernels))
-    return {"median_ms": statistics.median(host), "min_ms": min(host), "max_ms": max(host),
-            "device_median_ms": statistics.median(device), "kernels": renderer.stats.kernels,
-            "bounces": renderer.stats.bounces}
+    """One warm-up frame, then ``repeats`` timed frames (see :func:`bench.runner.time_frames`)."""
+    res = _time_frames(renderer, repeats)
+    return {"median_ms": res["ms"]["median"], "min_ms": res["ms"]["min"], "max_ms": res["ms"]["max"],
+            "device_median_ms": res["device_ms"]["median"], "kernels": res["kernels"],
+            "bounces": res["bounces"]}
 
 
 def main() -> None:
@@ -66,10 +67,11 @@ def main() -> None:
                   f"{res['median_ms']:.0f} | {res['min_ms']:.0f} | {res['max_ms']:.0f} | "
                   f"{res['device_median_ms']:.0f} | {base / res['median_ms']:.2f} | {res['compile_s']:.2f} |")
         soa = results[-1]
-        print("\nwavefront-soa per kernel (last frame):")
+        print("\nwavefront-soa per kernel (mean per frame):")
         for k in soa["kernels"]:
-            print(f"  {k['kernel']:20s} {k['launches']:4d} launches {k['total_ms']:9.1f} ms {100 * k['share']:5.1f}%")
-        print("wavefront-soa per bounce (last frame): rays / hits / misses / shadow / unoccluded")
+            share = k["ms"] / max(sum(x["ms"] for x in soa["kernels"]), 1e-9)
+            print(f"  {k['kernel']:20s} {k['launches']:6.0f} launches {k['ms']:9.1f} ms {100 * share:5.1f}%")
+        print("wavefront-soa per bounce (first timed frame): rays / hits / misses / shadow / unoccluded")
         for b in soa["bounces"][:12]:
             print(f"  {b['bounce']:3d}: {b['rays']:8d} {b['hits']:8d} {b['misses']:8d} {b['shadow_rays']:8d} "
                   f"{b['unoccluded']:8d}")

@@ -8,20 +8,21 @@ megakernel measured in the same run.
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
+import sys
+from pathlib import Path
 
-import pyclpt
+if not __package__:  # run as a script (python bench/variants.py): import this folder as the package `bench`
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+    __package__ = "bench"
+
+import pyclpt  # noqa: E402
+
+from .runner import time_frames  # noqa: E402
 
 
 def median_ms(r: pyclpt.Renderer, repeats: int) -> float:
-    r.render(1, seed=0, progress=False)
-    times = []
-    for i in range(repeats):
-        t = time.perf_counter()
-        r.render(1, seed=i + 1, progress=False)
-        times.append(1e3 * (time.perf_counter() - t))
-    return statistics.median(times)
+    """Median wall ms of ``repeats`` 1-spp frames after a warm-up frame."""
+    return time_frames(r, repeats)["ms"]["median"]
 
 
 def main() -> None:

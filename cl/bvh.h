@@ -22,6 +22,7 @@
 #define PYCLPT_BVH_H
 
 #include "common.h"
+#include "mask.h"
 
 typedef struct {
     float t;
@@ -127,9 +128,10 @@ static inline bool bvh_triangle(__global const float* tris, int i, const BvhRay*
     return true;
 }
 
-/* Closest hit with 0 < t < tmax. On a miss hit->prim = -1 and hit->t = tmax. */
-static inline bool bvh_closest(__global const float* nodes, __global const float* tris, float3 org,
-                               float3 dir, float tmax, Hit* hit) {
+/* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
+ * On a miss hit->prim = -1 and hit->t = tmax. */
+static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, float3 org,
+                                     float3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
@@ -160,7 +162,7 @@ static inline bool bvh_closest(__global const float* nodes, __global const float
             int end = start + (cur & 31);
             for (int i = start; i < end; ++i) {
                 float t, u, v;
-                if (bvh_triangle(tris, i, &r, best, &t, &u, &v)) {
+                if (bvh_triangle(tris, i, &r, best, &t, &u, &v) && alpha_accept(alpha, i, u, v)) {
                     best = t;
                     bu = u;
                     bv = v;
@@ -180,9 +182,9 @@ static inline bool bvh_closest(__global const float* nodes, __global const float
     return prim >= 0;
 }
 
-/* True if anything is hit with 0 < t < tmax (returns at the first hit). */
-static inline bool bvh_any(__global const float* nodes, __global const float* tris, float3 org,
-                           float3 dir, float tmax) {
+/* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */
+static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, float3 org,
+                                 float3 dir, float tmax, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     int sp = 0;
@@ -206,12 +208,23 @@ static inline bool bvh_any(__global const float* nodes, __global const float* tr
             int end = start + (cur & 31);
             for (int i = start; i < end; ++i) {
                 float t, u, v;
-                if (bvh_triangle(tris, i, &r, tmax, &t, &u, &v)) return true;
+                if (bvh_triangle(tris, i, &r, tmax, &t, &u, &v) && alpha_accept(alpha, i, u, v)) return true;
             }
         }
         if (sp == 0) return false;
         cur = stack_node[--sp];
     }
+}
+
+/* The queries without opacity (every triangle opaque). */
+static inline bool bvh_closest(__global const float* nodes, __global const float* tris, float3 org,
+                               float3 dir, float tmax, Hit* hit) {
+    return bvh_closest_alpha(nodes, tris, org, dir, tmax, hit, 0);
+}
+
+static inline bool bvh_any(__global const float* nodes, __global const float* tris, float3 org,
+                           float3 dir, float tmax) {
+    return bvh_any_alpha(nodes, tris, org, dir, tmax, 0);
 }
 
 #endif

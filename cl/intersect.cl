@@ -5,14 +5,15 @@
 #include "wavefront.h"
 
 __kernel void intersect(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* ray_queue,
-                        __global int* hit_queue, __global int* miss_queue) {
+                        __global int* hit_queue, __global int* miss_queue, uint seed, uint sample) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_RAY)) return;
     Scene sc = SCENE_INIT;
     PathStore P = PATH_INIT;
     int slot = ray_queue[i];
     Hit hit;
-    if (bvh_closest(sc.nodes, sc.tris, path_get_org(&P, slot), path_get_dir(&P, slot), INF_F, &hit)) {
+    if (scene_closest(&sc, path_key(&P, slot, seed, sample), bounce, path_get_org(&P, slot),
+                      path_get_dir(&P, slot), &hit)) {
         path_set_hit_t(&P, slot, hit.t);
         path_set_hit_u(&P, slot, hit.u);
         path_set_hit_v(&P, slot, hit.v);

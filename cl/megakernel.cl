@@ -19,7 +19,7 @@ __kernel void megakernel(SCENE_PARAMS, __global float* frame, volatile __global 
     if (max_depth != 0) {
         for (;;) {
             Hit hit;
-            if (!bvh_closest(sc.nodes, sc.tris, ps.org, ps.dir, INF_F, &hit)) {
+            if (!scene_closest(&sc, key, ps.depth, ps.org, ps.dir, &hit)) {
                 path_miss(&sc, &ps);
                 break;
             }
@@ -28,7 +28,7 @@ __kernel void megakernel(SCENE_PARAMS, __global float* frame, volatile __global 
             if (depth_allows(ps.depth + 1, max_depth)) {
                 ShadowRay sr;
                 if (path_sample_light(&sc, key, &s, &ps, &sr) &&
-                    !bvh_any(sc.nodes, sc.tris, sr.org, sr.dir, sr.tmax))
+                    !scene_occluded(&sc, key, ps.depth, sr.org, sr.dir, sr.tmax))
                     ps.L += sr.contrib;
             }
             if (!path_sample_bsdf(&sc, key, &s, &ps, max_depth)) break;

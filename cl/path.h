@@ -66,10 +66,12 @@ static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState
 
 /* miss: the environment seen along the ray, MIS-weighted against light sampling. */
 static inline void path_miss(const Scene* sc, PathState* ps) {
-    float3 le = env_radiance(sc);
+    bool mis = !(ps->flags & PATH_PREV_DELTA);
+    float light_pdf;
+    float3 le = env_eval(sc, ps->dir, mis, &light_pdf);
     if (le.x == 0.0f && le.y == 0.0f && le.z == 0.0f) return;
     float w = 1.0f;
-    if (!(ps->flags & PATH_PREV_DELTA)) w = power_heuristic(ps->prev_pdf, light_pdf_env(sc));
+    if (mis) w = power_heuristic(ps->prev_pdf, light_pdf);
     ps->L += ps->beta * le * w;
 }
 
@@ -89,8 +91,8 @@ static inline void path_hit_emission(const Scene* sc, const Surface* s, float t,
  * sample that can contribute (pdf > 0, non-zero value). */
 static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface* s, const PathState* ps,
                                      ShadowRay* sr) {
-    Material m = scene_material(sc, s->material);
-    if (bsdf_is_delta(m)) return false;
+    Bsdf b = bsdf_at(sc, s);
+    if (bsdf_is_delta(&b)) return false;
     LightSample ls;
     float u_sel = rng_1d(key, ps->depth, DIM_LIGHT_SELECT);
     float2 u = rng_2d(key, ps->depth, DIM_LIGHT_U);
@@ -98,10 +100,12 @@ static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface*
     float3 wi = to_local(s->sh, -ps->dir);
     float3 wo = to_local(s->sh, ls.wi);
     float bsdf_pdf;
-    float3 f = bsdf_eval(m, wi, wo, &bsdf_pdf);
+    float3 f = bsdf_eval(&b, wi, wo, &bsdf_pdf);
     /* the geometric normal must agree with the shading frame about the side */
     if (dot(ls.wi, s->ng) * wo.z <= 0.0f) return false;
-    float3 contrib = ps->beta * f * ls.radiance * (power_heuristic(ls.pdf, bsdf_pdf) / ls.pdf);
+    /* a delta light (point) cannot be hit by BSDF sampling: its sample takes the whole weight */
+    float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf);
+    float3 contrib = ps->beta * f * ls.radiance * (w / ls.pdf);
     if (!(max3(contrib) > 0.0f)) return false;
     sr->org = spawn_origin(s, ls.wi);
     sr->dir = ls.wi;
@@ -115,12 +119,12 @@ static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface*
 static inline bool path_sample_bsdf(const Scene* sc, RngKey key, const Surface* s, PathState* ps,
                                     int max_depth) {
     if (!depth_allows(ps->depth + 1, max_depth)) return false;
-    Material m = scene_material(sc, s->material);
+    Bsdf b = bsdf_at(sc, s);
     float3 wi = to_local(s->sh, -ps->dir);
     BsdfSample bs;
     float u_lobe = rng_1d(key, ps->depth, DIM_BSDF_LOBE);
     float2 u = rng_2d(key, ps->depth, DIM_BSDF_U);
-    if (!bsdf_sample(m, wi, u_lobe, u, &bs)) return false;
+    if (!bsdf_sample(&b, wi, u_lobe, u, &bs)) return false;
     float3 dir = to_world(s->sh, bs.wo);
     /* reject samples whose side disagrees between shading and geometric normals */
     if (dot(dir, s->ng) * bs.wo.z <= 0.0f) return false;

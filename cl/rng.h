@@ -17,6 +17,8 @@
 #define DIM_ROULETTE 6
 #define DIM_CAMERA_X 7
 #define DIM_CAMERA_Y 8
+#define DIM_MASK_CLOSEST 9 /* opacity tests of the path's ray (4th counter word: triangle) */
+#define DIM_MASK_SHADOW 10 /* opacity tests of the shadow ray */
 
 static inline uint4 philox4x32_10(uint4 c, uint2 k) {
     const uint M0 = 0xD2511F53u, M1 = 0xCD9E8D57u;
@@ -45,6 +47,12 @@ static inline RngKey rng_key(uint seed, uint pixel, uint sample) {
 /* Uniform float in [0, 1) for one (bounce, dimension) of a path. */
 static inline float rng_1d(RngKey key, uint bounce, uint dim) {
     uint4 r = philox4x32_10((uint4)(key.sample, bounce, dim, 0u), (uint2)(key.seed, key.pixel));
+    return (float)(r.x >> 8) * 0x1.0p-24f;
+}
+
+/* As rng_1d, with a fourth counter word (e.g. the triangle of an opacity test). */
+static inline float rng_1d_at(RngKey key, uint bounce, uint dim, uint extra) {
+    uint4 r = philox4x32_10((uint4)(key.sample, bounce, dim, extra), (uint2)(key.seed, key.pixel));
     return (float)(r.x >> 8) * 0x1.0p-24f;
 }
 

@@ -4,13 +4,13 @@
 #include "wavefront.h"
 
 __kernel void shadow_test(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* shadow_queue,
-                          __global int* light_queue) {
+                          __global int* light_queue, uint seed, uint sample) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_SHADOW)) return;
     Scene sc = SCENE_INIT;
     PathStore P = PATH_INIT;
     int slot = shadow_queue[i];
-    if (!bvh_any(sc.nodes, sc.tris, path_get_shadow_org(&P, slot), path_get_shadow_dir(&P, slot),
-                 path_get_shadow_tmax(&P, slot)))
+    if (!scene_occluded(&sc, path_key(&P, slot, seed, sample), bounce, path_get_shadow_org(&P, slot),
+                        path_get_shadow_dir(&P, slot), path_get_shadow_tmax(&P, slot)))
         queue_push(light_queue, counters, bounce, Q_LIGHT, slot);
 }

@@ -1,9 +1,10 @@
-"""The ``pyclpt`` command line: render, devices, scenes."""
+"""The ``pyclpt`` command line: render, devices, scenes, bench."""
 from __future__ import annotations
 
 import argparse
 import json
 import logging
+import re
 import sys
 import time
 from collections.abc import Sequence
@@ -26,6 +27,15 @@ def _int_in(lo: int, hi: int | None, note: str = ""):
     return parse
 
 
+def _define(text: str) -> tuple[str, str]:
+    """An argparse type: Mitsuba's ``-D NAME=VALUE`` scene parameter."""
+    name, sep, value = text.partition("=")
+    if not sep or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE (NAME a letter or _ then letters, digits, _), "
+                                         f"got {text!r}")
+    return name, value
+
+
 _positive = _int_in(1, None)
 _depth = _int_in(-1, None, " (-1 = unlimited)")
 _seed = _int_in(0, 2**32)
@@ -36,10 +46,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log compile times and progress details")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a scene to an image file")
-    r.add_argument("scene", help="built-in scene name (see `pyclpt scenes`) or scene file")
+    r.add_argument("scene", help="built-in scene name (see `pyclpt scenes`) or scene file "
+                                 "(.json, Mitsuba .xml)")
     r.add_argument("-o", "--output", default=None, help="output image (.exr linear; .png/.jpg sRGB); "
                                                         "default SCENE.png")
+    r.add_argument("-D", "--define", type=_define, action="append", default=[], metavar="NAME=VALUE",
+                   help="set a Mitsuba XML scene parameter ($NAME / <default name=NAME>); repeatable")
     r.add_argument("--spp", type=_positive, default=None, help="samples per pixel (default: the scene's)")
+    r.add_argument("--frames", type=_positive, default=None,
+                   help="frames to render, one sample per pixel each (default: --spp or the scene's spp)")
+    r.add_argument("--precision", choices=("single", "compensated", "double"), default="double",
+                   help="how frames are summed on the device (default double; docs/accumulation.md)")
+    r.add_argument("--max-frames", type=_int_in(0, 2**32, " (0 = unlimited)"), default=0,
+                   help="accumulate at most this many frames, then apply --overflow (0 = unlimited)")
+    r.add_argument("--overflow", choices=("stop", "reset", "ema"), default="stop",
+                   help="at --max-frames: stop (keep the image), reset (start over), ema (moving average)")
     r.add_argument("--max-depth", type=_depth, default=None, help="Mitsuba's max_depth; -1 = unlimited")
     r.add_argument("--width", type=_positive, default=None)
     r.add_argument("--height", type=_positive, default=None)
@@ -52,15 +73,23 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     sub.add_parser("scenes", help="list built-in scenes")
+    # Everything after `bench` goes to the report generator's own parser (`pyclpt bench --help`).
+    sub.add_parser("bench", add_help=False, help="timing report: megakernel vs wavefront AoS/SoA "
+                                                 "(`pyclpt bench --help`)")
     return p
 
 
 def _cmd_render(a: argparse.Namespace) -> int:
     from .image_io import write_image
-    from .renderer import Renderer
+    from .progressive import ProgressiveRenderer
     from .scene_library import load
 
-    scene = load(a.scene)
+    if a.frames and a.spp and a.frames != a.spp:
+        raise ValueError(f"--frames {a.frames} and --spp {a.spp} disagree (a frame is one sample per pixel)")
+    if a.overflow != "stop" and not a.max_frames:
+        raise ValueError(f"--overflow {a.overflow} acts once --max-frames frames are accumulated; "
+                         f"give --max-frames > 0")
+    scene = load(a.scene, **dict(a.define))
     out = a.output or f"{scene.name}.png"
     # Fail before a possibly long render rather than when writing its result.
     if not Path(out).suffix:
@@ -68,21 +97,30 @@ def _cmd_render(a: argparse.Namespace) -> int:
     if not Path(out).resolve().parent.is_dir():
         raise OSError(f"{out}: the output folder {Path(out).resolve().parent} does not exist")
     t0 = time.perf_counter()
-    r = Renderer(scene, integrator=a.integrator, layout=a.layout, max_depth=a.max_depth,
-                 width=a.width, height=a.height, device=a.device)
-    spp = a.spp or scene.spp
-    image = r.render(spp, seed=a.seed, progress=False if a.quiet else None)
+    size = {"width": a.width or scene.film.width, "height": a.height or scene.film.height}
+    pr = ProgressiveRenderer(scene, seed=a.seed, integrator=a.integrator, layout=a.layout, max_depth=a.max_depth,
+                             device=a.device, precision=a.precision, max_frame_count=a.max_frames,
+                             overflow=a.overflow, **size)
+    frames = a.frames or a.spp or scene.spp
+    image = pr.run(frames, progress=False if a.quiet else None)
     write_image(out, image, exposure=a.exposure)
-    st = r.stats
+    r, st = pr.renderer, pr.stats
+    spp = pr.sample_index
     print(f"{out}: {r.width}x{r.height}, {spp} spp, max depth {r.max_depth}, {a.integrator}"
           f"{'/' + a.layout if a.integrator == 'wavefront' else ''} on {r.device.name}: "
           f"render {st.seconds:.2f} s, compile {st.compile_seconds:.2f} s, setup {st.setup_seconds:.2f} s, "
           f"total {time.perf_counter() - t0:.2f} s")
+    acc = st.accumulation
+    if a.max_frames:
+        print(f"accumulation: {acc['implementation']}, at most {a.max_frames} frames then {a.overflow}: "
+              f"the image averages {pr.accumulator.divisor} frames")
     if st.dropped_samples:
         print(f"dropped {st.dropped_samples} NaN/inf samples")
+    if acc.get("overflowed_samples"):
+        print(f"{acc['overflowed_samples']} pixel samples not added: the {a.precision} sum would overflow float")
     if a.stats:
         print(json.dumps({"kernels": st.kernels, "bounces": st.bounces, "memory": st.memory,
-                          "dropped_samples": st.dropped_samples}, indent=1))
+                          "dropped_samples": st.dropped_samples, "accumulation": acc}, indent=1))
     return 0
 
 
@@ -103,10 +141,28 @@ def _cmd_scenes() -> int:
     return 0
 
 
+def _cmd_bench(argv: list[str]) -> int:
+    try:
+        from .bench.report import main as bench_main
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__package__}.bench":
+            raise
+        # a source checkout: bench/ sits beside pyclpt/ (installed, it is the subpackage pyclpt.bench)
+        root = str(Path(__file__).resolve().parent.parent)
+        if root not in sys.path:
+            sys.path.insert(0, root)
+        from bench.report import main as bench_main
+    return bench_main(argv)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    a = parser.parse_args(argv)
+    a, rest = parser.parse_known_args(argv)
+    if rest and a.command != "bench":
+        parser.error(f"unrecognized arguments: {' '.join(rest)}")
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING, format="%(name)s: %(message)s")
+    if a.command == "bench":
+        return _cmd_bench(rest)
     try:
         if a.command == "render":
             return _cmd_render(a)

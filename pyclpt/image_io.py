@@ -19,6 +19,12 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """The sRGB transfer curve undone (values in [0, 1] encoded -> linear)."""
+    x = np.asarray(x, np.float32)
+    return np.where(x <= 0.04045, x / 12.92, np.power((np.clip(x, 0.0, None) + 0.055) / 1.055, 2.4)).astype(np.float32)
+
+
 def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0) -> Path:
     """Write an (H, W, 3) linear image; the format follows the extension. Raises OSError on failure."""
     path = Path(path)

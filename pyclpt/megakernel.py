@@ -24,7 +24,7 @@ class Megakernel:
         self.max_depth = max_depth
         self.wave_size = wave_size
         self.local_size = local_size
-        self.kernel = cl.Kernel(build_program(device, ["megakernel.cl"]), "megakernel")
+        self.kernel = cl.Kernel(build_program(device, ["megakernel.cl"], defines=scene.defines), "megakernel")
         self.profile = KernelProfile()
 
     def warm_up(self) -> None:

@@ -1,6 +1,10 @@
 """Rendering a scene: scene buffers + an integrator + the film, one sample per
 pixel per frame, frames averaged on the device.
 
+Frames are summed by the film's accumulator (:mod:`pyclpt.accumulator`) in double precision
+by default (``precision=``; emulated double-float on a device without fp64).
+:class:`pyclpt.progressive.ProgressiveRenderer` renders frame by frame with auto-reset.
+
 Seed contract: the image is a pure function of (scene, seed, spp, max_depth,
 resolution). Sample ``s`` of pixel ``p`` draws its random numbers from the
 counter-based generator keyed by (seed, p, s, bounce, dimension) whatever
@@ -17,7 +21,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .device import Device, get_device
-from .film import Film
+from .film import DEFAULT_PRECISION, Film
 from .megakernel import Megakernel
 from .scene import Scene
 from .scene_buffers import SceneBuffers
@@ -40,6 +44,7 @@ class RenderStats:
     kernels: list[dict] = field(default_factory=list)
     bounces: list[dict] = field(default_factory=list)
     memory: dict = field(default_factory=dict)  # wavefront: wave size, bytes per path, path-state bytes
+    accumulation: dict = field(default_factory=dict)  # Accumulator.stats(): precision, frames, counters
 
 
 class Renderer:
@@ -48,7 +53,8 @@ class Renderer:
     def __init__(self, scene: Scene, *, integrator: str = "megakernel", layout: str = "soa",
                  max_depth: int | None = None, width: int | None = None, height: int | None = None,
                  device: Device | str | None = None, wave_size: int | None = None,
-                 local_size: int | None = None, schedule: str | None = None) -> None:
+                 local_size: int | None = None, schedule: str | None = None,
+                 precision: str = DEFAULT_PRECISION) -> None:
         if integrator not in INTEGRATORS:
             raise ValueError(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
         if layout not in LAYOUTS:
@@ -68,7 +74,7 @@ class Renderer:
         self.scene_buffers = SceneBuffers(scene, self.device)
         self.device.queue.finish()
         t1 = time.perf_counter()
-        self.film = Film(self.device, self.width, self.height)
+        self.film = Film(self.device, self.width, self.height, precision=precision)
         options: dict = {"wave_size": wave_size} if wave_size else {}
         if local_size:
             options["local_size"] = int(local_size)
@@ -109,9 +115,15 @@ class Renderer:
                     self.device.queue.finish()
                     bar.update(1)
         image = self.film.image()
+        self.collect_stats(spp, time.perf_counter() - start)
+        return image
+
+    def collect_stats(self, spp: int, seconds: float) -> RenderStats:
+        """Fill ``stats`` after frames were rendered (profile, bounces, memory, counters); returns it."""
         self.stats.spp = spp
-        self.stats.seconds = time.perf_counter() - start
+        self.stats.seconds = seconds
         self.stats.dropped_samples = self.film.dropped_samples()
+        self.stats.accumulation = self.film.accumulator.stats()
         self.stats.kernels = self.integrator.profile.table()
         self.stats.bounces = getattr(self.integrator, "bounce_stats", lambda: [])()
         if hasattr(self.integrator, "paths"):
@@ -120,22 +132,24 @@ class Renderer:
                                  "path_state_bytes": self.integrator.paths.nbytes}
         if self.stats.dropped_samples:
             log.warning("%s: dropped %d NaN/inf samples", self.scene.name, self.stats.dropped_samples)
-        return image
+        return self.stats
 
 
 def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = None, seed: int = 0,
            integrator: str = "megakernel", width: int | None = None, height: int | None = None,
            device: Device | str | None = None, layout: str = "soa", progress: bool | None = None,
-           wave_size: int | None = None) -> np.ndarray:
+           wave_size: int | None = None, precision: str = DEFAULT_PRECISION) -> np.ndarray:
     """Render ``scene`` (a Scene or a built-in scene name / file) to a (H, W, 3) float32 linear image.
 
     ``spp`` and ``max_depth`` default to the scene's; ``width``/``height`` override its film.
     ``progress``: True shows a bar, False never, None shows one on renders longer than a few seconds.
+    ``precision``: how the frames are summed (``single``, ``compensated``, ``double``; see
+    :mod:`pyclpt.accumulator`).
     """
     if isinstance(scene, str):
         from .scene_library import load
 
         scene = load(scene)
     r = Renderer(scene, integrator=integrator, layout=layout, max_depth=max_depth, width=width,
-                 height=height, device=device, wave_size=wave_size)
+                 height=height, device=device, wave_size=wave_size, precision=precision)
     return r.render(scene.spp if spp is None else spp, seed=seed, progress=progress)

@@ -27,36 +27,299 @@ def rgb(value: object, what: str = "color") -> RGB:
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
+WRAP_MODES = ("repeat", "mirror", "clamp", "black")
+FILTERS = ("nearest", "bilinear")
+DISTRIBUTIONS = ("ggx", "beckmann")
+
+
+def _uv(value: object, what: str) -> tuple[float, float]:
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size == 1:
+        arr = np.repeat(arr, 2)
+    if arr.size != 2 or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what}: expected a number or 2 finite numbers, got {value!r}")
+    return (float(arr[0]), float(arr[1]))
+
+
+@dataclass(eq=False)
+class Bitmap:
+    """An image texture (Mitsuba ``bitmap``), looked up at the surface's uv.
+
+    ``pixels`` (H, W, C) float32 holds the decoded values: linear radiance-like
+    values for ``raw`` or HDR files, sRGB-encoded values in [0, 1] otherwise
+    (decoded to linear on the device, before filtering). ``scale`` multiplies
+    the value (Mitsuba's ``scale`` texture). Row 0 of ``pixels`` is the top of
+    the image, which is v = 1 as in Mitsuba.
+    """
+
+    pixels: np.ndarray
+    name: str = "bitmap"
+    srgb: bool = True  # pixels are sRGB-encoded (LDR files unless raw)
+    filter: str = "bilinear"
+    wrap_mode: str = "repeat"
+    uv_scale: tuple[float, float] = (1.0, 1.0)
+    uv_offset: tuple[float, float] = (0.0, 0.0)
+    scale: RGB = (1.0, 1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        px = np.asarray(self.pixels, dtype=np.float32)
+        if px.ndim == 2:
+            px = px[:, :, None]
+        if px.ndim != 3 or px.shape[2] not in (1, 2, 3, 4) or px.shape[0] < 1 or px.shape[1] < 1:
+            raise ValueError(f"texture {self.name!r}: expected an (H, W, C) image, got shape {px.shape}")
+        if not np.all(np.isfinite(px)):
+            raise ValueError(f"texture {self.name!r}: the image holds NaN or infinite values")
+        self.pixels = np.ascontiguousarray(px)
+        if self.filter not in FILTERS:
+            raise ValueError(f"texture {self.name!r}: filter must be one of {FILTERS}, got {self.filter!r}")
+        if self.wrap_mode not in WRAP_MODES:
+            raise ValueError(f"texture {self.name!r}: wrap_mode must be one of {WRAP_MODES}, "
+                             f"got {self.wrap_mode!r}")
+        self.uv_scale = _uv(self.uv_scale, f"texture {self.name!r} uv_scale")
+        self.uv_offset = _uv(self.uv_offset, f"texture {self.name!r} uv_offset")
+        self.scale = rgb(self.scale, f"texture {self.name!r} scale")
+
+    @property
+    def width(self) -> int:
+        return int(self.pixels.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.pixels.shape[0])
+
+    def rgba(self) -> np.ndarray:
+        """The pixels as (H, W, 4): gray replicated, alpha 1 where absent."""
+        px = self.pixels
+        c = px.shape[2]
+        out = np.ones(px.shape[:2] + (4,), np.float32)
+        if c in (1, 2):
+            out[..., :3] = px[..., :1]
+            if c == 2:
+                out[..., 3] = px[..., 1]
+        else:
+            out[..., :c] = px
+        return out
+
+
+@dataclass(eq=False)
+class Checkerboard:
+    """Mitsuba's ``checkerboard``: color0 where floor(u*2) + floor(v*2) is even... in uv units of 0.5."""
+
+    color0: RGB = (0.4, 0.4, 0.4)
+    color1: RGB = (0.2, 0.2, 0.2)
+    uv_scale: tuple[float, float] = (1.0, 1.0)
+    uv_offset: tuple[float, float] = (0.0, 0.0)
+    scale: RGB = (1.0, 1.0, 1.0)
+    name: str = "checkerboard"
+
+    def __post_init__(self) -> None:
+        self.color0 = rgb(self.color0, f"texture {self.name!r} color0")
+        self.color1 = rgb(self.color1, f"texture {self.name!r} color1")
+        self.uv_scale = _uv(self.uv_scale, f"texture {self.name!r} uv_scale")
+        self.uv_offset = _uv(self.uv_offset, f"texture {self.name!r} uv_offset")
+        self.scale = rgb(self.scale, f"texture {self.name!r} scale")
+
+
+Texture = Union[Bitmap, Checkerboard]
+# A material parameter: a constant RGB or a texture.
+Color = Union[RGB, Bitmap, Checkerboard]
+
+
+def color(value: object, what: str) -> Color:
+    """A texture as is, or an RGB triple (see :func:`rgb`)."""
+    if isinstance(value, (Bitmap, Checkerboard)):
+        return value
+    return rgb(value, what)
+
+
+def _alpha(value: float, what: str) -> float:
+    v = float(value)
+    if not 0.0 <= v <= 4.0 or not np.isfinite(v):
+        raise ValueError(f"{what}: roughness alpha must be in [0, 4], got {value!r}")
+    return v
+
+
+def _distribution(value: str, what: str) -> str:
+    if value not in DISTRIBUTIONS:
+        raise ValueError(f"{what}: microfacet distribution must be one of {DISTRIBUTIONS}, got {value!r}")
+    return value
+
+
+def _ior(value: float, what: str) -> float:
+    v = float(value)
+    if not (v > 0.0 and np.isfinite(v)):
+        raise ValueError(f"{what}: an index of refraction must be positive and finite, got {value!r}")
+    return v
+
+
 @dataclass
 class Diffuse:
     """Lambertian reflection (Mitsuba ``diffuse``)."""
 
-    reflectance: RGB = (0.5, 0.5, 0.5)
+    reflectance: Color = (0.5, 0.5, 0.5)
     twosided: bool = False
+
+    def __post_init__(self) -> None:
+        self.reflectance = color(self.reflectance, "diffuse reflectance")
 
 
 @dataclass
 class Conductor:
-    """Metal with complex IOR ``eta + i k``; smooth when ``alpha == 0``, else GGX rough."""
+    """Metal with complex IOR ``eta + i k``; smooth when ``alpha == 0``, else rough
+    (``distribution`` GGX or Beckmann; Mitsuba ``conductor`` / ``roughconductor``)."""
 
     eta: RGB = (0.0, 0.0, 0.0)
     k: RGB = (1.0, 1.0, 1.0)
     alpha: float = 0.0
-    specular_reflectance: RGB = (1.0, 1.0, 1.0)
+    specular_reflectance: Color = (1.0, 1.0, 1.0)
     twosided: bool = False
+    distribution: str = "ggx"
+
+    def __post_init__(self) -> None:
+        self.eta = rgb(self.eta, "conductor eta")
+        self.k = rgb(self.k, "conductor k")
+        self.alpha = _alpha(self.alpha, "conductor")
+        self.specular_reflectance = color(self.specular_reflectance, "conductor specular_reflectance")
+        self.distribution = _distribution(self.distribution, "conductor")
 
 
 @dataclass
 class Dielectric:
-    """Smooth glass-like interface between ``int_ior`` (inside) and ``ext_ior``."""
+    """Glass-like interface between ``int_ior`` (inside) and ``ext_ior``; smooth when
+    ``alpha == 0``, else rough (Mitsuba ``dielectric`` / ``roughdielectric``)."""
 
     int_ior: float = 1.5046
     ext_ior: float = 1.000277
-    specular_reflectance: RGB = (1.0, 1.0, 1.0)
-    specular_transmittance: RGB = (1.0, 1.0, 1.0)
+    specular_reflectance: Color = (1.0, 1.0, 1.0)
+    specular_transmittance: Color = (1.0, 1.0, 1.0)
+    alpha: float = 0.0
+    distribution: str = "ggx"
+
+    def __post_init__(self) -> None:
+        self.int_ior = _ior(self.int_ior, "dielectric int_ior")
+        self.ext_ior = _ior(self.ext_ior, "dielectric ext_ior")
+        self.specular_reflectance = color(self.specular_reflectance, "dielectric specular_reflectance")
+        self.specular_transmittance = color(self.specular_transmittance, "dielectric specular_transmittance")
+        self.alpha = _alpha(self.alpha, "dielectric")
+        self.distribution = _distribution(self.distribution, "dielectric")
 
 
-Material = Union[Diffuse, Conductor, Dielectric]
+@dataclass
+class ThinDielectric:
+    """A thin sheet of glass (Mitsuba ``thindielectric``): reflection with the
+    summed internal reflections, transmission without refraction."""
+
+    int_ior: float = 1.5046
+    ext_ior: float = 1.000277
+    specular_reflectance: Color = (1.0, 1.0, 1.0)
+    specular_transmittance: Color = (1.0, 1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        self.int_ior = _ior(self.int_ior, "thindielectric int_ior")
+        self.ext_ior = _ior(self.ext_ior, "thindielectric ext_ior")
+        self.specular_reflectance = color(self.specular_reflectance, "thindielectric specular_reflectance")
+        self.specular_transmittance = color(self.specular_transmittance,
+                                            "thindielectric specular_transmittance")
+
+
+@dataclass
+class Plastic:
+    """A diffuse base under a dielectric coating (Mitsuba ``plastic`` / ``roughplastic``);
+    smooth coating when ``alpha == 0``."""
+
+    diffuse_reflectance: Color = (0.5, 0.5, 0.5)
+    specular_reflectance: Color = (1.0, 1.0, 1.0)
+    int_ior: float = 1.49
+    ext_ior: float = 1.000277
+    alpha: float = 0.0
+    distribution: str = "ggx"
+    nonlinear: bool = False
+    twosided: bool = False
+
+    def __post_init__(self) -> None:
+        self.diffuse_reflectance = color(self.diffuse_reflectance, "plastic diffuse_reflectance")
+        self.specular_reflectance = color(self.specular_reflectance, "plastic specular_reflectance")
+        self.int_ior = _ior(self.int_ior, "plastic int_ior")
+        self.ext_ior = _ior(self.ext_ior, "plastic ext_ior")
+        self.alpha = _alpha(self.alpha, "plastic")
+        self.distribution = _distribution(self.distribution, "plastic")
+
+
+BaseMaterial = Union[Diffuse, Conductor, Dielectric, ThinDielectric, Plastic]
+
+
+@dataclass
+class Mask:
+    """Mitsuba ``mask``: the nested material with probability ``opacity``, else the
+    ray passes through (honoured by closest-hit and shadow queries alike)."""
+
+    opacity: Color
+    material: "Material"
+
+    def __post_init__(self) -> None:
+        self.opacity = color(self.opacity, "mask opacity")
+
+
+@dataclass
+class BumpMap:
+    """Mitsuba ``bumpmap``: the shading normal perturbed by the gradient of a height texture."""
+
+    height: Texture
+    material: "Material"
+    scale: float = 1.0
+
+
+Material = Union[Diffuse, Conductor, Dielectric, ThinDielectric, Plastic, Mask, BumpMap]
+
+
+@dataclass
+class PointLight:
+    """An isotropic point emitter of ``intensity`` (W/sr, rgb) at ``position``."""
+
+    position: tuple[float, float, float]
+    intensity: RGB = (1.0, 1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.position, np.float64).reshape(-1)
+        if p.size != 3 or not np.all(np.isfinite(p)):
+            raise ValueError(f"point light position: expected 3 finite numbers, got {self.position!r}")
+        self.position = (float(p[0]), float(p[1]), float(p[2]))
+        self.intensity = rgb(self.intensity, "point light intensity")
+        if min(self.intensity) < 0:
+            raise ValueError(f"point light: negative intensity {self.intensity}")
+
+
+@dataclass(eq=False)
+class Envmap:
+    """A lat-long environment map (Mitsuba ``envmap``): ``pixels`` (H, W, 3) linear radiance,
+    row 0 at the top (+y in the map's frame), ``to_world`` rotating the map into the scene.
+    ``sunsky`` emitters are baked into one of these (pyclpt.sunsky)."""
+
+    pixels: np.ndarray
+    to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
+    scale: float = 1.0
+    name: str = "envmap"
+
+    def __post_init__(self) -> None:
+        px = np.asarray(self.pixels, np.float32)
+        if px.ndim == 2:
+            px = np.repeat(px[:, :, None], 3, axis=2)
+        if px.ndim != 3 or px.shape[2] < 3 or px.shape[0] < 2 or px.shape[1] < 2:
+            raise ValueError(f"environment map {self.name!r}: expected an (H, W, 3) image, got {px.shape}")
+        px = px[:, :, :3]
+        if not np.all(np.isfinite(px)) or px.min() < 0:
+            raise ValueError(f"environment map {self.name!r}: values must be finite and >= 0")
+        self.pixels = np.ascontiguousarray(px)
+        self.to_world = np.asarray(self.to_world, np.float64).reshape(4, 4)
+        if not (np.isfinite(self.scale) and self.scale >= 0):
+            raise ValueError(f"environment map {self.name!r}: scale must be >= 0, got {self.scale}")
+
+
+def base_material(mat: Material) -> BaseMaterial:
+    """The BSDF under any mask / bump-map wrappers."""
+    while isinstance(mat, (Mask, BumpMap)):
+        mat = mat.material
+    return mat
 
 
 @dataclass(eq=False)
@@ -173,11 +436,12 @@ class Scene:
     materials: list[Material]
     camera: Camera = field(default_factory=Camera)
     film: Film = field(default_factory=Film)
-    environment: RGB | None = None  # constant environment radiance
+    environment: RGB | Envmap | None = None  # constant radiance or an environment map
     spp: int = 64
     max_depth: int = -1
     name: str = "scene"
     source: Path | None = None
+    lights: list[PointLight] = field(default_factory=list)  # emitters that are not shapes
 
     def __post_init__(self) -> None:
         if not self.meshes:
@@ -186,7 +450,7 @@ class Scene:
             if not 0 <= mesh.material < len(self.materials):
                 raise ValueError(f"mesh {mesh.name!r} has material {mesh.material}, "
                                  f"but the scene has {len(self.materials)} materials")
-        if self.environment is not None:
+        if self.environment is not None and not isinstance(self.environment, Envmap):
             self.environment = rgb(self.environment, "environment radiance")
 
     @property
@@ -195,5 +459,5 @@ class Scene:
 
     @property
     def emitter_count(self) -> int:
-        return sum(m.triangle_count for m in self.meshes if m.emission is not None) + (
-            1 if self.environment is not None else 0)
+        return (sum(m.triangle_count for m in self.meshes if m.emission is not None)
+                + (1 if self.environment is not None else 0) + len(self.lights))

@@ -55,8 +55,10 @@ def shared_path(relative: str) -> Path:
     return path
 
 
-def load(name_or_path: str | os.PathLike) -> Scene:
-    """A built-in scene by name (``pyclpt.load("cornell-box")``) or a scene file (.json)."""
+def load(name_or_path: str | os.PathLike, /, **params: object) -> Scene:
+    """A built-in scene by name (``pyclpt.load("cornell-box")``) or a scene file (.json, or Mitsuba
+    .xml). ``params`` (converted with ``str``) override an XML file's ``<default>`` values, as
+    Mitsuba's ``-D name=value``: ``pyclpt.load("scene.xml", spp=16, resx=64)``."""
     text = str(name_or_path)
     path = Path(text)
     builtin = builtin_dir() / f"{text}.json"
@@ -67,8 +69,14 @@ def load(name_or_path: str | os.PathLike) -> Scene:
     else:
         known = ", ".join(builtin_scenes())
         raise FileNotFoundError(f"no built-in scene or scene file named {text!r} (built-in: {known})")
+    if path.suffix.lower() == ".xml":
+        from .mitsuba_xml import load_xml
+
+        return load_xml(path, **params)
     if path.suffix.lower() != ".json":
-        raise SceneDictError(f"{path}: unsupported scene file type {path.suffix!r} (.json)")
+        raise SceneDictError(f"{path}: unsupported scene file type {path.suffix!r} (.json, .xml)")
+    if params:
+        raise ValueError(f"{path}: parameters ({', '.join(params)}) apply only to Mitsuba .xml scenes")
     try:
         d = json.loads(path.read_text())
     except json.JSONDecodeError as exc:

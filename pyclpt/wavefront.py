@@ -57,7 +57,8 @@ class Wavefront:
         self.light_queue = alloc(device, nbytes, "light-contribution queue")
         self.counters = alloc(device, 4 * Q_COUNT * (max_depth + 2), "queue counters")
         generated = {"path_state.h": opencl_header(layout)}
-        self.kernels = {s: cl.Kernel(build_program(device, [f"{s}.cl"], generated=generated), s) for s in STAGES}
+        self.kernels = {s: cl.Kernel(build_program(device, [f"{s}.cl"], generated=generated,
+                                                   defines=scene.defines), s) for s in STAGES}
         self.profile = KernelProfile()
         self._bounce_totals = np.zeros((max_depth + 2, Q_COUNT), np.int64)
         self._counts = np.zeros((max_depth + 2, Q_COUNT), np.int32)
@@ -86,9 +87,9 @@ class Wavefront:
                      f.dropped, np.uint32(seed), np.uint32(sample), np.int32(offset), np.int32(n),
                      np.int32(self.max_depth))
 
-    def intersect(self, n: int, bounce: int) -> None:
+    def intersect(self, n: int, bounce: int, seed: int, sample: int) -> None:
         self._launch("intersect", n, *self._scene_args, *self._common(bounce), self.ray_queues[bounce % 2],
-                     self.hit_queue, self.miss_queue)
+                     self.hit_queue, self.miss_queue, np.uint32(seed), np.uint32(sample))
 
     def miss(self, n: int, bounce: int) -> None:
         self._launch("miss", n, *self._scene_args, *self._common(bounce), self.miss_queue, self.film.frame,
@@ -98,9 +99,9 @@ class Wavefront:
         self._launch("process_hit", n, *self._scene_args, *self._common(bounce), self.hit_queue,
                      self.shadow_queue, np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
 
-    def shadow_test(self, n: int, bounce: int) -> None:
+    def shadow_test(self, n: int, bounce: int, seed: int, sample: int) -> None:
         self._launch("shadow_test", n, *self._scene_args, *self._common(bounce), self.shadow_queue,
-                     self.light_queue)
+                     self.light_queue, np.uint32(seed), np.uint32(sample))
 
     def light_contribution(self, n: int, bounce: int) -> None:
         self._launch("light_contribution", n, *self._common(bounce), self.light_queue)
@@ -119,7 +120,7 @@ class Wavefront:
         self.path_init(1, 0, 0, 0)
         cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
         for stage in STAGES[1:]:
-            getattr(self, stage)(*((1, 0, 0, 0) if stage in ("process_hit", "sample_bsdf") else (1, 0)))
+            getattr(self, stage)(*((1, 0) if stage in ("miss", "light_contribution") else (1, 0, 0, 0)))
         cl.enqueue_fill_buffer(q, self.film.frame, np.float32(0), 0, 4 * 3 * self.film.pixels)
         q.finish()
         self.profile.clear()
@@ -145,10 +146,10 @@ class Wavefront:
                     rays = n
                     if bounce and bounce % CAPACITY_CHECK == 0 and self._read_count(bounce, 0) == 0:
                         break
-                self.intersect(rays, bounce)
+                self.intersect(rays, bounce, seed, sample)
                 self.miss(rays, bounce)
                 self.process_hit(rays, bounce, seed, sample)
-                self.shadow_test(rays, bounce)
+                self.shadow_test(rays, bounce, seed, sample)
                 self.light_contribution(rays, bounce)
                 self.sample_bsdf(rays, bounce, seed, sample)
             cl.enqueue_copy(q, self._counts, self.counters)

@@ -17,7 +17,7 @@ stats = pytest.importorskip("scipy.stats")
 from pyclpt.load_dict import METALS  # noqa: E402
 from pyclpt.program import build_program  # noqa: E402
 from pyclpt.scene import Conductor, Dielectric, Diffuse  # noqa: E402
-from pyclpt.scene_buffers import pack_material  # noqa: E402
+from pyclpt.material_buffers import pack_material  # noqa: E402
 
 KERNELS = r"""
 #include "rng.h"
@@ -59,11 +59,12 @@ __kernel void bsdf_eval_k(__global const float* mat, __global const float* wi, i
                           __global const float* wo, __global float* out) {
     int i = get_global_id(0);
     float pdf = -1.0f;
-    float3 v = bsdf_eval(mat, vload3(i * wi_stride, wi), vload3(i, wo), &pdf);
+    Bsdf b = bsdf_from(mat);
+    float3 v = bsdf_eval(&b, vload3(i * wi_stride, wi), vload3(i, wo), &pdf);
     vstore4((float4)(v, pdf), i, out);
 }
 
-/* out per item: wo[3] weight[3] pdf eta delta ok eval_value[3] eval_pdf, pad[2] */
+/* out per item: wo[3] weight[3] pdf eta delta ok eval_value[3] eval_pdf is_delta pad */
 __kernel void bsdf_sample_k(__global const float* mat, __global const float* wi, int wi_stride,
                             __global const float* u, __global float* out) {
     int i = get_global_id(0);
@@ -74,9 +75,10 @@ __kernel void bsdf_sample_k(__global const float* mat, __global const float* wi,
     s.pdf = 0.0f;
     s.eta = 0.0f;
     s.delta = false;
-    bool ok = bsdf_sample(mat, w, u[3 * i], (float2)(u[3 * i + 1], u[3 * i + 2]), &s);
+    Bsdf b = bsdf_from(mat);
+    bool ok = bsdf_sample(&b, w, u[3 * i], (float2)(u[3 * i + 1], u[3 * i + 2]), &s);
     float pdf = -1.0f;
-    float3 v = bsdf_eval(mat, w, s.wo, &pdf);
+    float3 v = bsdf_eval(&b, w, s.wo, &pdf);
     __global float* o = out + 16 * i;
     vstore3(s.wo, 0, o);
     vstore3(s.weight, 1, o);
@@ -86,7 +88,7 @@ __kernel void bsdf_sample_k(__global const float* mat, __global const float* wi,
     o[9] = ok ? 1.0f : 0.0f;
     vstore3(v, 0, o + 10);
     o[13] = pdf;
-    o[14] = 0.0f;
+    o[14] = bsdf_is_delta(&b) ? 1.0f : 0.0f;
     o[15] = 0.0f;
 }
 
@@ -98,6 +100,7 @@ __kernel void bsdf_cells_k(__global const float* mat, __global const float* wi_p
     int cell = cells[get_global_id(0)];
     int i = cell / n_phi, j = cell % n_phi;
     float3 wi = vload3(0, wi_p);
+    Bsdf bsdf = bsdf_from(mat);
     float4 acc = (float4)(0.0f);
     for (int a = 0; a < q_t; ++a) {
         float3 t = vload3(i * q_t + a, tnodes);
@@ -105,7 +108,7 @@ __kernel void bsdf_cells_k(__global const float* mat, __global const float* wi_p
         for (int b = 0; b < q_p; ++b) {
             float3 p = vload3(j * q_p + b, pnodes);
             float pdf;
-            float3 v = bsdf_eval(mat, wi, (float3)(t.x * p.x, t.x * p.y, t.y), &pdf);
+            float3 v = bsdf_eval(&bsdf, wi, (float3)(t.x * p.x, t.x * p.y, t.y), &pdf);
             row += p.z * (float4)(v, pdf);
         }
         acc += t.z * row;
@@ -119,6 +122,32 @@ __kernel void fresnel_dielectric_k(__global const float* cos_i, __global const f
     float ct = -2.0f, eti = -2.0f;
     float f = fresnel_dielectric(cos_i[i], eta[i], &ct, &eti);
     vstore3((float3)(f, ct, eti), i, out);
+}
+
+/* per item (m[3], v[3], alpha, beckmann) -> (D(m), G1(v, m), pdf_visible(v, m)) */
+__kernel void microfacet_k(__global const float* in, __global float* out) {
+    int i = get_global_id(0);
+    __global const float* p = in + 8 * i;
+    Microfacet d;
+    d.alpha = p[6];
+    d.beckmann = p[7] != 0.0f;
+    float3 m = vload3(0, p), v = vload3(1, p);
+    vstore3((float3)(mf_d(d, m), mf_g1(d, v, m), mf_pdf_visible(d, v, m)), i, out);
+}
+
+/* per item (wi[3], alpha, beckmann, u[2]) -> sampled visible normal */
+__kernel void microfacet_sample_k(__global const float* in, __global float* out) {
+    int i = get_global_id(0);
+    __global const float* p = in + 8 * i;
+    Microfacet d;
+    d.alpha = p[3];
+    d.beckmann = p[4] != 0.0f;
+    vstore3(mf_sample_visible(d, vload3(0, p), (float2)(p[5], p[6])), i, out);
+}
+
+__kernel void erfinv_k(__global const float* x, __global float* out) {
+    int i = get_global_id(0);
+    out[i] = erfinv_f(x[i]);
 }
 
 __kernel void fresnel_conductor_k(__global const float* cos_i, __global const float* ek,
@@ -184,14 +213,17 @@ class Kit:
         assert stride == 0 or wi.shape == wo.shape
         return self.run("bsdf_eval_k", wo.shape[0], mat, wi, np.int32(stride), wo, Out(wo.shape[0], 4))
 
-    def cells(self, mat: np.ndarray, wi: np.ndarray, cells=None, sub_t: int = 8, sub_p: int = 4):
-        """Integrals of bsdf_eval's (value rgb, pdf) over (cos theta, phi) cells of the upper hemisphere.
+    def cells(self, mat: np.ndarray, wi: np.ndarray, cells=None, sub_t: int = 8, sub_p: int = 4,
+              cos_lo: float = 0.0, n_cos: int | None = None):
+        """Integrals of bsdf_eval's (value rgb, pdf) over (cos theta, phi) cells, cos theta in [cos_lo, 1]
+        (0: the upper hemisphere, -1: the sphere) in n_cos rows of N_PHI cells.
 
         Composite 2-point Gauss-Legendre with sub_t x sub_p pieces per cell; returns (len(cells), 4)."""
+        n_cos = N_COS if n_cos is None else n_cos
         if cells is None:
-            cells = np.arange(N_COS * N_PHI)
+            cells = np.arange(n_cos * N_PHI)
         cells = np.ascontiguousarray(cells, np.int32)
-        th, wt, ph, wp = cell_nodes(0.0, N_COS, N_PHI, sub_t, sub_p)
+        th, wt, ph, wp = cell_nodes(cos_lo, n_cos, N_PHI, sub_t, sub_p)
         tn = np.stack([np.sin(th), np.cos(th), wt * np.sin(th)], axis=-1).astype(np.float32)
         pn = np.stack([np.cos(ph), np.sin(ph), wp], axis=-1).astype(np.float32)
         n = len(cells)
@@ -199,16 +231,19 @@ class Kit:
                        np.int32(th.shape[1]), np.int32(ph.shape[1]), tn, pn, cells, Out(n, 4))
         return out.astype(np.float64)
 
-    def adaptive_cells(self, mat: np.ndarray, wi: np.ndarray, n_samples: int) -> np.ndarray:
-        """Per-cell integrals (N_COS, N_PHI, 4), refined where the coarse quadrature is not yet converged
+    def adaptive_cells(self, mat: np.ndarray, wi: np.ndarray, n_samples: int, cos_lo: float = 0.0,
+                       n_cos: int | None = None) -> np.ndarray:
+        """Per-cell integrals (n_cos, N_PHI, 4), refined where the coarse quadrature is not yet converged
         at the resolution n_samples samples can see (narrow GGX lobes at grazing incidence)."""
-        a = self.cells(mat, wi, sub_t=4, sub_p=2)
-        b = self.cells(mat, wi, sub_t=8, sub_p=4)
+        n_cos = N_COS if n_cos is None else n_cos
+        kw = dict(cos_lo=cos_lo, n_cos=n_cos)
+        a = self.cells(mat, wi, sub_t=4, sub_p=2, **kw)
+        b = self.cells(mat, wi, sub_t=8, sub_p=4, **kw)
         diff = n_samples * np.abs(a[:, 3] - b[:, 3])
         todo = np.flatnonzero(diff > 0.05 * np.sqrt(np.maximum(n_samples * b[:, 3], 1.0)))
         if len(todo):
-            b[todo] = self.cells(mat, wi, todo, sub_t=64, sub_p=32)
-        return b.reshape(N_COS, N_PHI, 4)
+            b[todo] = self.cells(mat, wi, todo, sub_t=64, sub_p=32, **kw)
+        return b.reshape(n_cos, N_PHI, 4)
 
     def sample(self, mat: np.ndarray, wi: np.ndarray, u: np.ndarray) -> dict[str, np.ndarray]:
         u = np.ascontiguousarray(u, np.float32).reshape(-1, 3)
@@ -217,7 +252,8 @@ class Kit:
         n = u.shape[0]
         o = self.run("bsdf_sample_k", n, mat, wi, np.int32(stride), u, Out(n, 16))
         return {"wo": o[:, 0:3], "weight": o[:, 3:6], "pdf": o[:, 6], "eta": o[:, 7],
-                "delta": o[:, 8] > 0.5, "ok": o[:, 9] > 0.5, "value": o[:, 10:13], "eval_pdf": o[:, 13]}
+                "delta": o[:, 8] > 0.5, "ok": o[:, 9] > 0.5, "value": o[:, 10:13], "eval_pdf": o[:, 13],
+                "is_delta": o[:, 14] > 0.5}
 
 
 @pytest.fixture(scope="module")

@@ -337,7 +337,7 @@ def test_integrator_and_sensor_values():
 
 @pytest.mark.parametrize("elements, needles", [
     ({"blob": {"type": "blobby"}}, ["blob", "blobby"]),
-    ({"s": {**RECT, "bsdf": {"type": "plastic"}}}, ["s.bsdf", "plastic"]),
+    ({"s": {**RECT, "bsdf": {"type": "plasticky"}}}, ["s.bsdf", "plasticky"]),
     ({"s": {**RECT, "bsdf": {"type": "ref", "id": "nope"}}}, ["s.bsdf", "nope"]),
     ({"mat": {"type": "diffuse", "reflectance": [1, 2]}, "s": {**RECT, "bsdf": {"type": "ref", "id": "mat"}}},
      ["mat.reflectance"]),
@@ -347,7 +347,7 @@ def test_integrator_and_sensor_values():
     ({"s": {**RECT, "bsdf": {"type": "diffuse", "reflectance": [0.5, float("nan"), 0.5]}}},
      ["s.bsdf.reflectance"]),
     ({"s": {**RECT, "bsdf": {"type": "conductor", "material": "Unobtainium"}}}, ["s.bsdf.material", "Unobtainium"]),
-    ({"s": {**RECT, "bsdf": {"type": "roughconductor", "alpha": 2}}}, ["s.bsdf.alpha"]),
+    ({"s": {**RECT, "bsdf": {"type": "roughconductor", "alpha": -0.5}}}, ["s.bsdf.alpha"]),
     ({"s": {**RECT, "bsdf": {"type": "dielectric", "int_ior": -1}}}, ["s.bsdf", "-1"]),
     ({"s": {**RECT, "bsdf": {"type": "dielectric", "int_ior": "unobtainium"}}}, ["s.bsdf.int_ior"]),
     ({"s": {**RECT, "bsdf": "white"}}, ["s.bsdf"]),

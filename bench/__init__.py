@@ -1,0 +1,16 @@
+"""pyclpt's benchmarks; installed as the subpackage ``pyclpt.bench`` (``pyclpt bench`` runs
+:mod:`.report`).
+
+- :mod:`.runner`: timing frames of a renderer (warm-up, repeats, median/min/max, device time from
+  profiling events) and counting the rays they trace;
+- :mod:`.embree_ceiling`: Embree's own ray throughput on the same scene, on the host;
+- :mod:`.scenes`: which scenes a report covers, loaded or skipped with the reason;
+- :mod:`.machine`: the machine, OpenCL device and software versions a report records;
+- :mod:`.analysis`: figures derived from raw results (FPS, speed-ups, rays/s);
+- :mod:`.plots`: the report's matplotlib figures;
+- :mod:`.document`: a report as blocks, written as Markdown and self-contained HTML;
+- :mod:`.report`: the ``pyclpt bench`` command (runs everything, writes the report folder).
+
+The scripts ``frame_time.py``, ``variants.py`` and ``bvh_build.py`` run from a checkout
+(``python bench/frame_time.py``).
+"""

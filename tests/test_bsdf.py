@@ -1,0 +1,614 @@
+"""The materials of the Mitsuba importer on the device (cl/bsdf.h): the Beckmann distribution, the rough
+dielectric, the thin dielectric and the smooth and rough plastics.
+
+Built on the harness of test_sampling.py (small kernels calling bsdf_sample / bsdf_eval, chi-square tests
+against cell integrals of the device's own pdf). Per material and parameter set:
+
+* chi-square of sampled directions against bsdf_eval's pdf (the whole sphere for the rough dielectric;
+  delta and failed samples pooled into one extra cell whose expectation is 1 - the pdf's integral);
+* sample weight == eval value / pdf and sample pdf == eval pdf;
+* sampled albedo == quadrature of bsdf_eval's value;
+* energy: white furnaces, and the rough dielectric's reflected / transmitted energy against the independent
+  host integrals of pyclpt/microfacet.py;
+* reference formulas (numpy, after Mitsuba 3's plastic.cpp / roughplastic.cpp / thindielectric.cpp);
+* reciprocity, one- and two-sidedness, and finite output at extreme inputs.
+
+Every random input comes from a fixed seed, so every p-value is deterministic.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+cl = pytest.importorskip("pyopencl")
+stats = pytest.importorskip("scipy.stats")
+special = pytest.importorskip("scipy.special")
+
+from test_sampling import (N_COS, N_PHI, PHI_I, Kit, Out, chi2_pvalue, direction,  # noqa: E402
+                           histogram_sphere, random_directions, sphere_quadrature, integrate_cells, uniform)
+
+from pyclpt.load_dict import METALS  # noqa: E402
+from pyclpt.material_buffers import MAT_FDR_INT, MAT_RP_TRANS, pack_material  # noqa: E402
+from pyclpt.microfacet import RP_KNOTS, rough_reflectance, rough_transmittance, smith_g1  # noqa: E402
+from pyclpt.scene import Conductor, Dielectric, Plastic, ThinDielectric  # noqa: E402
+
+FLIP = np.float32([1, 1, -1])
+
+
+@pytest.fixture(scope="module")
+def kit(device) -> Kit:
+    return Kit(device)  # the program comes from the device's cache when test_sampling built it
+
+
+# --------------------------------------------------------------------------
+# numpy references (float64)
+
+
+def fresnel(cos_i, eta):
+    """Unpolarised dielectric Fresnel reflectance, cos_i >= 0 on the side where int/ext = eta."""
+    cos_i = np.asarray(cos_i, np.float64)
+    sin_t2 = (1.0 - cos_i**2) / eta**2
+    cos_t = np.sqrt(np.clip(1.0 - sin_t2, 0.0, None))
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    return np.where(sin_t2 >= 1.0, 1.0, 0.5 * (rs**2 + rp**2))
+
+
+def ndf(m, alpha, beckmann):
+    """D(m) of GGX or Beckmann."""
+    c2 = m[..., 2] ** 2
+    xy2 = m[..., 0] ** 2 + m[..., 1] ** 2
+    a2 = alpha * alpha
+    if beckmann:
+        d = np.exp(-xy2 / (a2 * c2)) / (np.pi * a2 * c2 * c2)
+    else:
+        d = 1.0 / (np.pi * a2 * (xy2 / a2 + c2) ** 2)
+    return np.where(m[..., 2] > 0, d, 0.0)
+
+
+def g1_exact(v, m, alpha, beckmann):
+    """Smith G1 with scipy's erfc (the device's closed forms checked independently of pyclpt.microfacet)."""
+    xy = np.sqrt(v[..., 0] ** 2 + v[..., 1] ** 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.abs(v[..., 2]) / (alpha * xy)
+        if beckmann:
+            lam = 0.5 * (np.exp(-a * a) / (a * np.sqrt(np.pi)) - special.erfc(a))
+        else:
+            lam = 0.5 * (np.sqrt(1.0 + 1.0 / (a * a)) - 1.0)
+        g = np.where(xy == 0, 1.0, 1.0 / (1.0 + lam))
+    return np.where((v * m).sum(-1) * v[..., 2] <= 0, 0.0, g)
+
+
+def spec_weight(mat_obj) -> float:
+    """Mitsuba's m_specular_sampling_weight for constant colours."""
+    s, d = np.mean(mat_obj.specular_reflectance), np.mean(mat_obj.diffuse_reflectance)
+    return s / (s + d)
+
+
+def knots_of(rec) -> np.ndarray:
+    return np.asarray(rec[MAT_RP_TRANS:MAT_RP_TRANS + RP_KNOTS // 2], np.float32).view(np.float16).astype(np.float64)
+
+
+def knot_lerp(knots, cos_theta):
+    """The device's interpolation of the rough coating's transmittance, linear in sqrt(cos)."""
+    x = np.sqrt(np.clip(cos_theta, 0.0, 1.0)) * (RP_KNOTS - 1)
+    return np.interp(x, np.arange(RP_KNOTS), knots)
+
+
+# --------------------------------------------------------------------------
+# 1. Microfacet distributions
+
+
+@pytest.mark.parametrize("beckmann", [False, True], ids=["ggx", "beckmann"])
+def test_microfacet_functions(kit, beckmann):
+    """D against its closed form and its normalisation, G1 against scipy, the visible-normal pdf's
+    normalisation (Smith's identity) for several incident directions."""
+    dirs, weights = sphere_quadrature(0.0, sub_t=16, sub_p=4)
+    m = dirs.reshape(-1, 3)
+    for alpha in (0.05, 0.3, 0.8):
+        for cos_i in (1.0, 0.7, 0.2, 0.02):
+            wi = np.broadcast_to(direction(cos_i, PHI_I), m.shape)
+            rec = np.zeros((len(m), 8), np.float32)
+            rec[:, 0:3], rec[:, 3:6], rec[:, 6], rec[:, 7] = m, wi, alpha, float(beckmann)
+            out = kit.run("microfacet_k", len(m), rec, Out(len(m), 3)).astype(np.float64)
+            md, wid = m.astype(np.float64), wi.astype(np.float64)
+            if cos_i == 1.0:
+                np.testing.assert_allclose(out[:, 0], ndf(md, alpha, beckmann), rtol=2e-5, atol=1e-30)
+                norm = integrate_cells(out[:, 0] * md[:, 2], weights).sum()
+                assert abs(norm - 1.0) < 2e-3, f"integral of D cos = {norm} (alpha {alpha})"
+            np.testing.assert_allclose(out[:, 1], g1_exact(wid, md, alpha, beckmann), rtol=2e-5, atol=2e-6)
+            vis = integrate_cells(out[:, 2], weights).sum()
+            assert abs(vis - 1.0) < 3e-3, f"visible normals of cos_i {cos_i}, alpha {alpha} integrate to {vis}"
+
+
+@pytest.mark.parametrize("beckmann", [False, True], ids=["ggx", "beckmann"])
+@pytest.mark.parametrize("alpha,cos_i", [(0.05, 0.3), (0.3, 1.0), (0.3, 0.05), (0.8, 0.6)])
+def test_visible_normal_sampling_chi2(kit, beckmann, alpha, cos_i):
+    """mf_sample_visible against mf_pdf_visible, in the space of normals."""
+    n = 200_000
+    wi = direction(cos_i, PHI_I)
+    u = uniform(7000 + int(alpha * 100) + int(cos_i * 10) + 1000 * beckmann, n, 2)
+    rec = np.zeros((n, 8), np.float32)
+    rec[:, 0:3], rec[:, 3], rec[:, 4], rec[:, 5:7] = wi, alpha, float(beckmann), u
+    m = kit.run("microfacet_sample_k", n, rec, Out(n, 3))
+    assert np.all(np.isfinite(m)) and np.all(m[:, 2] > 0)
+    np.testing.assert_allclose(np.linalg.norm(m, axis=1), 1.0, atol=1e-5)
+    dirs, weights = sphere_quadrature(0.0, sub_t=16, sub_p=8)
+    q = dirs.reshape(-1, 3)
+    rq = np.zeros((len(q), 8), np.float32)
+    rq[:, 0:3], rq[:, 3:6], rq[:, 6], rq[:, 7] = q, wi, alpha, float(beckmann)
+    pdf = kit.run("microfacet_k", len(q), rq, Out(len(q), 3))[:, 2]
+    cells = integrate_cells(pdf, weights)
+    p, diag = chi2_pvalue(histogram_sphere(m, 0.0), n * cells / cells.sum())
+    assert abs(cells.sum() - 1.0) < 5e-3
+    assert p > 0.01, f"visible normals (alpha {alpha}, cos {cos_i}): p={p:.2e} ({diag})"
+
+
+def test_erfinv(kit):
+    x = np.concatenate([np.linspace(-0.999999, 0.999999, 20001), [0.0, 1e-7, -1e-7, 0.9999, -0.99999]])
+    x = x.astype(np.float32)
+    got = kit.run("erfinv_k", len(x), x, Out(len(x))).astype(np.float64)
+    want = special.erfinv(x.astype(np.float64))
+    np.testing.assert_allclose(got, want, rtol=2e-6, atol=1e-7)
+
+
+# --------------------------------------------------------------------------
+# 2. Sampling against evaluation, per material and parameter set
+
+N_S = 300_000
+SPHERE = (-1.0, 2 * N_COS)  # cos_lo, rows: the rough dielectric's cells cover the sphere
+HEMI = (0.0, N_COS)
+
+
+def _glass(alpha, dist, int_ior=1.5, ext_ior=1.0):
+    return Dielectric(int_ior, ext_ior, (0.9, 0.8, 0.7), (0.6, 0.7, 0.8), alpha=alpha, distribution=dist)
+
+
+CASES: dict[str, tuple] = {}
+for _d in ("ggx", "beckmann"):
+    for _a, _co, _ci in ((0.05, 0.7, -0.85), (0.3, 0.4, -0.5), (0.8, 0.15, -0.3)):
+        # from outside (eta 1.5) and from inside (eta 1 / 1.5: beyond the smooth critical angle for
+        # -0.5 and -0.3, where only the roughness lets light out)
+        CASES[f"roughglass-{_d}-a{_a}-out{_co}"] = (_glass(_a, _d), _co, SPHERE)
+        CASES[f"roughglass-{_d}-a{_a}-in{-_ci}"] = (_glass(_a, _d), _ci, SPHERE)
+# an interface with int_ior < ext_ior (an air bubble in water) seen from outside
+CASES["roughbubble-ggx-a0.3-out0.6"] = (_glass(0.3, "ggx", 1.0, 1.333), 0.6, SPHERE)
+CASES["roughbubble-beckmann-a0.3-out0.9"] = (_glass(0.3, "beckmann", 1.0, 1.333), 0.9, SPHERE)
+for _d in ("ggx", "beckmann"):
+    for _a, _c, _nl in ((0.05, 0.8, False), (0.3, 0.5, True), (0.8, 0.1, False), (0.3, 0.95, False)):
+        CASES[f"roughplastic-{_d}-a{_a}-cos{_c}-{'nl' if _nl else 'lin'}"] = (
+            Plastic((0.7, 0.4, 0.2), (1.0, 0.9, 0.8), 1.5, 1.0, alpha=_a, distribution=_d, nonlinear=_nl), _c, HEMI)
+for _c, _nl in ((0.8, False), (0.3, True), (0.05, False)):
+    CASES[f"plastic-cos{_c}-{'nl' if _nl else 'lin'}"] = (
+        Plastic((0.7, 0.4, 0.2), (1.0, 0.9, 0.8), 1.5, 1.0, nonlinear=_nl), _c, HEMI)
+for _a, _c in ((0.05, 0.6), (0.05, 0.1), (0.3, 1.0), (0.3, 0.1), (0.8, 0.6), (0.8, 0.1)):
+    CASES[f"roughcu-beckmann-a{_a}-cos{_c}"] = (
+        Conductor(*METALS["Cu"], alpha=_a, specular_reflectance=(0.9, 1.0, 0.8), distribution="beckmann"), _c, HEMI)
+
+
+def run_case(kit, case: str):
+    """Samples, their eval, and the cell integrals of eval's pdf and value (cached per case)."""
+    key = ("bsdf-new", case)
+    if key not in kit.cache:
+        mat_obj, cos_i, (cos_lo, n_cos) = CASES[case]
+        mat = pack_material(mat_obj)
+        wi = direction(abs(cos_i), PHI_I) * (FLIP if cos_i < 0 else np.float32(1))
+        seed = 5000 + list(CASES).index(case)
+        s = kit.sample(mat, wi, uniform(seed, N_S, 3))
+        cells = kit.adaptive_cells(mat, wi, N_S, cos_lo=cos_lo, n_cos=n_cos)
+        kit.cache[key] = (mat_obj, mat, wi, s, cells[..., 3], cells[..., :3])
+    return kit.cache[key]
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_chi2(kit, case):
+    mat_obj, _, wi, s, pdf_cells, _ = run_case(kit, case)
+    cos_lo, n_cos = CASES[case][2]
+    smooth = s["ok"] & ~s["delta"]
+    if cos_lo == 0.0:
+        assert np.all(s["wo"][s["ok"], 2] > 0), "a reflective material sampled below the surface"
+    total = pdf_cells.sum()
+    assert total <= 1.0 + 1e-3, f"eval pdf integrates to {total} > 1"
+    observed = np.append(histogram_sphere(s["wo"][smooth], cos_lo, n_cos).ravel(), np.count_nonzero(~smooth))
+    expected = np.append(N_S * pdf_cells.ravel(), max(N_S * (1.0 - total), 0.0))
+    p, diag = chi2_pvalue(observed, expected)
+    assert p > 0.01, f"{case}: sampled wo vs bsdf_eval pdf: p={p:.2e} ({diag}); pdf integral {total:.5f}"
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_sample_matches_eval(kit, case):
+    mat_obj, _, wi, s, _, _ = run_case(kit, case)
+    ok = s["ok"] & ~s["delta"]
+    assert ok.mean() > 0.3
+    pdf, epdf = s["pdf"][ok].astype(np.float64), s["eval_pdf"][ok].astype(np.float64)
+    assert np.all(pdf > 0) and np.all(np.isfinite(pdf))
+    np.testing.assert_allclose(pdf, epdf, rtol=2e-3, err_msg=f"{case}: bs.pdf vs bsdf_eval pdf")
+    weight = s["weight"][ok].astype(np.float64)
+    expect = s["value"][ok].astype(np.float64) / epdf[:, None]
+    assert np.all(np.isfinite(weight)) and np.all(weight >= 0)
+    np.testing.assert_allclose(weight, expect, rtol=2e-3, atol=1e-6,
+                               err_msg=f"{case}: bs.weight vs bsdf_eval value / pdf")
+    crossed = s["wo"][ok, 2] * wi[2] < 0
+    if isinstance(mat_obj, Dielectric):
+        eta = mat_obj.int_ior / mat_obj.ext_ior
+        eta_it = eta if wi[2] > 0 else 1.0 / eta
+        np.testing.assert_allclose(s["eta"][ok][crossed], eta_it, rtol=1e-6)
+        assert crossed.any() and (~crossed).any(), "both lobes of the rough dielectric are sampled"
+    else:
+        assert not crossed.any()
+    np.testing.assert_array_equal(s["eta"][ok][~crossed], 1.0)
+    assert not s["is_delta"].any()
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_albedo_sampled_vs_integrated(kit, case):
+    """Mean weight of the non-delta samples (others count 0) = quadrature of bsdf_eval's value."""
+    mat_obj, _, wi, s, _, value_cells = run_case(kit, case)
+    smooth = s["ok"] & ~s["delta"]
+    w = np.where(smooth[:, None], s["weight"], 0.0).astype(np.float64)
+    mean, err = w.mean(axis=0), w.std(axis=0) / np.sqrt(N_S)
+    integral = value_cells.sum(axis=(0, 1))
+    assert np.all(np.abs(mean - integral) <= 5 * err + 2e-3 * integral), \
+        f"{case}: sampled albedo {mean} vs integrated {integral} (+-{err})"
+    if isinstance(mat_obj, Plastic) and mat_obj.alpha == 0:
+        # the delta coating lobe: mean weight F(cos_i) * specular_reflectance
+        d = np.where(s["delta"][:, None], s["weight"], 0.0).astype(np.float64)
+        f_i = fresnel(wi[2], 1.5)
+        np.testing.assert_allclose(d.mean(axis=0), f_i * np.array(mat_obj.specular_reflectance),
+                                   atol=5 * d.std(axis=0).max() / np.sqrt(N_S) + 1e-6)
+
+
+# --------------------------------------------------------------------------
+# 3. Energy
+
+
+@pytest.mark.parametrize("dist", ["ggx", "beckmann"])
+@pytest.mark.parametrize("alpha", [0.05, 0.3, 0.8])
+def test_roughdielectric_energy(kit, dist, alpha):
+    """White rough glass: reflected + transmitted energy (the eta_ti^2 radiance scaling of the weights
+    undone) <= 1, each equal to the host's single-scattering integrals (pyclpt/microfacet.py), and the
+    transmitted radiance weight carries exactly eta_ti^2."""
+    mat = pack_material(Dielectric(1.5, 1.0, alpha=alpha, distribution=dist))
+    n = 200_000
+    for k, cos_i in enumerate((1.0, 0.5, 0.1, -1.0, -0.8, -0.4)):
+        wi = direction(abs(cos_i), PHI_I) * (FLIP if cos_i < 0 else np.float32(1))
+        s = kit.sample(mat, wi, uniform(8000 + k + int(100 * alpha), n, 3))
+        ok = s["ok"]
+        crossed = ok & (s["wo"][:, 2] * wi[2] < 0)
+        refl = ok & ~crossed
+        eta_it = 1.5 if cos_i > 0 else 1 / 1.5
+        w = s["weight"][:, 0].astype(np.float64)
+        np.testing.assert_allclose(w[crossed] * eta_it**2, np.minimum(w[crossed] * eta_it**2, 1.0 + 1e-5))
+        r = np.where(refl, w, 0.0)
+        t = np.where(crossed, w * eta_it**2, 0.0)
+        e = r + t
+        tol = 5 * e.std() / np.sqrt(n)
+        assert e.mean() <= 1.0 + tol, f"cos {cos_i}: energy {e.mean()} > 1"
+        want_r = rough_reflectance([abs(cos_i)], alpha, eta_it, dist == "beckmann")[0]
+        want_t = rough_transmittance([abs(cos_i)], alpha, eta_it, dist == "beckmann")[0]
+        assert abs(r.mean() - want_r) < 5 * r.std() / np.sqrt(n) + 3e-3, f"cos {cos_i}: R {r.mean()} vs {want_r}"
+        assert abs(t.mean() - want_t) < 5 * t.std() / np.sqrt(n) + 3e-3, f"cos {cos_i}: T {t.mean()} vs {want_t}"
+        if alpha == 0.05 and abs(cos_i) >= 0.5 and not (cos_i < 0 and abs(cos_i) < 0.75):
+            assert e.mean() > 0.99, f"near-smooth glass loses {1 - e.mean()} at cos {cos_i}"
+
+
+@pytest.mark.parametrize("alpha,dist", [(0.0, "ggx"), (0.05, "ggx"), (0.3, "beckmann"), (0.8, "ggx"),
+                                        (0.8, "beckmann")])
+@pytest.mark.parametrize("nonlinear", [False, True], ids=["lin", "nl"])
+def test_plastic_furnace(kit, alpha, dist, nonlinear):
+    """Diffuse 1 and specular 1: the plastic reflects at most everything; the smooth one exactly everything
+    (F_i + (1 - F_i) (1 - Fdr_ext) / (eta^2 (1 - Fdr_int)) = 1)."""
+    mat = pack_material(Plastic((1, 1, 1), (1, 1, 1), 1.5, 1.0, alpha=alpha, distribution=dist, nonlinear=nonlinear))
+    n = 200_000
+    for k, cos_i in enumerate((1.0, 0.5, 0.1)):
+        s = kit.sample(mat, direction(cos_i, PHI_I), uniform(8100 + k + int(100 * alpha), n, 3))
+        w = np.where(s["ok"], s["weight"][:, 0], 0.0).astype(np.float64)
+        mean, err = w.mean(), w.std() / np.sqrt(n)
+        assert mean <= 1.0 + 5 * err + 1e-3, f"cos {cos_i}: albedo {mean} > 1"
+        if alpha == 0.0:
+            assert abs(mean - 1.0) < 5 * err + 1e-3, f"smooth white plastic albedo {mean} != 1"
+        elif alpha <= 0.05 and cos_i >= 0.5:
+            assert mean > 0.97, f"near-smooth white plastic albedo {mean}"
+
+
+@pytest.mark.parametrize("alpha", [0.05, 0.8])
+def test_beckmann_conductor_furnace(kit, alpha):
+    """Metal 'none' (F = 1) with Beckmann: weights G1 <= 1, albedo <= 1, and ~1 when nearly smooth."""
+    mat = pack_material(Conductor(*METALS["none"], alpha=alpha, distribution="beckmann"))
+    n = 200_000
+    for k, cos_i in enumerate((1.0, 0.6, 0.1)):
+        s = kit.sample(mat, direction(cos_i, PHI_I), uniform(8200 + k, n, 3))
+        w = np.where(s["ok"][:, None], s["weight"], 0.0).astype(np.float64)
+        assert np.all(s["weight"][s["ok"]] <= 1.0 + 1e-5)
+        mean, err = w.mean(axis=0), w.std(axis=0) / np.sqrt(n)
+        assert np.all(mean <= 1.0 + 5 * err + 1e-6)
+        if alpha == 0.05 and cos_i >= 0.5:
+            assert np.all(mean > 0.99), f"albedo {mean}"
+
+
+# --------------------------------------------------------------------------
+# 4. Reference formulas
+
+
+@pytest.mark.parametrize("ior", [1.5046, 1.333, 1.0])
+def test_thindielectric(kit, ior):
+    """R' = 2R / (1 + R) (= R + T^2 R / (1 - R^2)), T' = 1 - R', straight through, both sides, eta 1."""
+    spec_r, spec_t = (0.9, 0.8, 0.7), (0.6, 0.5, 0.4)
+    mat = pack_material(ThinDielectric(ior, 1.0, spec_r, spec_t))
+    n = 4000
+    up = random_directions(91, n)
+    wi = np.concatenate([up, up * FLIP])
+    r0 = fresnel(np.abs(wi[:, 2]), ior)
+    want_r = 2 * r0 / (1 + r0)
+    np.testing.assert_allclose(want_r, r0 + (1 - r0) ** 2 * r0 / (1 - r0**2), rtol=1e-12)
+    one = np.float32(1) - np.float32(2**-24)
+    r = kit.sample(mat, wi, np.column_stack([np.zeros(2 * n), uniform(92, 2 * n, 2)]))
+    t = kit.sample(mat, wi, np.column_stack([np.full(2 * n, one), uniform(93, 2 * n, 2)]))
+    assert t["ok"].all() and t["delta"].all() and t["is_delta"].all()
+    np.testing.assert_array_equal(t["wo"], -wi)
+    np.testing.assert_allclose(t["pdf"], 1 - want_r, atol=2e-6)
+    np.testing.assert_allclose(t["weight"], np.broadcast_to(spec_t, (2 * n, 3)), rtol=1e-6)
+    np.testing.assert_array_equal(t["eta"], 1.0)
+    np.testing.assert_array_equal(t["value"], 0.0)
+    np.testing.assert_array_equal(t["eval_pdf"], 0.0)
+    if ior == 1.0:
+        assert not r["ok"].any() or np.all(r["wo"][r["ok"]] == -wi[r["ok"]]), "an index-matched sheet reflects"
+        return
+    assert r["ok"].all() and r["delta"].all()
+    np.testing.assert_allclose(r["wo"], wi * np.float32([-1, -1, 1]), atol=1e-7)
+    np.testing.assert_allclose(r["pdf"], want_r, atol=2e-6, rtol=1e-5)
+    np.testing.assert_allclose(r["pdf"] + t["pdf"], 1.0, atol=1e-6)
+    np.testing.assert_allclose(r["weight"], np.broadcast_to(spec_r, (2 * n, 3)), rtol=1e-6)
+    np.testing.assert_array_equal(r["eta"], 1.0)
+    # random u_lobe: the reflected fraction is R'
+    m = 200_000
+    s = kit.sample(mat, direction(0.3, PHI_I), uniform(94, m, 3))
+    want = 2 * fresnel(0.3, ior) / (1 + fresnel(0.3, ior))
+    frac = np.mean(s["wo"][:, 2] > 0)
+    assert abs(frac - want) < 5 * np.sqrt(want * (1 - want) / m)
+
+
+@pytest.mark.parametrize("nonlinear", [False, True], ids=["lin", "nl"])
+@pytest.mark.parametrize("twosided", [False, True], ids=["one", "two"])
+def test_plastic_reference(kit, nonlinear, twosided):
+    """Smooth plastic against Mitsuba 3's plastic.cpp: the lobe probability F_i s / (F_i s + (1 - F_i)(1 - s)),
+    the delta weight F_i spec / p_spec, the diffuse value diff / (1 - (nonlinear ? diff fdr : fdr)) / eta^2
+    (1 - F_i)(1 - F_o) cos_o / pi and its pdf (1 - p_spec) cos_o / pi."""
+    obj = Plastic((0.7, 0.4, 0.2), (1.0, 0.9, 0.6), 1.6, 1.1, nonlinear=nonlinear, twosided=twosided)
+    mat = pack_material(obj)
+    eta = 1.6 / 1.1
+    fdr = float(mat[MAT_FDR_INT])
+    n = 20_000
+    wi, wo = random_directions(95, n), random_directions(96, n)
+    f_i, f_o = fresnel(wi[:, 2], eta), fresnel(wo[:, 2], eta)
+    sw = spec_weight(obj)
+    ps = f_i * sw / (f_i * sw + (1 - f_i) * (1 - sw))
+    diff = np.array(obj.diffuse_reflectance)
+    base = diff / (1 - (diff * fdr if nonlinear else fdr)) / eta**2 / np.pi
+    want = base[None, :] * ((1 - f_i) * (1 - f_o) * wo[:, 2])[:, None]
+    sides = [(wi, wo)] + ([(wi * FLIP, wo * FLIP)] if twosided else [])
+    for a, b in sides:
+        out = kit.eval(mat, a, b)
+        np.testing.assert_allclose(out[:, :3], want, rtol=2e-5, atol=1e-7)
+        np.testing.assert_allclose(out[:, 3], (1 - ps) * wo[:, 2] / np.pi, rtol=2e-5, atol=1e-7)
+        s = kit.sample(mat, a, np.column_stack([np.zeros(n), uniform(97, n, 2)]))  # u_lobe 0: specular
+        spec = s["delta"]
+        assert spec.all() and not s["is_delta"].any()
+        np.testing.assert_allclose(s["pdf"], ps, rtol=2e-5)
+        np.testing.assert_allclose(s["weight"], (f_i / ps)[:, None] * np.array(obj.specular_reflectance), rtol=2e-5)
+        np.testing.assert_allclose(s["wo"], a * np.float32([-1, -1, 1]), atol=1e-7)
+    if not twosided:
+        assert not kit.sample(mat, wi * FLIP, uniform(98, n, 3))["ok"].any()
+        np.testing.assert_array_equal(kit.eval(mat, wi * FLIP, wo * FLIP), 0.0)
+        np.testing.assert_array_equal(kit.eval(mat, wi * FLIP, wo), 0.0)
+    np.testing.assert_array_equal(kit.eval(mat, wi, wo * FLIP), 0.0)
+
+
+@pytest.mark.parametrize("alpha,dist", [(0.05, "ggx"), (0.3, "beckmann"), (0.8, "ggx"), (0.5, "beckmann")])
+@pytest.mark.parametrize("nonlinear", [False, True], ids=["lin", "nl"])
+def test_roughplastic_reference(kit, alpha, dist, nonlinear):
+    """Rough plastic against Mitsuba 3's roughplastic.cpp: F D G / (4 cos_i) spec + diff / (1 - (nonlinear ?
+    diff r_int : r_int)) / eta^2 t_i t_o cos_o / pi, pdf p_spec D G1(wi) / (4 cos_i) + (1 - p_spec) cos_o / pi
+    with p_spec from (1 - t_i) s : t_i (1 - s); t from the record's knots, r_int the record's."""
+    obj = Plastic((0.7, 0.4, 0.2), (1.0, 0.9, 0.6), 1.5, 1.0, alpha=alpha, distribution=dist, nonlinear=nonlinear)
+    mat = pack_material(obj)
+    beck = dist == "beckmann"
+    knots, r_int = knots_of(mat), float(mat[MAT_FDR_INT])
+    n = 20_000
+    wi, wo = random_directions(101, n).astype(np.float64), random_directions(102, n).astype(np.float64)
+    k = n // 2  # half of the pairs near the mirror direction, where the coating lobe is large
+    wo[:k] = wi[:k] * [-1, -1, 1] + 0.2 * alpha * random_directions(103, k, hemisphere=False)
+    wo[:k, 2] = np.abs(wo[:k, 2]) + 1e-3
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    wi32, wo32 = wi.astype(np.float32), wo.astype(np.float32)
+    wi, wo = wi32.astype(np.float64), wo32.astype(np.float64)
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    d = ndf(h, alpha, beck)
+    g1i, g1o = g1_exact(wi, h, alpha, beck), g1_exact(wo, h, alpha, beck)
+    f = fresnel((wi * h).sum(1), 1.5)
+    t_i, t_o = knot_lerp(knots, wi[:, 2]), knot_lerp(knots, wo[:, 2])
+    sw = spec_weight(obj)
+    ps = (1 - t_i) * sw / ((1 - t_i) * sw + t_i * (1 - sw))
+    diff = np.array(obj.diffuse_reflectance)
+    base = diff / (1 - (diff * r_int if nonlinear else r_int)) / 1.5**2 / np.pi
+    want = (np.array(obj.specular_reflectance)[None, :] * (f * d * g1i * g1o / (4 * wi[:, 2]))[:, None]
+            + base[None, :] * (t_i * t_o * wo[:, 2])[:, None])
+    want_pdf = ps * d * g1i / (4 * wi[:, 2]) + (1 - ps) * wo[:, 2] / np.pi
+    out = kit.eval(mat, wi32, wo32).astype(np.float64)
+    np.testing.assert_allclose(out[:, :3], want, rtol=2e-4, atol=1e-6)
+    np.testing.assert_allclose(out[:, 3], want_pdf, rtol=2e-4, atol=1e-6)
+    assert np.all(np.isfinite(out))
+
+
+@pytest.mark.parametrize("dist", ["ggx", "beckmann"])
+def test_roughplastic_tables(dist):
+    """The host's rough-coating integrals: the knots follow t(cos) closely, t tends to the smooth 1 - F and
+    the internal reflectance to the smooth Fdr as the coating gets smooth, and rougher coatings let more
+    light in at grazing incidence."""
+    from pyclpt.material_buffers import fresnel_diffuse_reflectance
+    beck = dist == "beckmann"
+    cos = np.linspace(0.0, 1.0, 101)
+    for alpha in (0.05, 0.3, 0.8):
+        mat = pack_material(Plastic(alpha=alpha, int_ior=1.5, ext_ior=1.0, distribution=dist))
+        exact = rough_transmittance(cos, alpha, 1.5, beck)
+        approx = knot_lerp(knots_of(mat), cos)
+        err = np.abs(approx - exact)
+        assert err.max() < 0.05 and (err * 2 * cos).mean() < 0.005, f"alpha {alpha}: knots off by {err.max()}"
+        assert np.all((exact >= 0) & (exact <= 1))
+    smooth = pack_material(Plastic(alpha=1e-4, int_ior=1.5, ext_ior=1.0, distribution=dist))
+    c = cos[cos >= 0.1]
+    np.testing.assert_allclose(knot_lerp(knots_of(smooth), c), 1 - fresnel(c, 1.5), atol=0.02)
+    assert abs(float(smooth[MAT_FDR_INT]) - fresnel_diffuse_reflectance(1 / 1.5)) < 0.01
+    rough = pack_material(Plastic(alpha=0.5, int_ior=1.5, ext_ior=1.0, distribution=dist))
+    assert knots_of(rough)[1] > knots_of(smooth)[1] + 0.2
+    assert float(rough[MAT_FDR_INT]) < float(smooth[MAT_FDR_INT])  # single scattering loses internal light
+
+
+# --------------------------------------------------------------------------
+# 5. Reciprocity, sidedness
+
+
+RECIPROCAL = {
+    "roughglass-ggx-0.3": _glass(0.3, "ggx"),
+    "roughglass-beckmann-0.1": _glass(0.1, "beckmann"),
+    "roughplastic-ggx-0.2": Plastic((0.7, 0.4, 0.2), alpha=0.2, nonlinear=True),
+    "roughplastic-beckmann-0.6": Plastic((0.7, 0.4, 0.2), alpha=0.6, distribution="beckmann"),
+    "plastic": Plastic((0.7, 0.4, 0.2)),
+    "roughcu-beckmann-0.3": Conductor(*METALS["Cu"], alpha=0.3, distribution="beckmann"),
+}
+
+
+@pytest.mark.parametrize("name", list(RECIPROCAL))
+def test_reciprocity(kit, name):
+    """f(wi, wo) = f(wo, wi) for reflection; for refraction f(wi, wo) / eta_i^2 = f(wo, wi) / eta_o^2
+    (Veach 1997, eq. 5.14, with Mitsuba's radiance-mode wi / wo)."""
+    obj = RECIPROCAL[name]
+    mat = pack_material(obj)
+    n = 50_000
+    wi = random_directions(111, n, hemisphere=False)
+    wo = random_directions(112, n, hemisphere=False)
+    if not isinstance(obj, Dielectric):
+        wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]) + 0.01, np.abs(wo[:, 2]) + 0.01
+        wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+        wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    a, b = kit.eval(mat, wi, wo), kit.eval(mat, wo, wi)
+    fa = a[:, :3].astype(np.float64) / np.abs(wo[:, 2:3])
+    fb = b[:, :3].astype(np.float64) / np.abs(wi[:, 2:3])
+    assert np.all(np.isfinite(fa)) and np.all(np.isfinite(fb))
+    if isinstance(obj, Dielectric):
+        crossed = wi[:, 2] * wo[:, 2] < 0
+        eta = obj.int_ior / obj.ext_ior
+        eta_i = np.where(wi[:, 2] > 0, 1.0, eta)[:, None]  # IOR on wi's side (outside = 1)
+        eta_o = np.where(wo[:, 2] > 0, 1.0, eta)[:, None]
+        assert fa[crossed].max() > 0 and fa[~crossed].max() > 0
+        # the colours differ between the lobes; compare lobe by lobe
+        np.testing.assert_allclose(fa / eta_i**2, fb / eta_o**2, rtol=2e-4, atol=1e-7,
+                                   err_msg=f"{name}: generalized reciprocity")
+    else:
+        assert fa.max() > 0
+        np.testing.assert_allclose(fa, fb, rtol=2e-4, atol=1e-7, err_msg=f"{name}: f(wi, wo) != f(wo, wi)")
+
+
+@pytest.mark.parametrize("name", ["roughplastic-ggx-0.2", "roughplastic-beckmann-0.6", "plastic",
+                                  "roughcu-beckmann-0.3"])
+def test_one_sided_and_two_sided(kit, name):
+    base = RECIPROCAL[name]
+    one = pack_material(base)
+    two = pack_material(type(base)(**{**base.__dict__, "twosided": True}))
+    n = 20_000
+    wi, wo = random_directions(121, n), random_directions(122, n)
+    front = kit.eval(one, wi, wo)
+    assert np.all(front[:, 3] > 0) and front[:, :3].max() > 0
+    np.testing.assert_array_equal(kit.eval(one, wi * FLIP, wo * FLIP), 0.0)
+    np.testing.assert_array_equal(kit.eval(one, wi * FLIP, wo), 0.0)
+    u = uniform(123, n, 3)
+    assert not kit.sample(one, wi * FLIP, u)["ok"].any()
+    np.testing.assert_array_equal(kit.eval(two, wi, wo), front)
+    np.testing.assert_allclose(kit.eval(two, wi * FLIP, wo * FLIP), front, rtol=1e-6, atol=0)
+    np.testing.assert_array_equal(kit.eval(two, wi * FLIP, wo)[:, :3], 0.0)
+    sf, sb = kit.sample(two, wi, u), kit.sample(two, wi * FLIP, u)
+    np.testing.assert_array_equal(sb["ok"], sf["ok"])
+    ok = sf["ok"]
+    np.testing.assert_array_equal(sb["wo"][ok], sf["wo"][ok] * FLIP)
+    np.testing.assert_array_equal(sb["weight"][ok], sf["weight"][ok])
+    np.testing.assert_array_equal(sb["pdf"][ok], sf["pdf"][ok])
+    np.testing.assert_array_equal(sb["delta"], sf["delta"])
+
+
+def test_roughdielectric_both_sides(kit):
+    """The rough dielectric ignores `twosided`: it reflects and refracts from either side, and its value
+    from inside differs from outside (eta 1 / 1.5, total internal reflection for the smooth part)."""
+    mat = pack_material(_glass(0.3, "ggx"))
+    n = 20_000
+    wi = random_directions(131, n)
+    wo = random_directions(132, n, hemisphere=False)
+    out, inside = kit.eval(mat, wi, wo), kit.eval(mat, wi * FLIP, wo * FLIP)
+    for e in (out, inside):
+        crossed = (wo[:, 2] < 0)
+        assert e[crossed, :3].max() > 0 and e[~crossed, :3].max() > 0 and np.all(e[:, 3] >= 0)
+    assert not np.allclose(out, inside)
+
+
+def test_index_matched_roughdielectric(kit):
+    """int_ior == ext_ior: an invisible interface, straight through with weight = transmittance (delta)."""
+    mat = pack_material(Dielectric(1.33, 1.33, (0.9, 0.8, 0.7), (0.6, 0.5, 0.4), alpha=0.3))
+    wi = random_directions(141, 1000, hemisphere=False)
+    s = kit.sample(mat, wi, uniform(142, 1000, 3))
+    assert s["ok"].all() and s["delta"].all() and s["is_delta"].all()
+    np.testing.assert_array_equal(s["wo"], -wi)
+    np.testing.assert_allclose(s["weight"], np.broadcast_to((0.6, 0.5, 0.4), (1000, 3)), rtol=1e-6)
+    np.testing.assert_array_equal(s["value"], 0.0)
+
+
+# --------------------------------------------------------------------------
+# 6. Robustness
+
+EXTREME = {
+    "roughglass-ggx-1e-4": Dielectric(1.5, 1.0, alpha=1e-4),
+    "roughglass-beckmann-1e-4": Dielectric(1.5, 1.0, alpha=1e-4, distribution="beckmann"),
+    "roughglass-ggx-0.8": Dielectric(1.5, 1.0, alpha=0.8),
+    "roughglass-beckmann-0.05": Dielectric(1.5, 1.0, alpha=0.05, distribution="beckmann"),
+    "roughbubble-beckmann-0.8": Dielectric(1.0, 1.5, alpha=0.8, distribution="beckmann"),
+    "roughglass-nearly-matched": Dielectric(1.0003, 1.0, alpha=0.3),
+    "roughglass-matched": Dielectric(1.0, 1.0, alpha=0.3),
+    "thin": ThinDielectric(1.5, 1.0),
+    "thin-matched": ThinDielectric(1.0, 1.0),
+    "plastic": Plastic(),
+    "plastic-matched-nl": Plastic((1, 1, 1), int_ior=1.0, ext_ior=1.0, nonlinear=True),
+    "plastic-black": Plastic((0, 0, 0)),
+    "roughplastic-ggx-1e-4": Plastic(alpha=1e-4),
+    "roughplastic-beckmann-1e-4": Plastic(alpha=1e-4, distribution="beckmann"),
+    "roughplastic-beckmann-0.8": Plastic(alpha=0.8, distribution="beckmann", nonlinear=True),
+    "roughplastic-matched": Plastic(alpha=0.3, int_ior=1.0, ext_ior=1.0),
+    "roughcu-beckmann-1e-4": Conductor(*METALS["Cu"], alpha=1e-4, distribution="beckmann"),
+    "roughcu-beckmann-0.8": Conductor(*METALS["Cu"], alpha=0.8, distribution="beckmann"),
+}
+
+
+@pytest.mark.parametrize("name", list(EXTREME))
+def test_extremes_finite(kit, name):
+    """Normal, grazing, exactly tangent and denormal incidence from both sides, random numbers at the corners
+    of [0, 1): no NaN, no Inf, no negative weight or pdf; eval finite everywhere on the sphere."""
+    mat = pack_material(EXTREME[name])
+    cos = np.array([1.0, 0.999999, 0.5, 1e-2, 1e-4, 1e-6, 1e-40, 0.0], np.float32)
+    corners = np.array([0.0, 1e-7, 0.5, np.float32(1) - np.float32(2**-24)], np.float32)
+    u = np.array(np.meshgrid(corners, corners, corners, indexing="ij")).reshape(3, -1).T
+    u = np.concatenate([u, uniform(151, 300, 3)])
+    wi = np.array([direction(c, phi) for c in cos for phi in (0.0, PHI_I)], np.float32)
+    wi = np.concatenate([wi, wi * FLIP])
+    WI, U = np.repeat(wi, len(u), axis=0), np.tile(u, (len(wi), 1))
+    s = kit.sample(mat, WI, U)
+    ok = s["ok"]
+    front = WI[:, 2] > 1e-3
+    assert ok[front].mean() > 0.5, f"only {ok[front].mean()} of the front-side samples succeed"
+    for key in ("wo", "weight", "pdf", "eta", "value", "eval_pdf"):
+        assert np.all(np.isfinite(s[key][ok])), f"non-finite {key}"
+    assert np.all(np.isfinite(s["value"])) and np.all(np.isfinite(s["eval_pdf"]))
+    assert np.all(s["weight"][ok] >= 0) and np.all(s["pdf"][ok] > 0) and np.all(s["eval_pdf"] >= 0)
+    np.testing.assert_allclose(np.linalg.norm(s["wo"][ok], axis=1), 1.0, atol=1e-4)
+    wo = random_directions(152, len(WI), hemisphere=False)
+    wo[::7] = WI[::7] * np.float32([-1, -1, 1])  # mirror directions
+    wo[3::7] = -WI[3::7]  # straight through
+    e = kit.eval(mat, WI, wo)
+    assert np.all(np.isfinite(e)) and np.all(e >= 0), f"eval: {e[~np.isfinite(e).all(1)][:3]}"

@@ -1,0 +1,483 @@
+"""Emitters (cl/lights.h, pyclpt/light_buffers.py, pyclpt/sunsky.py): environment maps with
+importance sampling, point lights, the baked sun and sky.
+
+Device-level checks call lights.h through a small test kernel on a real packed scene: the
+envmap lookup against Mitsuba 3's own ``envmap`` (tests/data/envmap-mitsuba3-eval.npz) and a
+numpy reference, its sampling against its pdf (chi-square over the sampling cells), the pdf's
+normalisation. Render-level checks compare with analytic or quadrature values.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pyclpt
+from pyclpt.light_buffers import (LIGHT_CDF, LIGHT_ENVMAP, LIGHT_PMF, LIGHT_POINT, LIGHT_PRIM, LIGHT_TRIANGLE,
+                                  LIGHT_TYPE, envmap_cells, pack_lights)
+from pyclpt.material_buffers import TextureTable
+from pyclpt.scene import Envmap, PointLight
+from pyclpt.scene_buffers import SceneBuffers, pack_scene
+from pyclpt.sunsky import (SUN_RADIUS_DEG, _row_hat_solid_angle, sun_radiance_rgb, sunsky_envmap,
+                           texel_directions)
+from pyclpt.transform import rotate
+from scenes import FRONT_CAMERA, object_under_sky, sensor
+
+cl = pytest.importorskip("pyopencl")
+stats = pytest.importorskip("scipy.stats")
+
+DATA = Path(__file__).parent / "data"
+CLASSROOM_SUN = np.array([-0.865804, 0.416766, -0.276929])
+
+KERNELS = r"""
+#include "lights.h"
+
+/* u: (u_select, u1, u2) per item. out: wi[3] dist radiance[3] pdf delta ok eval_radiance[3] eval_pdf */
+__kernel void light_sample_k(SCENE_PARAMS, __global const float* p, __global const float* u,
+                             __global float* out) {
+    int i = get_global_id(0);
+    Scene sc = SCENE_INIT;
+    LightSample ls;
+    ls.wi = (float3)(0.0f);
+    ls.dist = 0.0f;
+    ls.radiance = (float3)(0.0f);
+    ls.pdf = 0.0f;
+    ls.delta = false;
+    bool ok = light_sample(&sc, vload3(0, p), u[3 * i], (float2)(u[3 * i + 1], u[3 * i + 2]), &ls);
+    float eval_pdf;
+    float3 le = env_eval(&sc, ls.wi, true, &eval_pdf);
+    __global float* o = out + 16 * i;
+    vstore3(ls.wi, 0, o);
+    o[3] = ls.dist;
+    vstore3(ls.radiance, 0, o + 4);
+    o[7] = ls.pdf;
+    o[8] = ls.delta ? 1.0f : 0.0f;
+    o[9] = ok ? 1.0f : 0.0f;
+    vstore3(le, 0, o + 10);
+    o[13] = eval_pdf;
+    o[14] = 0.0f;
+    o[15] = 0.0f;
+}
+
+/* out: radiance[3] pdf of the environment along each world direction */
+__kernel void env_eval_k(SCENE_PARAMS, __global const float* dirs, __global float* out) {
+    int i = get_global_id(0);
+    Scene sc = SCENE_INIT;
+    float pdf;
+    float3 le = env_eval(&sc, vload3(i, dirs), true, &pdf);
+    vstore4((float4)(le, pdf), i, out);
+}
+"""
+
+
+# --------------------------------------------------------------------------------------------
+# helpers
+
+
+def small_scene(environment=None, lights=(), **shape) -> pyclpt.Scene:
+    """A unit quad facing +z at the origin (diffuse 0.5), seen from z = 4, with the given emitters."""
+    d = {"type": "scene", "sensor": sensor(FRONT_CAMERA, fov=30.0, size=16),
+         "quad": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": 0.5}, **shape}}
+    scene = pyclpt.load_dict(d, name="lights-test")
+    scene.environment = environment
+    scene.lights = list(lights)
+    return scene
+
+
+class LightKit:
+    """lights.h on the device for one packed scene."""
+
+    def __init__(self, device, scene: pyclpt.Scene) -> None:
+        from pyclpt.program import build_program
+
+        self.device = device
+        self.buffers = SceneBuffers(scene, device)
+        self.prg = build_program(device, source=KERNELS, defines=self.buffers.defines, name="test_lights")
+        self.args = self.buffers.args(8, 8)
+
+    def _run(self, name: str, n: int, inputs: list[np.ndarray], width: int) -> np.ndarray:
+        ctx, queue, mf = self.device.context, self.device.queue, cl.mem_flags
+        bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a, np.float32))
+                for a in inputs]
+        out = np.empty((n, width), np.float32)
+        obuf = cl.Buffer(ctx, mf.WRITE_ONLY, out.nbytes)
+        cl.Kernel(self.prg, name)(queue, (n,), None, *self.args, *bufs, obuf)
+        cl.enqueue_copy(queue, out, obuf)
+        queue.finish()
+        return out
+
+    def sample(self, u: np.ndarray, p=(0.0, 0.0, 0.0)) -> dict[str, np.ndarray]:
+        u = np.ascontiguousarray(u, np.float32).reshape(-1, 3)
+        o = self._run("light_sample_k", len(u), [np.asarray(p, np.float32), u], 16)
+        return {"wi": o[:, 0:3], "dist": o[:, 3], "radiance": o[:, 4:7], "pdf": o[:, 7], "delta": o[:, 8] > 0.5,
+                "ok": o[:, 9] > 0.5, "eval_radiance": o[:, 10:13], "eval_pdf": o[:, 13]}
+
+    def eval(self, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        dirs = np.ascontiguousarray(dirs, np.float32).reshape(-1, 3)
+        o = self._run("env_eval_k", len(dirs), [dirs], 4)
+        return o[:, :3], o[:, 3]
+
+
+def envmap_reference(pixels: np.ndarray, rotation: np.ndarray, scale: float, dirs: np.ndarray) -> np.ndarray:
+    """Mitsuba 3's envmap lookup (src/emitters/envmap.cpp, eval_spectrum) in numpy."""
+    px = np.asarray(pixels, np.float64)
+    h, w = px.shape[:2]
+    loc = np.asarray(dirs, np.float64) @ np.asarray(rotation, np.float64)  # R^T d
+    u = np.arctan2(loc[:, 0], -loc[:, 2]) / (2 * np.pi)
+    v = np.arccos(np.clip(loc[:, 1], -1, 1)) / np.pi
+    x, y = np.mod(u * w - 0.5, w), v * (h - 1)
+    i0 = np.minimum(np.floor(x).astype(int), w - 1)
+    j0 = np.minimum(np.floor(y).astype(int), h - 2)
+    fx, fy, i1 = (x - i0)[:, None], (y - j0)[:, None], (i0 + 1) % w
+    c = (1 - fy) * ((1 - fx) * px[j0, i0] + fx * px[j0, i1]) + fy * ((1 - fx) * px[j0 + 1, i0] + fx * px[j0 + 1, i1])
+    return c * scale
+
+
+def sphere_grid(n_cos: int, n_phi: int) -> tuple[np.ndarray, float]:
+    """Midpoint directions of an (n_cos x n_phi) grid uniform in (cos theta, phi) about +z, and the
+    solid angle of one cell."""
+    c = -1 + 2 * (np.arange(n_cos) + 0.5) / n_cos
+    phi = 2 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
+    s = np.sqrt(1 - c * c)
+    d = np.stack([s[:, None] * np.cos(phi)[None], s[:, None] * np.sin(phi)[None],
+                  np.broadcast_to(c[:, None], (n_cos, n_phi))], axis=-1)
+    return d.reshape(-1, 3), 4 * np.pi / (n_cos * n_phi)
+
+
+def irradiance(env: Envmap, normal, n_cos: int = 400, n_phi: int = 800) -> np.ndarray:
+    """E = integral of L max(cos, 0) about ``normal``, by quadrature of the reference lookup."""
+    d, dw = sphere_grid(n_cos, n_phi)
+    n = np.asarray(normal, np.float64)
+    cos = np.maximum(d @ (n / np.linalg.norm(n)), 0.0)
+    L = envmap_reference(env.pixels, np.asarray(env.to_world, np.float64)[:3, :3], env.scale, d)
+    return (L * cos[:, None]).sum(0) * dw
+
+
+def render(scene, integrator="megakernel", **kw):
+    return pyclpt.render(scene, integrator=integrator, progress=False, **kw)
+
+
+def cap_map(h: int, w: int, centre_local, angle_deg: float, value) -> np.ndarray:
+    """A map that is ``value`` at texels within angle_deg of centre_local and 0 elsewhere."""
+    d = texel_directions(w, h)
+    c = np.asarray(centre_local, np.float64)
+    inside = d @ (c / np.linalg.norm(c)) >= np.cos(np.radians(angle_deg))
+    return np.where(inside[..., None], np.asarray(value, np.float32), 0.0).astype(np.float32)
+
+
+# --------------------------------------------------------------------------------------------
+# 1. The lookup convention
+
+
+def test_envmap_lookup_matches_mitsuba3(device):
+    """Radiance along 200 directions of a rotated, scaled random map: Mitsuba 3's own values."""
+    ref = np.load(DATA / "envmap-mitsuba3-eval.npz")
+    env = Envmap(ref["pixels"], ref["to_world"], float(ref["scale"]), "mitsuba-reference")
+    kit = LightKit(device, small_scene(env))
+    le, pdf = kit.eval(ref["dirs"])
+    np.testing.assert_allclose(le, ref["values"], rtol=2e-5, atol=2e-5)
+    np.testing.assert_allclose(envmap_reference(ref["pixels"], ref["to_world"][:3, :3], 2.0, ref["dirs"]),
+                               ref["values"], rtol=1e-5, atol=1e-5)
+    assert np.all(pdf > 0)
+
+
+# --------------------------------------------------------------------------------------------
+# 2. Importance sampling
+
+
+def structured_map() -> np.ndarray:
+    """17 x 32: smooth variation, a bright texel, a black band, a coloured region."""
+    rng = np.random.default_rng(3)
+    h, w = 17, 32
+    px = (0.2 + rng.random((h, w, 1)) * np.linspace(0.5, 2.0, w)[None, :, None]) * np.ones((1, 1, 3))
+    px[:, 20:24] *= np.array([3.0, 0.2, 0.1])
+    px[6:8] = 0.0  # the cells of row 6 (between texel rows 6 and 7) have zero weight
+    px[11, 5] = 60.0
+    return px.astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def env_kit(device):
+    return LightKit(device, small_scene(Envmap(structured_map(), name="structured")))
+
+
+def test_envmap_sampling_chi2(env_kit):
+    """Directions from light_sample, counted in the sampling cells, against N * pdf * cell solid angle;
+    the pdf against the designed cell weights (luminance of the corners x solid angle)."""
+    px = structured_map()
+    h, w = px.shape[:2]
+    n = 400_000
+    s = env_kit.sample(np.random.default_rng(5).random((n, 3), dtype=np.float32))
+    assert s["ok"].mean() > 0.999 and not s["delta"].any() and np.all(np.isinf(s["dist"][s["ok"]]))
+    d = s["wi"][s["ok"]].astype(np.float64)
+    x = np.mod(np.arctan2(d[:, 0], -d[:, 2]) / (2 * np.pi) * w - 0.5, w)
+    y = np.arccos(np.clip(d[:, 1], -1, 1)) / np.pi * (h - 1)
+    cell = np.minimum(y.astype(int), h - 2) * w + np.minimum(x.astype(int), w - 1)
+    observed = np.bincount(cell, minlength=(h - 1) * w)
+    # expected from the device pdf at each cell's centre
+    r, c = np.divmod(np.arange((h - 1) * w), w)
+    theta = np.pi * (r + 0.5) / (h - 1)
+    phi = 2 * np.pi * (c + 1.0) / w
+    centres = np.stack([np.sin(phi) * np.sin(theta), np.cos(theta), -np.cos(phi) * np.sin(theta)], axis=1)
+    _, pdf = env_kit.eval(centres)
+    lum_w, _, cell_omega = envmap_cells(px)
+    pmf = pdf * cell_omega[r]
+    np.testing.assert_allclose(pmf, lum_w.reshape(-1) / lum_w.sum(), rtol=1e-4, atol=1e-9)
+    assert np.all(pmf[6 * w:7 * w] == 0) and observed[6 * w:7 * w].sum() == 0
+    expected = n * pmf
+    keep = expected > 0
+    chi2 = ((observed[keep] - expected[keep]) ** 2 / expected[keep]).sum()
+    p = stats.chi2.sf(chi2, keep.sum() - 1)
+    assert p > 0.01, (chi2, keep.sum())
+
+
+def test_envmap_sample_agrees_with_eval(env_kit):
+    """A sample's radiance and pdf are the environment's along the sampled direction."""
+    s = env_kit.sample(np.random.default_rng(6).random((20000, 3), dtype=np.float32))
+    ok = s["ok"]
+    np.testing.assert_allclose(s["radiance"][ok], s["eval_radiance"][ok], rtol=1e-4, atol=1e-6)
+    # the pdf is piecewise constant: away from cell borders (float rounding) the two agree exactly
+    same = np.isclose(s["pdf"][ok], s["eval_pdf"][ok], rtol=1e-4)
+    assert same.mean() > 0.999
+    np.testing.assert_allclose(np.linalg.norm(s["wi"][ok], axis=1), 1.0, atol=1e-5)
+
+
+@pytest.mark.parametrize("rotation", [np.eye(4), rotate([1.0, -2.0, 0.5], 70.0)])
+def test_envmap_pdf_integrates_to_one(device, rotation):
+    """The pdf over a world-space quadrature grid sums to 1 (the map rotated or not); it is zero
+    exactly where the map is black."""
+    kit = LightKit(device, small_scene(Envmap(structured_map(), rotation, name="structured")))
+    d, dw = sphere_grid(600, 1200)
+    le, pdf = kit.eval(d)
+    assert np.all(pdf >= 0) and np.all(np.isfinite(pdf))
+    assert pdf.sum() * dw == pytest.approx(1.0, abs=2e-3)
+    assert np.all(pdf[le.max(axis=1) > 0] > 0)  # light sampling covers every lit direction
+
+
+def test_envmap_rotation_moves_samples(device):
+    """The same random numbers give R times the unrotated direction, with the same pdf and radiance."""
+    rot = rotate([0.3, 1.0, -0.4], 125.0)
+    u = np.random.default_rng(8).random((5000, 3), dtype=np.float32)
+    a = LightKit(device, small_scene(Envmap(structured_map(), name="a"))).sample(u)
+    b = LightKit(device, small_scene(Envmap(structured_map(), rot, name="b"))).sample(u)
+    np.testing.assert_allclose(b["wi"], a["wi"] @ rot[:3, :3].T, atol=2e-5)
+    np.testing.assert_allclose(b["pdf"], a["pdf"], rtol=1e-5)
+    np.testing.assert_allclose(b["radiance"], a["radiance"], rtol=1e-4, atol=1e-6)
+
+
+# --------------------------------------------------------------------------------------------
+# 3. Renders
+
+
+@pytest.mark.parametrize("integrator", ["megakernel", "wavefront"])
+def test_constant_envmap_renders_like_constant_environment(integrator):
+    """A diffuse cube under a constant-valued map reflects albedo * Le, as under the constant sky."""
+    scene = object_under_sky({"type": "diffuse", "reflectance": 0.7}, radiance=1.5)
+    const = render(scene, integrator, spp=128, max_depth=-1, seed=2)
+    scene.environment = Envmap(np.full((8, 16, 3), 1.5, np.float32), name="constant-map")
+    img = render(scene, integrator, spp=128, max_depth=-1, seed=2)
+    assert np.allclose(img[0, 0], 1.5) and np.allclose(img[-1, -1], 1.5)
+    assert img[9:15, 9:15].mean() == pytest.approx(0.7 * 1.5, rel=0.02)
+    assert img.mean() == pytest.approx(const.mean(), rel=0.02)
+
+
+ORIENTATIONS = {
+    # name: (cap centre in the map's frame, to_world); the quad faces world +z
+    "facing": ((0, 0, 1), np.eye(4)),
+    "behind": ((0, 0, 1), rotate([0, 1, 0], 180.0)),
+    "zenith-rotated-to-face": ((0, 1, 0), rotate([1, 0, 0], 90.0)),
+    "grazing": ((1, 0, 0), np.eye(4)),
+}
+
+
+@pytest.mark.parametrize("name", list(ORIENTATIONS))
+def test_envmap_orientation(name):
+    """A map bright only in a 25-degree cap lights a quad facing the cap's world direction and not one
+    facing away; to_world moves the cap. Radiance = albedo / pi * E, E by quadrature of the reference."""
+    centre, to_world = ORIENTATIONS[name]
+    env = Envmap(cap_map(33, 64, centre, 25.0, (8.0, 4.0, 2.0)), to_world, 1.5, name)
+    expected = 0.5 / np.pi * irradiance(env, (0, 0, 1))
+    if name in ("facing", "zenith-rotated-to-face"):
+        assert expected[0] > 1.0
+    if name == "behind":
+        assert expected.max() == 0.0
+    img = render(small_scene(env), spp=64, max_depth=2, seed=3, width=16, height=16)
+    quad = img[5:11, 5:11].reshape(-1, 3).mean(0)
+    np.testing.assert_allclose(quad, expected, rtol=0.03, atol=2e-3)
+
+
+def camera_hits_on_plane(scene, width, height):
+    """World points where the pixel-centre rays of the scene's camera meet the plane z = 0."""
+    origin, forward, right, up = scene.camera.basis(width, height)
+    px, py = np.meshgrid(np.arange(width), np.arange(height))
+    sx = 2 * (px + 0.5) / width - 1
+    sy = 1 - 2 * (py + 0.5) / height
+    d = forward + sx[..., None] * right + sy[..., None] * up
+    t = -origin[2] / d[..., 2]
+    return origin + t[..., None] * d
+
+
+def test_point_light_analytic():
+    """Direct lighting from a point light: L = albedo / pi * I cos / d^2 at every pixel of the quad."""
+    pos, intensity = np.array([0.3, -0.2, 1.5]), np.array([4.0, 2.0, 1.0])
+    scene = small_scene(lights=[PointLight(tuple(pos), tuple(intensity))])
+    img = render(scene, spp=64, max_depth=-1, seed=4, width=24, height=24)
+    hits = camera_hits_on_plane(scene, 24, 24)
+    v = pos - hits
+    dist = np.linalg.norm(v, axis=-1)
+    expected = 0.5 / np.pi * intensity * (v[..., 2] / dist)[..., None] / (dist**2)[..., None]
+    inside = np.all(np.abs(hits[..., :2]) < 0.85, axis=-1)  # the footprint is well inside the quad
+    assert inside.sum() > 100
+    np.testing.assert_allclose(img[inside], expected[inside], rtol=0.01)
+    outside = np.all(np.abs(hits[..., :2]) > 1.15, axis=-1)
+    assert np.all(img[outside] == 0)  # the point light itself is never seen
+
+
+def test_point_light_with_environment():
+    """Two emitters of different kinds chosen by power: the quad under a constant map (one-sided,
+    so albedo * Le) plus the point light's albedo / pi * I cos / d^2."""
+    pos, intensity = np.array([0.0, 0.0, 2.0]), np.array([6.0, 6.0, 6.0])
+    env = Envmap(np.full((6, 12, 3), 0.8, np.float32), name="grey")
+    scene = small_scene(env, [PointLight(tuple(pos), tuple(intensity))])
+    img = render(scene, spp=128, max_depth=2, seed=5, width=16, height=16)
+    hits = camera_hits_on_plane(scene, 16, 16)
+    v = pos - hits
+    dist = np.linalg.norm(v, axis=-1)
+    expected = 0.5 * 0.8 + 0.5 / np.pi * 6.0 * v[..., 2] / dist**3
+    block = (slice(5, 11), slice(5, 11))
+    assert img[block].mean() == pytest.approx(expected[block].mean(), rel=0.02)
+
+
+def test_megakernel_equals_wavefront_with_envmap_and_point_light():
+    env = Envmap(structured_map(), rotate([1, 1, 0], 35.0), 2.0, "structured")
+    scene = object_under_sky({"type": "roughplastic", "alpha": 0.2, "diffuse_reflectance": 0.5})
+    scene.environment = env
+    scene.lights = [PointLight((1.5, 1.0, 2.0), (3.0, 2.0, 1.0))]
+    kw = dict(spp=4, max_depth=-1, width=16, height=16, seed=6)
+    mega = render(scene, "megakernel", **kw)
+    wave = render(scene, "wavefront", **kw)
+    assert mega.max() > 0 and np.isfinite(mega).all()
+    assert np.array_equal(mega, wave)
+
+
+# --------------------------------------------------------------------------------------------
+# 4. Packing and bad inputs
+
+
+def test_pack_lights_records_and_power():
+    scene = pyclpt.load_dict({
+        "type": "scene", "sensor": sensor(FRONT_CAMERA),
+        "quad": {"type": "rectangle", "emitter": {"type": "area", "radiance": 2.0}},
+    })
+    scene.lights = [PointLight((0, 1, 2), (1.0, 1.0, 1.0)), PointLight((0, 0, 5), (0.0, 0.0, 0.0))]
+    scene.environment = Envmap(np.full((4, 8, 3), 0.25, np.float32), name="grey")
+    arrays = pack_scene(scene)
+    la = arrays.lights
+    types = la.lights[:, LIGHT_TYPE].astype(int).tolist()
+    assert types == [LIGHT_TRIANGLE, LIGHT_TRIANGLE, LIGHT_POINT, LIGHT_ENVMAP]  # the dark light is dropped
+    assert la.env_light == 3
+    assert la.lights[-1, LIGHT_CDF] == 1.0 and np.all(np.diff(la.lights[:, LIGHT_CDF]) > 0)
+    pmf = la.lights[:, LIGHT_PMF]
+    # power: area 2 * 2 -> 8 for the quad's two triangles, 4 pi for the point light
+    assert pmf[2] / pmf[:2].sum() == pytest.approx(4 * np.pi / 8.0, rel=1e-5)
+    offset = la.lights[2, LIGHT_PRIM:LIGHT_PRIM + 1].view(np.int32)[0]
+    np.testing.assert_array_equal(la.light_data[offset:offset + 3], [0, 1, 2])
+
+
+def test_bad_envmaps_name_the_emitter():
+    with pytest.raises(ValueError, match="'sky-neg'"):
+        Envmap(np.full((4, 8, 3), -1.0), name="sky-neg")
+    bad = np.ones((4, 8, 3))
+    bad[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match="'sky-nan'.*finite"):
+        Envmap(bad, name="sky-nan")
+    with pytest.raises(ValueError, match="'sky-empty'"):
+        Envmap(np.zeros((0, 0, 3)), name="sky-empty")
+    with pytest.raises(ValueError, match="'sky-sheared'.*rotation"):
+        env = Envmap(np.ones((4, 8, 3)), np.diag([1.0, 2.0, 1.0, 1.0]), name="sky-sheared")
+        pack_lights(small_scene(env), np.zeros((0, 9)), np.zeros((0, 3)), np.zeros((2, 3)), TextureTable())
+    # a uniform scale is divided out
+    env = Envmap(np.ones((4, 8, 3)), np.diag([3.0, 3.0, 3.0, 1.0]), name="scaled")
+    pack_lights(small_scene(env), np.zeros((0, 9)), np.zeros((0, 3)), np.zeros((2, 3)), TextureTable())
+
+
+# --------------------------------------------------------------------------------------------
+# 5. Sun and sky
+
+
+@pytest.fixture(scope="module")
+def classroom_sky() -> Envmap:
+    return sunsky_envmap(CLASSROOM_SUN, turbidity=3, sky_scale=6, sun_scale=10, sun_radius_scale=18.8131)
+
+
+def test_sunsky_classroom_config(classroom_sky):
+    """The classroom scene's sunsky: finite, non-negative, the sun where sun_direction points, a blue
+    zenith, black below the horizon, and the sun's power that of the real sun x sun_scale."""
+    env = classroom_sky
+    px = env.pixels
+    h, w = px.shape[:2]
+    assert (h, w) == (256, 512) and np.isfinite(px).all() and px.min() >= 0
+    dirs = texel_directions(w, h)
+    sun = CLASSROOM_SUN / np.linalg.norm(CLASSROOM_SUN)
+    radius = np.radians(SUN_RADIUS_DEG * 18.8131)
+    angle = np.arccos(np.clip(dirs @ sun, -1, 1))
+    lum = px @ np.array([0.2127, 0.7152, 0.0722])
+    brightest = np.argsort(lum.ravel())[-50:]
+    assert np.all(angle.ravel()[brightest] < radius + np.radians(1.0))
+    assert np.all(lum[angle < 0.8 * radius] > 50 * lum[angle > 2 * radius].max())  # a disk, brighter than the sky
+    zenith = px[0].mean(0)
+    assert zenith[2] > zenith[1] > zenith[0] > 0
+    assert np.all(px[dirs[..., 1] < 0] == 0)
+    assert np.all(lum[(dirs[..., 1] > 0.05) & (angle > 2 * radius)] > 0)
+    # power of the sun on the (bilinearly reconstructed) map
+    sky_only = sunsky_envmap(CLASSROOM_SUN, turbidity=3, sky_scale=6, sun_scale=0, sun_radius_scale=18.8131)
+    weight = _row_hat_solid_angle(h)[:, None, None] * (2 * np.pi / w)
+    sun_power = ((px.astype(np.float64) - sky_only.pixels) * weight).sum((0, 1))
+    real = 2 * np.pi * (1 - np.cos(np.radians(SUN_RADIUS_DEG)))
+    expected = 10 * sun_radiance_rgb(np.arccos(sun[1]), 3.0) * real
+    np.testing.assert_allclose(sun_power, expected, rtol=1e-3)
+    assert expected[0] > expected[1] > expected[2] > 0  # a low sun is yellowish
+
+
+def test_sunsky_lights_a_ground_plane(classroom_sky):
+    """Render-level: an upward quad under the classroom sky shows albedo / pi * E, E from the map by
+    quadrature (dominated by the sun: tests importance sampling of a very peaked map)."""
+    scene = small_scene(classroom_sky, to_world=[{"rotate": {"axis": [1, 0, 0], "angle": -90}}])
+    scene.camera = pyclpt.Camera.look_at((0, 3, 1.5), (0, 0, 0), fov=30.0)
+    img = render(scene, spp=64, max_depth=2, seed=7, width=16, height=16)
+    px = classroom_sky.pixels.astype(np.float64)
+    h, w = px.shape[:2]
+    cos = np.maximum(texel_directions(w, h)[..., 1], 0.0)
+    weight = _row_hat_solid_angle(h)[:, None] * (2 * np.pi / w)
+    E = (px * (cos * weight)[..., None]).sum((0, 1))
+    expected = 0.5 / np.pi * E
+    centre = img[6:10, 6:10].reshape(-1, 3).mean(0)
+    assert np.isfinite(img).all()
+    np.testing.assert_allclose(centre, expected, rtol=0.03)
+
+
+def test_sunsky_options_and_errors():
+    sky = sunsky_envmap((0, 1, 1), sun_scale=0.0, resolution=64)
+    assert sky.pixels.shape == (32, 64, 3) and sky.name == "sunsky"
+    assert sky.pixels.max() < 1.0  # no sun
+    ext = sunsky_envmap((0, 1, 1), sun_scale=0.0, resolution=64, extend=True)
+    assert ext.pixels[20].min() > 0 and np.all(ext.pixels[-1] == 0)  # extended, faded out at the nadir
+    # to_world: the sun stays where sun_direction points in the world
+    rot = rotate([1, 0, 0], 90.0)  # the sky's +y is the world's +z
+    env = sunsky_envmap((0.2, 0.1, 0.9), resolution=128, to_world=rot)
+    np.testing.assert_array_equal(env.to_world, rot)
+    h, w = env.pixels.shape[:2]
+    j, i = np.unravel_index(np.argmax(env.pixels.sum(-1)), (h, w))
+    world = rot[:3, :3] @ texel_directions(w, h)[j, i]
+    assert np.degrees(np.arccos(world @ np.array([0.2, 0.1, 0.9]) / np.linalg.norm([0.2, 0.1, 0.9]))) < 3.0
+    for kwargs, match in [(dict(sun_direction=(0, -1, 0.2)), "below the horizon"),
+                          (dict(sun_direction=(0, 0, 0)), "sun_direction"),
+                          (dict(sun_direction=(0, 1, 0), turbidity=12), "turbidity"),
+                          (dict(sun_direction=(0, 1, 0), sky_scale=-1), "sky_scale"),
+                          (dict(sun_direction=(0, 1, 0), resolution=3), "resolution"),
+                          (dict(sun_direction=(0, 1, 0), albedo=float("nan")), "albedo")]:
+        with pytest.raises(ValueError, match=f"sunsky.*{match}"):
+            sunsky_envmap(**kwargs)
+    with pytest.warns(UserWarning, match="directional"):
+        sunsky_envmap((0, 1, 1), sun_radius_scale=0.0, resolution=32)
