@@ -10,8 +10,8 @@ each after two warm-up frames, so that a slow moment of a shared machine hits th
 the table gives the median, min and max, and the median relative to ``single``'s.
 
 Besides the three precisions (and the emulated double-float sum that replaces ``double``
-without fp64), it measures: EMA past max_frame_count, the Kahan step without its volatile
-temporaries (an experiment: the program is rebuilt with -DKAHAN_VOLATILE=), work-group shapes,
+without fp64), it measures: EMA past max_frame_count, the Kahan step with its other guards (an experiment: the
+program is rebuilt with -DKAHAN_GUARD=2, volatile temporaries, or 0, no guard), work-group shapes,
 and ``add_batch`` of ``--batch`` frames per launch (time per frame). The first rows use the
 accumulator's default work-group shape for the device (``default_local_size``).
 """
@@ -38,7 +38,8 @@ def settings(batch: int) -> list[dict]:
         {"name": "single, EMA", "precision": "single", "max_frame_count": 1, "overflow": "ema"},
         {"name": "compensated, EMA", "precision": "compensated", "max_frame_count": 1, "overflow": "ema"},
         {"name": "double, EMA", "precision": "double", "max_frame_count": 1, "overflow": "ema"},
-        {"name": "compensated, no volatile", "precision": "compensated", "no_volatile": True},
+        {"name": "compensated, volatile guard", "precision": "compensated", "kahan_guard": 2},
+        {"name": "compensated, no guard", "precision": "compensated", "kahan_guard": 0},
     ]
     for shape in ((16, 16), (8, 8), (32, 8), (64, 4), (128, 2), (256, 1), (512, 1)):
         s.append({"name": f"single, {shape[0]}x{shape[1]} groups", "precision": "single", "local_size": shape})
@@ -49,11 +50,12 @@ def settings(batch: int) -> list[dict]:
 
 
 def make(dev, w: int, h: int, channels: int, cfg: dict) -> Accumulator:
-    opts = {k: v for k, v in cfg.items() if k not in ("name", "no_volatile", "batch")}
+    opts = {k: v for k, v in cfg.items() if k not in ("name", "kahan_guard", "batch")}
     acc = Accumulator(dev, w, h, channels=channels, **opts)
-    if cfg.get("no_volatile"):
+    if "kahan_guard" in cfg:
         defines = {"ACC_PRECISION": IMPLEMENTATIONS[acc.implementation], "ACC_INPUT": 0, "ACC_CHANNELS": channels,
-                   "ACC_LOCAL_X": acc.local_size[0], "ACC_LOCAL_Y": acc.local_size[1], "KAHAN_VOLATILE": "/**/"}
+                   "ACC_LOCAL_X": acc.local_size[0], "ACC_LOCAL_Y": acc.local_size[1],
+                   "KAHAN_GUARD": cfg["kahan_guard"]}
         prog = build_program(dev, ["accumulate.cl"], defines=defines)
         acc._batch_kernel = cl.Kernel(prog, "accumulate_batch")
         acc._frame_kernel = cl.Kernel(prog, "accumulate_frame")

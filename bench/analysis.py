@@ -40,6 +40,7 @@ def derived(res: Results, run: dict) -> dict[str, float | None]:
         "ms": ms, "ms_min": run["ms"]["min"], "ms_max": run["ms"]["max"],
         "device_ms": run["device_ms"]["median"], "fps": 1e3 / ms, "samples_per_s": run["pixels"] / (ms / 1e3),
         "rays_per_frame": None, "mrays_per_s": None, "speedup": None,
+        "cpu_ms": run["cpu_ms"]["median"] if "cpu_ms" in run else None, "cpu_speedup": None,
     }
     counts = run.get("counts")
     if counts:
@@ -48,6 +49,8 @@ def derived(res: Results, run: dict) -> dict[str, float | None]:
     base = find(res, run["scene"], "megakernel", run["depth"])
     if base is not None:
         out["speedup"] = base["ms"]["median"] / ms
+        if out["cpu_ms"] and "cpu_ms" in base:
+            out["cpu_speedup"] = base["cpu_ms"]["median"] / out["cpu_ms"]
     return out
 
 

@@ -180,14 +180,12 @@ def run(settings: dict, out_dir: Path, progress: bool = True) -> dict:
                 runs: list[dict] = []
                 try:
                     for depth in depths:
-                        for m in methods:
-                            bar.set_postfix_str(f"{entry.label}: {m}, max depth {depth}")
-                            r = runner.measure(scene, m, depth, w, h, repeats=settings["repeats"],
-                                               warmup=settings["warmup"], device=device,
-                                               spp=settings["spp"] if depth == settings["spp_depth"] else None)
-                            runs.append(r)
-                            bar.update(1)
-                            done += 1
+                        bar.set_postfix_str(f"{entry.label}: max depth {depth}, {', '.join(methods)}")
+                        runs += runner.measure_depth(
+                            scene, methods, depth, w, h, repeats=settings["repeats"], warmup=settings["warmup"],
+                            device=device, spp=settings["spp"] if depth == settings["spp_depth"] else None)
+                        bar.update(len(methods))
+                        done += len(methods)
                         _fill_megakernel_counts(runs, depth, scene, w, h, device)
                     first = runs[0]
                     entry.info.update(setup_s=first["setup_s"], bvh_build_s=first.get("bvh_build_s"),
@@ -246,8 +244,9 @@ def write_json(res: dict, out_dir: Path) -> Path:
 
 
 CSV_FIELDS = ["scene", "triangles", "method", "integrator", "layout", "depth", "width", "height", "repeats",
-              "ms_median", "ms_min", "ms_max", "device_ms_median", "fps", "samples_per_s", "camera_rays",
+              "ms_median", "ms_min", "ms_max", "device_ms_median", "cpu_ms_median", "fps", "samples_per_s", "camera_rays",
               "extension_rays", "shadow_rays", "total_rays", "mrays_per_s", "speedup_vs_megakernel",
+              "cpu_speedup_vs_megakernel",
               "compile_s", "setup_s", "spp", "spp_seconds", "spp_speedup_vs_megakernel", "counts_source"]
 
 
@@ -265,10 +264,12 @@ def write_csv(res: dict, path: Path) -> None:
                 "integrator": r["integrator"], "layout": r["layout"] or "", "depth": r["depth"],
                 "width": r["width"], "height": r["height"], "repeats": r["repeats"],
                 "ms_median": r["ms"]["median"], "ms_min": r["ms"]["min"], "ms_max": r["ms"]["max"],
-                "device_ms_median": r["device_ms"]["median"], "fps": d["fps"], "samples_per_s": d["samples_per_s"],
+                "device_ms_median": r["device_ms"]["median"], "cpu_ms_median": d["cpu_ms"], "fps": d["fps"],
+                "samples_per_s": d["samples_per_s"],
                 "camera_rays": c.get("camera"), "extension_rays": c.get("extension"),
                 "shadow_rays": c.get("shadow"), "total_rays": c.get("total"), "mrays_per_s": d["mrays_per_s"],
-                "speedup_vs_megakernel": d["speedup"], "compile_s": r["compile_s"], "setup_s": r["setup_s"],
+                "speedup_vs_megakernel": d["speedup"], "cpu_speedup_vs_megakernel": d["cpu_speedup"],
+                "compile_s": r["compile_s"], "setup_s": r["setup_s"],
                 "spp": spp.get("spp"), "spp_seconds": spp.get("seconds"),
                 "spp_speedup_vs_megakernel": A.spp_speedup(res, r), "counts_source": r.get("counts_source"),
             })
@@ -333,8 +334,11 @@ def build_document(res: dict, figures: dict[str, str]) -> Document:
             sp = [A.derived(res, r)["speedup"] for s in scenes if (r := A.find(res, s["scene"], m, d))]
             g = _geomean([x for x in sp if x])
             if g is not None:
+                cpu = _geomean([A.derived(res, r)["cpu_speedup"] for s in scenes
+                                if (r := A.find(res, s["scene"], m, d))])
                 items.append(f"max depth {d}: {_label(m)} runs at {_x(g)} the megakernel's speed "
-                             f"(geometric mean over {len(sp)} scene(s); range {_x(min(sp))}-{_x(max(sp))})")
+                             f"(geometric mean over {len(sp)} scene(s); range {_x(min(sp))}-{_x(max(sp))}"
+                             + (f"; by process CPU time {_x(cpu)}" if cpu else "") + ")")
         winners = [f"{s['scene']}: {_label(A.fastest(res, s['scene'], d) or '-')}" for s in scenes]
         if winners:
             items.append(f"fastest at max depth {d}: " + ", ".join(winners))
@@ -572,6 +576,11 @@ def build_document(res: dict, figures: dict[str, str]) -> Document:
         "Frame time: host wall clock around `Renderer.render(1)` (which reads the frame back) and a queue "
         "`finish()`: what a user waits. Device time: the sum of the frame's kernels' OpenCL profiling events "
         "(in the CSV and the per-kernel table).",
+        "Frames of the methods are interleaved: per max depth, all methods' renderers are made and warmed "
+        "up, then each round renders one frame with every method (rotating the order), so load changes on "
+        "a shared machine hit all methods alike.",
+        "Process CPU time per frame (all the driver's threads; in the CSV and the summary) is steadier than "
+        "wall time when other processes compete for the cores: on a CPU device, compare speed-ups by both.",
         "FPS = 1000 / median ms; samples/s = pixels / median s; rays/s = rays per frame / median s.",
         "The Fig. 6 analog is one timed `render(spp)` call per method at its depth, after the warm-up.",
         "Wavefront: default wave size and `readback` schedule; megakernel: one work-item per path. Both use "

@@ -62,51 +62,83 @@ def make_renderer(scene: pyclpt.Scene, method: str, depth: int, width: int, heig
                            height=height, device=device)
 
 
-def _frame(renderer: pyclpt.Renderer, spp: int, seed: int) -> tuple[float, float]:
-    """(host ms, device ms) of one render call."""
+def _frame(renderer: pyclpt.Renderer, spp: int, seed: int) -> tuple[float, float, float]:
+    """(host wall ms, device ms, process CPU ms) of one render call."""
+    c = time.process_time()
     t = time.perf_counter()
     renderer.render(spp, seed=seed, progress=False)
     renderer.device.queue.finish()
     host = 1e3 * (time.perf_counter() - t)
-    return host, sum(k["total_ms"] for k in renderer.stats.kernels)
+    cpu = 1e3 * (time.process_time() - c)
+    return host, sum(k["total_ms"] for k in renderer.stats.kernels), cpu
+
+
+class FrameLog:
+    """The timed frames of one renderer: wall, device and CPU ms per frame, per-kernel ms, and
+    the queue counts (wavefront only)."""
+
+    def __init__(self, renderer: pyclpt.Renderer) -> None:
+        self.renderer = renderer
+        self.host: list[float] = []
+        self.device: list[float] = []
+        self.cpu: list[float] = []
+        self.seeds: list[int] = []
+        self.kernel_sums: dict[str, dict] = {}
+        self.per_seed: list[dict] = []
+        self.bounces: list[dict] = []
+
+    def warm_up(self, frames: int) -> None:
+        for _ in range(frames):
+            self.renderer.render(1, seed=0, progress=False)
+
+    def frame(self, seed: int) -> None:
+        h, d, c = _frame(self.renderer, 1, seed)
+        self.host.append(h)
+        self.device.append(d)
+        self.cpu.append(c)
+        self.seeds.append(seed)
+        st = self.renderer.stats
+        for k in st.kernels:
+            row = self.kernel_sums.setdefault(k["kernel"], {"kernel": k["kernel"], "ms": 0.0, "launches": 0})
+            row["ms"] += k["total_ms"]
+            row["launches"] += k["launches"]
+        if st.bounces:
+            self.per_seed.append(ray_counts(st.bounces))
+            if len(self.seeds) == 1:
+                self.bounces = [dict(b) for b in st.bounces]
+
+    def result(self) -> dict:
+        n = len(self.host)
+        if n == 0:
+            raise ValueError("no frame was timed")
+        kernels = [{"kernel": k["kernel"], "ms": k["ms"] / n, "launches": k["launches"] / n}
+                   for k in self.kernel_sums.values()]
+        counts = None
+        if self.per_seed:
+            counts = {key: statistics.fmean(c[key] for c in self.per_seed) for key in self.per_seed[0]}
+        return {"ms": summary(self.host), "device_ms": summary(self.device), "cpu_ms": summary(self.cpu),
+                "frames_ms": self.host, "frames_device_ms": self.device, "frames_cpu_ms": self.cpu,
+                "kernels": kernels, "bounces": self.bounces, "counts": counts, "seeds": list(self.seeds)}
 
 
 def time_frames(renderer: pyclpt.Renderer, repeats: int, *, warmup: int = 1, first_seed: int = 1) -> dict:
-    """Warm-up frames (seed 0), then ``repeats`` timed frames: wall and device ms (median/min/max and each
-    frame's), per-kernel ms (mean per frame), per-bounce queue counts of the first timed frame
-    and rays per frame (mean; wavefront only, else None)."""
+    """Warm-up frames (seed 0), then ``repeats`` timed frames (seeds ``first_seed``, ...): wall,
+    device and process-CPU ms (median/min/max and each frame's), per-kernel ms (mean per frame),
+    per-bounce queue counts of the first timed frame and rays per frame (mean; wavefront only,
+    else None)."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
-    for _ in range(warmup):
-        renderer.render(1, seed=0, progress=False)
-    host, device, per_seed = [], [], []
-    kernels: dict[str, dict] = {}
-    bounces: list[dict] = []
+    log = FrameLog(renderer)
+    log.warm_up(warmup)
     for i in range(repeats):
-        h, d = _frame(renderer, 1, first_seed + i)
-        host.append(h)
-        device.append(d)
-        st = renderer.stats
-        for k in st.kernels:
-            row = kernels.setdefault(k["kernel"], {"kernel": k["kernel"], "ms": 0.0, "launches": 0})
-            row["ms"] += k["total_ms"] / repeats
-            row["launches"] += k["launches"] / repeats
-        if st.bounces:
-            per_seed.append(ray_counts(st.bounces))
-            if i == 0:
-                bounces = [dict(b) for b in st.bounces]
-    counts = None
-    if per_seed:
-        counts = {key: statistics.fmean(c[key] for c in per_seed) for key in per_seed[0]}
-    return {"ms": summary(host), "device_ms": summary(device), "frames_ms": host, "frames_device_ms": device,
-            "kernels": list(kernels.values()), "bounces": bounces, "counts": counts,
-            "seeds": [first_seed + i for i in range(repeats)]}
+        log.frame(first_seed + i)
+    return log.result()
 
 
 def time_spp(renderer: pyclpt.Renderer, spp: int, seed: int = 0) -> dict:
     """One render of ``spp`` samples per pixel (after the frames that warmed the renderer up)."""
-    h, d = _frame(renderer, spp, seed)
-    return {"spp": spp, "seconds": h / 1e3, "device_seconds": d / 1e3}
+    h, d, c = _frame(renderer, spp, seed)
+    return {"spp": spp, "seconds": h / 1e3, "device_seconds": d / 1e3, "cpu_seconds": c / 1e3}
 
 
 def count_rays(scene: pyclpt.Scene, depth: int, width: int, height: int, seeds: list[int],
@@ -121,22 +153,49 @@ def count_rays(scene: pyclpt.Scene, depth: int, width: int, height: int, seeds: 
     return {key: statistics.fmean(c[key] for c in per_seed) for key in per_seed[0]}
 
 
+def measure_depth(scene: pyclpt.Scene, methods: list[str], depth: int, width: int, height: int, *,
+                  repeats: int, warmup: int = 1, device: Any = None, spp: int | None = None,
+                  on_method: Any = None) -> list[dict]:
+    """Every method at one max depth: make the renderers (compile and setup timed apart), warm
+    each up, then time ``repeats`` rounds of one frame per method (frame i of every method uses
+    seed i + 1; the method order rotates each round), so that a change in the machine's load
+    hits all methods alike; then, if ``spp`` is given, one render of that many samples each.
+    ``on_method(method)`` is called as each renderer is made (for progress bars)."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    logs, info = {}, {}
+    for m in methods:
+        if on_method:
+            on_method(m)
+        t0 = time.perf_counter()
+        r = make_renderer(scene, m, depth, width, height, device)
+        create_s = time.perf_counter() - t0
+        bvh = getattr(getattr(r.scene_buffers, "arrays", None), "bvh", None)
+        info[m] = {"compile_s": r.stats.compile_seconds, "setup_s": r.stats.setup_seconds, "create_s": create_s,
+                   "bvh_build_s": getattr(bvh, "build_seconds", None)}  # 0 when the BVH came from the cache
+        logs[m] = FrameLog(r)
+        logs[m].warm_up(warmup)
+    for i in range(repeats):
+        k = i % len(methods)
+        for m in methods[k:] + methods[:k]:
+            logs[m].frame(1 + i)
+    out = []
+    for m in methods:
+        r = logs[m].renderer
+        res = logs[m].result()
+        integrator, layout = METHODS[m]
+        res.update(scene=scene.name, method=m, integrator=integrator,
+                   layout=layout if integrator == "wavefront" else None, depth=depth, width=r.width,
+                   height=r.height, pixels=r.width * r.height, repeats=repeats, warmup=warmup,
+                   memory=dict(r.stats.memory), counts_source="measured" if res["counts"] else None, **info[m])
+        if spp:
+            res["spp_run"] = time_spp(r, spp)
+        out.append(res)
+    return out
+
+
 def measure(scene: pyclpt.Scene, method: str, depth: int, width: int, height: int, *, repeats: int,
             warmup: int = 1, device: Any = None, spp: int | None = None) -> dict:
-    """One configuration: make the renderer (compile and setup timed apart), time its frames
-    and, if ``spp`` is given, one render of that many samples."""
-    t0 = time.perf_counter()
-    r = make_renderer(scene, method, depth, width, height, device)
-    create_s = time.perf_counter() - t0
-    res = time_frames(r, repeats, warmup=warmup)
-    integrator, layout = METHODS[method]
-    res.update(scene=scene.name, method=method, integrator=integrator,
-               layout=layout if integrator == "wavefront" else None, depth=depth, width=r.width,
-               height=r.height, pixels=r.width * r.height, repeats=repeats, warmup=warmup,
-               compile_s=r.stats.compile_seconds, setup_s=r.stats.setup_seconds, create_s=create_s,
-               memory=dict(r.stats.memory), counts_source="measured" if res["counts"] else None)
-    bvh = getattr(getattr(r.scene_buffers, "arrays", None), "bvh", None)
-    res["bvh_build_s"] = getattr(bvh, "build_seconds", None)  # 0 when the BVH came from the cache
-    if spp:
-        res["spp_run"] = time_spp(r, spp)
-    return res
+    """One configuration alone (see :func:`measure_depth`)."""
+    return measure_depth(scene, [method], depth, width, height, repeats=repeats, warmup=warmup, device=device,
+                         spp=spp)[0]

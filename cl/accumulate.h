@@ -15,10 +15,12 @@
  * the output). The finiteness tests are bit tests returning 0/1, so that the kernel has no
  * branches per value and a CPU driver can vectorise it across work-items.
  *
+ * acc_add / acc_ema take `opaque`, a kernel argument that is always 0, for the Kahan guard below.
+ *
  * The compensated and emulated-double arithmetic is exact only under IEEE evaluation: these
  * programs are never built with -cl-fast-relaxed-math / -cl-unsafe-math-optimizations, common.h
- * turns FP_CONTRACT off, and the Kahan step goes through volatile temporaries so that no
- * compiler can fold (t - s) - y to 0. */
+ * turns FP_CONTRACT off, and the Kahan step is guarded (KAHAN_GUARD) so that no compiler can
+ * fold (t - s) - y to 0. */
 #ifndef PYCLPT_ACCUMULATE_H
 #define PYCLPT_ACCUMULATE_H
 
@@ -128,31 +130,46 @@ typedef float acc_store_t;
 typedef float acc_t;
 static inline acc_t acc_load(__global const acc_store_t* s, size_t i) { return s[i]; }
 static inline void acc_store(__global acc_store_t* s, size_t i, acc_t a) { s[i] = a; }
-static inline acc_t acc_add(acc_t a, input_t x) { return a + (float)x; }
-static inline acc_t acc_ema(acc_t a, input_t x, uint m) { return a + ((float)x - a / (float)m); }
+static inline acc_t acc_add(acc_t a, input_t x, uint opaque) { return a + (float)x; }
+static inline acc_t acc_ema(acc_t a, input_t x, uint m, uint opaque) { return a + ((float)x - a / (float)m); }
 static inline uint acc_bad(acc_t a) { return float_bad(a); }
 static inline float acc_mean(acc_t a, uint n) { return a / (float)n; }
 
 #elif ACC_PRECISION == ACC_COMPENSATED
 
 /* (x, y) = (running sum s, Kahan correction c); the true sum is s - c.
- * KAHAN_VOLATILE is `volatile` unless defined otherwise (bench/accumulation.py measures it empty). */
-#ifndef KAHAN_VOLATILE
-#define KAHAN_VOLATILE volatile
+ * The step t = s + y; c' = (t - s) - y must be evaluated as written: a compiler allowed to
+ * reassociate (fast/unsafe math) folds c' to 0. Besides never building this program with such
+ * options, KAHAN_GUARD makes the fold impossible:
+ *   1 (default)  t = s + y and d = t - s pass through an integer XOR with `opaque`, a kernel
+ *                argument that is always 0: no compiler can know that they equal s + y and t - s,
+ *                so d - y cannot be rewritten. Two integer ops, which a CPU driver vectorises.
+ *   2            t and t - s in volatile temporaries (also safe; they stay in memory, slower).
+ *   0            no guard (plain IEEE evaluation; bench/accumulation.py measures it). */
+#ifndef KAHAN_GUARD
+#define KAHAN_GUARD 1
 #endif
 typedef float acc_store_t;
 typedef fpair acc_t;
 static inline acc_t acc_load(__global const acc_store_t* s, size_t i) { return fpair_load(s, i); }
 static inline void acc_store(__global acc_store_t* s, size_t i, acc_t a) { fpair_store(s, i, a); }
-static inline acc_t kahan_add(acc_t a, float x) {
+static inline acc_t kahan_add(acc_t a, float x, uint opaque) {
     float y = x - a.y;
-    KAHAN_VOLATILE float t = a.x + y;  /* volatile: (t - s) - y must be evaluated as written */
-    KAHAN_VOLATILE float d = t - a.x;
+#if KAHAN_GUARD == 2
+    volatile float t = a.x + y;
+    volatile float d = t - a.x;
+#elif KAHAN_GUARD == 1
+    float t = as_float(as_uint(a.x + y) ^ opaque);
+    float d = as_float(as_uint(t - a.x) ^ opaque);
+#else
+    float t = a.x + y;
+    float d = t - a.x;
+#endif
     return fpair_make(t, d - y);
 }
-static inline acc_t acc_add(acc_t a, input_t x) { return kahan_add(a, (float)x); }
-static inline acc_t acc_ema(acc_t a, input_t x, uint m) {
-    return kahan_add(a, (float)x - (a.x - a.y) / (float)m);
+static inline acc_t acc_add(acc_t a, input_t x, uint opaque) { return kahan_add(a, (float)x, opaque); }
+static inline acc_t acc_ema(acc_t a, input_t x, uint m, uint opaque) {
+    return kahan_add(a, (float)x - (a.x - a.y) / (float)m, opaque);
 }
 static inline uint acc_bad(acc_t a) { return float_bad(a.x) | float_bad(a.y); }
 static inline float acc_mean(acc_t a, uint n) { return (a.x - a.y) / (float)n; }
@@ -165,8 +182,8 @@ typedef uint2 acc_store_t;
 typedef double acc_t;
 static inline acc_t acc_load(__global const acc_store_t* s, size_t i) { return as_double(s[i]); }
 static inline void acc_store(__global acc_store_t* s, size_t i, acc_t a) { s[i] = as_uint2(a); }
-static inline acc_t acc_add(acc_t a, input_t x) { return a + (double)x; }
-static inline acc_t acc_ema(acc_t a, input_t x, uint m) { return a + ((double)x - a / (double)m); }
+static inline acc_t acc_add(acc_t a, input_t x, uint opaque) { return a + (double)x; }
+static inline acc_t acc_ema(acc_t a, input_t x, uint m, uint opaque) { return a + ((double)x - a / (double)m); }
 static inline uint acc_bad(acc_t a) {
     return (as_ulong(a) & 0x7ff0000000000000UL) == 0x7ff0000000000000UL;
 }
@@ -187,8 +204,8 @@ static inline fpair input_df(input_t x) {
     return fpair_make(hi, (float)((long)x - (long)hi));
 #endif
 }
-static inline acc_t acc_add(acc_t a, input_t x) { return df_add(a, input_df(x)); }
-static inline acc_t acc_ema(acc_t a, input_t x, uint m) {
+static inline acc_t acc_add(acc_t a, input_t x, uint opaque) { return df_add(a, input_df(x)); }
+static inline acc_t acc_ema(acc_t a, input_t x, uint m, uint opaque) {
     fpair mean = df_div(a, uint_df(m));
     return df_add(a, df_add(input_df(x), fpair_neg(mean)));
 }

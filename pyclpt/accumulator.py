@@ -49,7 +49,7 @@ UNSAFE_MATH_OPTIONS = ("-cl-fast-relaxed-math", "-cl-unsafe-math-optimizations",
                        "-cl-mad-enable", "-cl-no-signed-zeros")
 EMULATE_FP64_ENV = "PYCLPT_EMULATE_FP64"
 # Work-group shape: Falcor's 16x16 tiles on GPUs; on a CPU driver (PoCL) a row of 256 pixels,
-# which measured 1.8x (single) to 2.1x (double) faster than 16x16 at 1920x1080
+# on which 16x16 took 1.5x (single) to 1.7x (double) the time at 1920x1080
 # (bench/accumulation.py; docs/accumulation.md).
 GPU_LOCAL_SIZE = (16, 16)
 CPU_LOCAL_SIZE = (256, 1)
@@ -66,6 +66,9 @@ def default_local_size(device: Device) -> tuple[int, int]:
     return (side, side)
 
 _COUNTER_LIMIT = 2**32 - 1
+# The kernels' `opaque` argument: always 0; the Kahan step XORs its sum with it, so that no compiler
+# can prove the correction term is zero (cl/accumulate.h, KAHAN_GUARD).
+_OPAQUE_ZERO = np.uint32(0)
 
 
 class AccumulatorError(ValueError):
@@ -281,11 +284,11 @@ class Accumulator:
         size = (np.int32(self.width), np.int32(self.height))
         if count == 1:
             ev = self._frame_kernel(q, gsize, lsize, self._state, buf, *size, np.uint64(first),
-                                    np.uint32(self.frame_count), np.uint32(ema_max), self.counters)
+                                    np.uint32(self.frame_count), np.uint32(ema_max), _OPAQUE_ZERO, self.counters)
         else:
             ev = self._batch_kernel(q, gsize, lsize, self._state, buf, *size, np.uint64(first),
                                     np.uint64(self.frame_stride), np.int32(count), np.uint32(self.frame_count),
-                                    np.uint32(ema_max), self.counters)
+                                    np.uint32(ema_max), _OPAQUE_ZERO, self.counters)
         self.frame_count += count
         return ev
 
@@ -411,8 +414,8 @@ class Accumulator:
         compile time; the sum is untouched."""
         q, lsize, none = self.device.queue, self.local_size, (np.int32(0), np.int32(0))
         self._batch_kernel(q, lsize, lsize, self._state, self._output, *none, np.uint64(0), np.uint64(0),
-                           np.int32(0), np.uint32(0), np.uint32(0), self.counters)
+                           np.int32(0), np.uint32(0), np.uint32(0), _OPAQUE_ZERO, self.counters)
         self._frame_kernel(q, lsize, lsize, self._state, self._output, *none, np.uint64(0), np.uint32(0),
-                           np.uint32(0), self.counters)
+                           np.uint32(0), _OPAQUE_ZERO, self.counters)
         self._resolve(q, lsize, lsize, self._state, self._output, *none, np.uint32(1))
         self.device.queue.finish()

@@ -76,7 +76,8 @@ def test_compensated_is_built_without_unsafe_math_and_survives_fast_math(device)
     acc = make(device, precision="compensated")
     assert not set(acc.build_options) & set(UNSAFE_MATH_OPTIONS)
     assert "-DACC_PRECISION=1" in acc.build_options
-    # The volatile temporaries keep the correction even where fast math would let LLVM fold it.
+    # The Kahan guard (an XOR with a kernel argument that is 0) keeps the correction even where
+    # fast math would let LLVM fold it to 0.
     n, value = 100000, np.float32(0.1)
     frames = cl.Buffer(device.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                        hostbuf=np.full(n, value, np.float32))
@@ -86,7 +87,8 @@ def test_compensated_is_built_without_unsafe_math_and_survives_fast_math(device)
     counters = cl.Buffer(device.context, cl.mem_flags.READ_WRITE, size=8)
     cl.enqueue_fill_buffer(device.queue, state, np.uint32(0), 0, 8)
     cl.Kernel(prog, "accumulate_batch")(device.queue, (16, 16), (16, 16), state, frames, np.int32(1), np.int32(1),
-                                  np.uint64(0), np.uint64(1), np.int32(n), np.uint32(0), np.uint32(0), counters)
+                                  np.uint64(0), np.uint64(1), np.int32(n), np.uint32(0), np.uint32(0), np.uint32(0),
+                                  counters)
     out = np.empty(2, np.float32)
     cl.enqueue_copy(device.queue, out, state)
     s, c = out

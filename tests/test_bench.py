@@ -102,6 +102,8 @@ def test_quick_report_figures_are_sane(quick):
         assert ms["min"] <= ms["median"] <= ms["max"]
         assert len(r["frames_ms"]) == st["repeats"] == r["repeats"]
         assert _finite_positive(r["device_ms"]["median"])
+        assert r["cpu_ms"]["median"] >= 0 and len(r["frames_cpu_ms"]) == r["repeats"]
+        assert r["seeds"] == list(range(1, r["repeats"] + 1))  # every method renders the same frames
         assert r["compile_s"] >= 0 and r["setup_s"] >= 0
         names = {k["kernel"] for k in r["kernels"]}
         assert ("megakernel" in names) if r["method"] == "megakernel" else (WAVEFRONT_KERNELS <= names)
