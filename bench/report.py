@@ -85,7 +85,8 @@ def _resolution(text: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="pyclpt bench", description="The streaming paper's tables and plots, measured on this OpenCL "
+    p = argparse.ArgumentParser(prog="pyclpt bench",
+                                description="The streaming paper's tables and plots, measured on this OpenCL "
                                 "device (docs/benchmarks.md).",
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="Defaults: " + ", ".join(f"{k}={v}" for k, v in DEFAULTS.items()) +
@@ -244,7 +245,8 @@ def write_json(res: dict, out_dir: Path) -> Path:
 
 
 CSV_FIELDS = ["scene", "triangles", "method", "integrator", "layout", "depth", "width", "height", "repeats",
-              "ms_median", "ms_min", "ms_max", "device_ms_median", "cpu_ms_median", "fps", "samples_per_s", "camera_rays",
+              "ms_median", "ms_min", "ms_max", "device_ms_median", "cpu_ms_median", "fps", "samples_per_s",
+              "camera_rays",
               "extension_rays", "shadow_rays", "total_rays", "mrays_per_s", "speedup_vs_megakernel",
               "cpu_speedup_vs_megakernel",
               "compile_s", "setup_s", "spp", "spp_seconds", "spp_speedup_vs_megakernel", "counts_source"]
@@ -421,8 +423,9 @@ def build_document(res: dict, figures: dict[str, str]) -> Document:
 
     # Fig 6
     doc.add(Heading(1, "Fig. 6 analog: render time for many samples"))
-    doc.add(Para(f"Seconds to render {st['spp']} spp at max depth {st['spp_depth']} (one `render` call after "
-                 f"the warm-up; the paper used 1024 spp: multiply by {_n(1024 / st['spp'])} for its count)."))
+    doc.add(Para(f"Seconds to render {st['spp']} spp at max depth {st['spp_depth']} after the timed frames (in up "
+                 "to 4 render calls per method, interleaved across the methods; the paper used 1024 spp: "
+                 f"multiply by {_n(1024 / st['spp'])} for its count)."))
     rows = []
     for s in scenes:
         row = [s["scene"]]
@@ -582,7 +585,9 @@ def build_document(res: dict, figures: dict[str, str]) -> Document:
         "Process CPU time per frame (all the driver's threads; in the CSV and the summary) is steadier than "
         "wall time when other processes compete for the cores: on a CPU device, compare speed-ups by both.",
         "FPS = 1000 / median ms; samples/s = pixels / median s; rays/s = rays per frame / median s.",
-        "The Fig. 6 analog is one timed `render(spp)` call per method at its depth, after the warm-up.",
+        "The Fig. 6 analog renders the spp count with each method after its frames, as up to 4 render calls "
+        "(consecutive sample ranges, together the same samples as one call) interleaved across the methods; "
+        "the calls' times are summed.",
         "Wavefront: default wave size and `readback` schedule; megakernel: one work-item per path. Both use "
         "work-groups of 64.",
         "On a shared machine the load average above says how noisy the run was.",

@@ -62,11 +62,11 @@ def make_renderer(scene: pyclpt.Scene, method: str, depth: int, width: int, heig
                            height=height, device=device)
 
 
-def _frame(renderer: pyclpt.Renderer, spp: int, seed: int) -> tuple[float, float, float]:
+def _frame(renderer: pyclpt.Renderer, spp: int, seed: int, first_sample: int = 0) -> tuple[float, float, float]:
     """(host wall ms, device ms, process CPU ms) of one render call."""
     c = time.process_time()
     t = time.perf_counter()
-    renderer.render(spp, seed=seed, progress=False)
+    renderer.render(spp, seed=seed, progress=False, first_sample=first_sample)
     renderer.device.queue.finish()
     host = 1e3 * (time.perf_counter() - t)
     cpu = 1e3 * (time.process_time() - c)
@@ -135,10 +135,21 @@ def time_frames(renderer: pyclpt.Renderer, repeats: int, *, warmup: int = 1, fir
     return log.result()
 
 
-def time_spp(renderer: pyclpt.Renderer, spp: int, seed: int = 0) -> dict:
-    """One render of ``spp`` samples per pixel (after the frames that warmed the renderer up)."""
-    h, d, c = _frame(renderer, spp, seed)
-    return {"spp": spp, "seconds": h / 1e3, "device_seconds": d / 1e3, "cpu_seconds": c / 1e3}
+def time_spp(renderers: dict[str, pyclpt.Renderer], spp: int, seed: int = 0, chunks: int = 4) -> dict[str, dict]:
+    """``spp`` samples per pixel with each renderer, as ``chunks`` render calls (samples
+    [0, a), [a, b), ... of the same seed: together the same samples as one call) interleaved
+    across the renderers in rotating order; the times of a renderer's calls are summed."""
+    names = list(renderers)
+    chunks = max(1, min(chunks, spp))
+    edges = [round(spp * j / chunks) for j in range(chunks + 1)]
+    acc = {m: [0.0, 0.0, 0.0] for m in names}
+    for j in range(chunks):
+        k = j % len(names)
+        for m in names[k:] + names[:k]:
+            h, d, c = _frame(renderers[m], edges[j + 1] - edges[j], seed, first_sample=edges[j])
+            acc[m] = [acc[m][0] + h, acc[m][1] + d, acc[m][2] + c]
+    return {m: {"spp": spp, "chunks": chunks, "seconds": h / 1e3, "device_seconds": d / 1e3,
+                "cpu_seconds": c / 1e3} for m, (h, d, c) in acc.items()}
 
 
 def count_rays(scene: pyclpt.Scene, depth: int, width: int, height: int, seeds: list[int],
@@ -159,7 +170,8 @@ def measure_depth(scene: pyclpt.Scene, methods: list[str], depth: int, width: in
     """Every method at one max depth: make the renderers (compile and setup timed apart), warm
     each up, then time ``repeats`` rounds of one frame per method (frame i of every method uses
     seed i + 1; the method order rotates each round), so that a change in the machine's load
-    hits all methods alike; then, if ``spp`` is given, one render of that many samples each.
+    hits all methods alike; then, if ``spp`` is given, that many samples per pixel with each
+    (:func:`time_spp`, interleaved likewise).
     ``on_method(method)`` is called as each renderer is made (for progress bars)."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
@@ -179,6 +191,7 @@ def measure_depth(scene: pyclpt.Scene, methods: list[str], depth: int, width: in
         k = i % len(methods)
         for m in methods[k:] + methods[:k]:
             logs[m].frame(1 + i)
+    spp_runs = time_spp({m: logs[m].renderer for m in methods}, spp) if spp else {}
     out = []
     for m in methods:
         r = logs[m].renderer
@@ -189,7 +202,7 @@ def measure_depth(scene: pyclpt.Scene, methods: list[str], depth: int, width: in
                    height=r.height, pixels=r.width * r.height, repeats=repeats, warmup=warmup,
                    memory=dict(r.stats.memory), counts_source="measured" if res["counts"] else None, **info[m])
         if spp:
-            res["spp_run"] = time_spp(r, spp)
+            res["spp_run"] = spp_runs[m]
         out.append(res)
     return out
 

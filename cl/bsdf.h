@@ -166,8 +166,7 @@ static inline float fresnel_dielectric(float cos_i, float eta, float* cos_t, flo
     float a_s = (ci - eta_it * ct) / (ci + eta_it * ct);
     float a_p = (eta_it * ci - ct) / (eta_it * ci + ct);
     *cos_t = outside ? -ct : ct;
-    float f = 0.5f * (a_s * a_s + a_p * a_p);
-    return isfinite(f) ? f : 1.0f; /* ci = ct = 0 (grazing, eta = 1): 0 / 0 */
+    return 0.5f * (a_s * a_s + a_p * a_p);
 }
 
 /* F alone, for cos_i >= 0 on the outside of an interface int/ext = eta. */

@@ -168,7 +168,10 @@ class ProgressiveRenderer:
             return []
         t = time.perf_counter()
         old = self.renderer
-        self.renderer = self._make_renderer()  # scene buffers, integrator (its specialisation), film
+        if changed == ["camera"]:  # only the per-resolution constants depend on the camera
+            self.renderer.scene_buffers.refresh_camera()
+        else:
+            self.renderer = self._make_renderer()  # scene buffers, integrator (its specialisation), film
         self._fingerprint = fp
         keep = not self.auto_reset and "resolution" not in changed
         if keep:  # accumulate on: the old sum continues under the new scene

@@ -117,6 +117,10 @@ class SceneBuffers:
         """-D specialisations the kernels need for this scene."""
         return self.arrays.defines
 
+    def refresh_camera(self) -> None:
+        """Re-read the scene's camera: the constants are rebuilt on the next args() call."""
+        self._consts.clear()
+
     def args(self, width: int, height: int) -> tuple[cl.Buffer, ...]:
         """The SCENE_PARAMS kernel arguments for a film of width x height."""
         key = (width, height)

@@ -138,6 +138,7 @@ def test_quick_report_figures_are_sane(quick):
         if r["depth"] == st["spp_depth"]:
             spp = r["spp_run"]
             assert spp["spp"] == st["spp"] and _finite_positive(spp["seconds"])
+            assert spp["chunks"] == min(4, st["spp"])
             sp = A.spp_speedup(res, r)
             assert math.isclose(sp, mk["spp_run"]["seconds"] / spp["seconds"])
         else:

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 cl = pytest.importorskip("pyopencl")
-stats = pytest.importorskip("scipy.stats")
+pytest.importorskip("scipy.stats")  # test_sampling needs it
 special = pytest.importorskip("scipy.special")
 
 from test_sampling import (N_COS, PHI_I, Kit, Out, chi2_pvalue, direction, fresnel_ref,  # noqa: E402
@@ -29,7 +29,7 @@ from test_sampling import (N_COS, PHI_I, Kit, Out, chi2_pvalue, direction, fresn
 
 from pyclpt.load_dict import METALS  # noqa: E402
 from pyclpt.material_buffers import MAT_FDR_INT, MAT_RP_TRANS, pack_material  # noqa: E402
-from pyclpt.microfacet import RP_KNOTS, rough_reflectance, rough_transmittance, smith_g1  # noqa: E402
+from pyclpt.microfacet import RP_KNOTS, rough_reflectance, rough_transmittance  # noqa: E402
 from pyclpt.scene import Conductor, Dielectric, Plastic, ThinDielectric  # noqa: E402
 
 FLIP = np.float32([1, 1, -1])
@@ -128,7 +128,7 @@ def test_microfacet_functions(kit, beckmann):
 @pytest.mark.parametrize("alpha,cos_i", [(0.05, 0.3), (0.3, 1.0), (0.3, 0.05), (0.8, 0.6)])
 def test_visible_normal_sampling_chi2(kit, beckmann, alpha, cos_i):
     """mf_sample_visible against mf_pdf_visible, in the space of normals."""
-    n = 200_000
+    n = 100_000
     wi = direction(cos_i, PHI_I)
     u = uniform(7000 + int(alpha * 100) + int(cos_i * 10) + 1000 * beckmann, n, 2)
     rec = np.zeros((n, 8), np.float32)
@@ -136,7 +136,7 @@ def test_visible_normal_sampling_chi2(kit, beckmann, alpha, cos_i):
     m = kit.run("microfacet_sample_k", n, rec, Out(n, 3))
     assert np.all(np.isfinite(m)) and np.all(m[:, 2] > 0)
     np.testing.assert_allclose(np.linalg.norm(m, axis=1), 1.0, atol=1e-5)
-    dirs, weights = sphere_quadrature(0.0, sub_t=16, sub_p=8)
+    dirs, weights = sphere_quadrature(0.0, sub_t=16, sub_p=4)
     q = dirs.reshape(-1, 3)
     rq = np.zeros((len(q), 8), np.float32)
     rq[:, 0:3], rq[:, 3:6], rq[:, 6], rq[:, 7] = q, wi, alpha, float(beckmann)
@@ -158,7 +158,7 @@ def test_erfinv(kit):
 # --------------------------------------------------------------------------
 # 2. Sampling against evaluation, per material and parameter set
 
-N_S = 300_000
+N_S = 200_000
 SPHERE = (-1.0, 2 * N_COS)  # cos_lo, rows: the rough dielectric's cells cover the sphere
 HEMI = (0.0, N_COS)
 
@@ -178,13 +178,13 @@ for _d in ("ggx", "beckmann"):
 CASES["roughbubble-ggx-a0.3-out0.6"] = (_glass(0.3, "ggx", 1.0, 1.333), 0.6, SPHERE)
 CASES["roughbubble-beckmann-a0.3-out0.9"] = (_glass(0.3, "beckmann", 1.0, 1.333), 0.9, SPHERE)
 for _d in ("ggx", "beckmann"):
-    for _a, _c, _nl in ((0.05, 0.8, False), (0.3, 0.5, True), (0.8, 0.1, False), (0.3, 0.95, False)):
+    for _a, _c, _nl in ((0.05, 0.8, False), (0.3, 0.5, True), (0.8, 0.1, _d == "ggx")):
         CASES[f"roughplastic-{_d}-a{_a}-cos{_c}-{'nl' if _nl else 'lin'}"] = (
             Plastic((0.7, 0.4, 0.2), (1.0, 0.9, 0.8), 1.5, 1.0, alpha=_a, distribution=_d, nonlinear=_nl), _c, HEMI)
 for _c, _nl in ((0.8, False), (0.3, True), (0.05, False)):
     CASES[f"plastic-cos{_c}-{'nl' if _nl else 'lin'}"] = (
         Plastic((0.7, 0.4, 0.2), (1.0, 0.9, 0.8), 1.5, 1.0, nonlinear=_nl), _c, HEMI)
-for _a, _c in ((0.05, 0.6), (0.05, 0.1), (0.3, 1.0), (0.3, 0.1), (0.8, 0.6), (0.8, 0.1)):
+for _a, _c in ((0.05, 0.6), (0.05, 0.1), (0.3, 1.0), (0.8, 0.1)):
     CASES[f"roughcu-beckmann-a{_a}-cos{_c}"] = (
         Conductor(*METALS["Cu"], alpha=_a, specular_reflectance=(0.9, 1.0, 0.8), distribution="beckmann"), _c, HEMI)
 
@@ -273,7 +273,7 @@ def test_roughdielectric_energy(kit, dist, alpha):
     transmitted radiance weight carries exactly eta_ti^2."""
     mat = pack_material(Dielectric(1.5, 1.0, alpha=alpha, distribution=dist))
     n = 100_000
-    for k, cos_i in enumerate((1.0, 0.5, 0.1, -0.9, -0.5)):
+    for k, cos_i in enumerate((1.0, 0.3, -0.9, -0.5)):
         wi = direction(abs(cos_i), PHI_I) * (FLIP if cos_i < 0 else np.float32(1))
         s = kit.sample(mat, wi, uniform(8000 + k + int(100 * alpha), n, 3))
         ok = s["ok"]
@@ -295,9 +295,9 @@ def test_roughdielectric_energy(kit, dist, alpha):
             assert e.mean() > 0.99, f"near-smooth glass loses {1 - e.mean()} at cos {cos_i}"
 
 
-@pytest.mark.parametrize("alpha,dist", [(0.0, "ggx"), (0.05, "ggx"), (0.3, "beckmann"), (0.8, "ggx"),
-                                        (0.8, "beckmann")])
-@pytest.mark.parametrize("nonlinear", [False, True], ids=["lin", "nl"])
+@pytest.mark.parametrize("alpha,dist,nonlinear", [(0.0, "ggx", False), (0.0, "ggx", True), (0.05, "ggx", False),
+                                                  (0.3, "beckmann", True), (0.8, "ggx", False),
+                                                  (0.8, "beckmann", False)])
 def test_plastic_furnace(kit, alpha, dist, nonlinear):
     """Diffuse 1 and specular 1: the plastic reflects at most everything. The smooth one reflects exactly
     everything (F_i + (1 - F_i) (1 - Fdr_ext) / (eta^2 (1 - Fdr_int)) = 1); the rough one what the host's
@@ -327,7 +327,7 @@ def test_plastic_furnace(kit, alpha, dist, nonlinear):
 def test_beckmann_conductor_furnace(kit, alpha):
     """Metal 'none' (F = 1) with Beckmann: weights G1 <= 1, albedo <= 1, and ~1 when nearly smooth."""
     mat = pack_material(Conductor(*METALS["none"], alpha=alpha, distribution="beckmann"))
-    n = 200_000
+    n = 100_000
     for k, cos_i in enumerate((1.0, 0.6, 0.1)):
         s = kit.sample(mat, direction(cos_i, PHI_I), uniform(8200 + k, n, 3))
         w = np.where(s["ok"][:, None], s["weight"], 0.0).astype(np.float64)
@@ -501,6 +501,70 @@ def test_roughplastic_tables(dist):
     rough = pack_material(Plastic(alpha=0.5, int_ior=1.5, ext_ior=1.0, distribution=dist))
     assert knots_of(rough)[1] > knots_of(smooth)[1] + 0.2
     assert float(rough[MAT_FDR_INT]) < float(smooth[MAT_FDR_INT])  # single scattering loses internal light
+
+
+# Mitsuba 3.9.1's own plug-ins (tests/data/make_bsdf_reference.py): name -> (pyclpt material, tolerance
+# of eval's value and pdf relative to the larger of the reference and 1e-4, why not tighter).
+MITSUBA_REFERENCE = {
+    "roughglass-ggx-0.3": (Dielectric(1.5, 1.0, (0.9, 0.8, 0.7), (0.6, 0.7, 0.8), alpha=0.3), 1e-4, "float32"),
+    "roughglass-beckmann-0.1": (Dielectric(1.5, 1.0, alpha=0.1, distribution="beckmann"), 8e-3,
+                                "Mitsuba's rational Beckmann G1 (0.35% per G1)"),
+    "roughbubble-ggx-0.8": (Dielectric(1.0, 1.333, alpha=0.8), 1e-4, "float32"),
+    "thin-1.5": (ThinDielectric(1.5, 1.0, (0.9, 0.8, 0.7), (0.6, 0.7, 0.8)), 0.0, "delta only"),
+    "plastic-lin": (Plastic((0.7, 0.4, 0.2), (1.0, 0.9, 0.6), 1.6, 1.1), 3e-3,
+                    "Mitsuba's polynomial fit of Fdr; pyclpt integrates it"),
+    "plastic-nl": (Plastic((0.7, 0.4, 0.2), int_ior=1.5, ext_ior=1.0, nonlinear=True), 3e-3, "as plastic-lin"),
+    "roughplastic-ggx-0.3": (Plastic((0.7, 0.4, 0.2), alpha=0.3, int_ior=1.5, ext_ior=1.0), 5e-2,
+                             "10 half-float knots of t instead of 64 floats"),
+    "roughplastic-beckmann-0.1-nl": (Plastic((0.7, 0.4, 0.2), alpha=0.1, distribution="beckmann", int_ior=1.5,
+                                             ext_ior=1.0, nonlinear=True), 5e-2, "as roughplastic-ggx-0.3"),
+    "roughplastic-ggx-0.8": (Plastic((0.9, 0.9, 0.9), (0.5, 0.5, 0.5), 1.33, 1.0, alpha=0.8), 5e-2,
+                             "as roughplastic-ggx-0.3"),
+    "roughconductor-beckmann-0.3": (Conductor((0.2, 0.9, 1.1), (3.9, 2.4, 2.2), alpha=0.3, distribution="beckmann"),
+                                    1e-2, "as roughglass-beckmann-0.1"),
+}
+
+
+@pytest.fixture(scope="module")
+def mitsuba_reference():
+    from pathlib import Path
+    path = Path(__file__).parent / "data" / "bsdf-mitsuba3-eval.npz"
+    if not path.is_file():
+        pytest.skip(f"{path} is missing (tests/data/make_bsdf_reference.py makes it)")
+    return np.load(path)
+
+
+@pytest.mark.parametrize("name", list(MITSUBA_REFERENCE))
+def test_mitsuba_reference(kit, mitsuba_reference, name):
+    """bsdf_eval's value and pdf against Mitsuba 3's eval / pdf at the same direction pairs; samples against
+    Mitsuba's sample at the same random numbers where both use the same warp (delta lobes, Beckmann's
+    visible normals, the cosine hemisphere)."""
+    obj, tol, _ = MITSUBA_REFERENCE[name]
+    ref = {key: mitsuba_reference[f"{name}/{key}"] for key in ("wi", "wo", "u", "value", "pdf", "s_wo", "s_weight",
+                                                                "s_pdf")}
+    mat = pack_material(obj)
+    e = kit.eval(mat, ref["wi"], ref["wo"]).astype(np.float64)
+    v, p = ref["value"].astype(np.float64), ref["pdf"].astype(np.float64)
+    assert v.max() > 0 or isinstance(obj, ThinDielectric)
+    err_v = np.abs(e[:, :3] - v).max(axis=1) / np.maximum(v.max(axis=1), 1e-4)
+    err_p = np.abs(e[:, 3] - p) / np.maximum(p, 1e-4)
+    assert err_v.max() <= tol, f"{name}: value off Mitsuba's by {err_v.max():.2e} (median {np.median(err_v):.1e})"
+    assert err_p.max() <= tol, f"{name}: pdf off Mitsuba's by {err_p.max():.2e} (median {np.median(err_p):.1e})"
+    alpha = getattr(obj, "alpha", 0.0)
+    if isinstance(obj, Plastic) and alpha > 0:
+        assert np.median(err_v) < 1e-2 and np.median(err_p) < 1e-2
+    same_warp = alpha == 0 or obj.distribution == "beckmann"
+    if not same_warp:
+        return
+    s = kit.sample(mat, ref["wi"], ref["u"])
+    valid = (ref["s_pdf"] > 0) & (ref["s_weight"].max(axis=1) > 0)
+    agree = s["ok"] == valid
+    assert agree.mean() >= 0.97, f"{name}: a sample exists for {agree.mean():.3f} of the inputs alike"
+    both = s["ok"] & valid
+    exact = alpha == 0
+    np.testing.assert_allclose(s["wo"][both], ref["s_wo"][both], atol=1e-6 if exact else 2e-3)
+    np.testing.assert_allclose(s["weight"][both], ref["s_weight"][both], rtol=max(tol, 1e-5), atol=1e-6)
+    np.testing.assert_allclose(s["pdf"][both], ref["s_pdf"][both], rtol=max(tol, 1e-5 if exact else 2e-2))
 
 
 # --------------------------------------------------------------------------
