@@ -839,34 +839,3 @@ def test_reciprocity(kit, name):
     fb = b[:, :3].astype(np.float64) / np.abs(wi[:, 2:3])
     assert np.all(np.isfinite(fa)) and fa.max() > 0
     np.testing.assert_allclose(fa, fb, rtol=1e-4, atol=1e-7, err_msg=f"{name}: f(wi, wo) != f(wo, wi)")
-
-
-@pytest.mark.parametrize("name", ["diffuse", "roughau-0.3"])
-def test_one_sided_and_two_sided(kit, name):
-    base = RECIPROCITY_MATERIALS[name]
-    one = pack_material(base)
-    two = pack_material(type(base)(**{**base.__dict__, "twosided": True}))
-    assert two[1] == 1.0 and one[1] == 0.0
-    n = 20_000
-    wi, wo = random_directions(71, n), random_directions(72, n)
-    flip = np.float32([1, 1, -1])
-    front = kit.eval(one, wi, wo)
-    assert np.all(front[:, :3] > 0) if name == "diffuse" else front[:, :3].max() > 0
-    # one-sided: black from behind, whichever side wo is on; no sample either
-    np.testing.assert_array_equal(kit.eval(one, wi * flip, wo * flip), 0.0)
-    np.testing.assert_array_equal(kit.eval(one, wi * flip, wo), 0.0)
-    u = uniform(73, n, 3)
-    assert not kit.sample(one, wi * flip, u)["ok"].any()
-    # two-sided: the mirrored configuration gives the same value and pdf; transmission stays zero
-    np.testing.assert_array_equal(kit.eval(two, wi, wo), front)
-    np.testing.assert_allclose(kit.eval(two, wi * flip, wo * flip), front, rtol=1e-6, atol=0)
-    np.testing.assert_array_equal(kit.eval(two, wi * flip, wo)[:, :3], 0.0)
-    np.testing.assert_array_equal(kit.eval(two, wi, wo * flip)[:, :3], 0.0)
-    # two-sided sampling from behind mirrors the front-side samples
-    sf, sb = kit.sample(two, wi, u), kit.sample(two, wi * flip, u)
-    np.testing.assert_array_equal(sb["ok"], sf["ok"])
-    ok = sf["ok"]
-    np.testing.assert_array_equal(sb["wo"][ok], sf["wo"][ok] * flip)
-    np.testing.assert_array_equal(sb["weight"][ok], sf["weight"][ok])
-    np.testing.assert_array_equal(sb["pdf"][ok], sf["pdf"][ok])
-    np.testing.assert_allclose(sb["eval_pdf"][ok], sf["pdf"][ok], rtol=1e-3)
