@@ -2,7 +2,7 @@
 
     python bench/gallery.py [--width 384] [--spp 64] [--max-depth 8] [--out docs/gallery]
 
-Writes one PNG per scene (sRGB, small) and prints the markdown table (scene, resolution,
+Writes one JPEG per scene (sRGB, small) and prints the markdown table (scene, resolution,
 spp, depth, load / compile / render seconds) that docs/gallery.md shows.
 """
 from __future__ import annotations
@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         w, h = max(1, round(fw * scale)), max(1, round(fh * scale))
         r = pyclpt.Renderer(scene, integrator=a.integrator, max_depth=a.max_depth, width=w, height=h)
         image = r.render(a.spp, seed=0, progress=True)
-        out = a.out / f"{name}.png"
+        out = a.out / f"{name}.jpg"
         pyclpt.write_image(out, image)
         st = r.stats
         rows.append(f"| ![{name}](gallery/{out.name}) | {name} | {SCENES.get(name, '')} | {scene.triangle_count:,} "

@@ -20,13 +20,15 @@ from .mitsuba_xml import SceneXMLError, load_xml
 from .program import KernelBuildError
 from .progressive import ProgressiveRenderer
 from .renderer import Renderer, RenderStats, render
-from .scene import Camera, Conductor, Dielectric, Diffuse, Film, Mesh, Scene
+from .scene import (Bitmap, BumpMap, Camera, Checkerboard, Conductor, Dielectric, Diffuse, Envmap, Film, Mask, Mesh,
+                    Plastic, PointLight, Scene, ThinDielectric)
 from .scene_library import builtin_scenes, load
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Accumulator", "AccumulatorError", "ProgressiveRenderer",
+    "Bitmap", "BumpMap", "Checkerboard", "Envmap", "Mask", "Plastic", "PointLight", "ThinDielectric",
     "Camera", "Conductor", "Device", "DeviceError", "Dielectric", "Diffuse", "Film", "KernelBuildError",
     "Mesh", "RenderStats", "Renderer", "Scene", "SceneDictError", "SceneXMLError", "builtin_scenes",
     "default_device", "get_device", "list_devices", "load", "load_dict", "load_xml", "open_device", "read_image",

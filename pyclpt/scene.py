@@ -103,7 +103,8 @@ class Bitmap:
 
 @dataclass(eq=False)
 class Checkerboard:
-    """Mitsuba's ``checkerboard``: color0 where floor(u*2) + floor(v*2) is even... in uv units of 0.5."""
+    """Mitsuba's ``checkerboard``: ``color0`` where the fractional parts of u and v are both below
+    or both above one half, ``color1`` elsewhere (after the uv transform); ``scale`` multiplies both."""
 
     color0: RGB = (0.4, 0.4, 0.4)
     color1: RGB = (0.2, 0.2, 0.2)
