@@ -160,12 +160,8 @@ def occupancy(res: dict, folder: Path) -> str | None:
     if not any_data:
         plt.close(fig)
         return None
-    ax.set_yscale("log")
-    ax.set_xlabel("bounce")
-    ax.set_ylabel("paths alive / pixels (log)")
-    ax.set_title(f"Occupancy: paths alive per bounce at max depth {depth} (ray queue size)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    _line_axes(ax, "bounce", "paths alive / pixels (log)",
+               f"Occupancy: paths alive per bounce at max depth {depth} (ray queue size)", logy=True)
     return _save(fig, folder, "occupancy.png")
 
 
@@ -209,13 +205,22 @@ def triangles(res: dict, folder: Path) -> str | None:
         if r:
             ax.annotate(s["scene"], (s["triangles"], A.derived(res, r)["ms"]), fontsize=7,
                         textcoords="offset points", xytext=(3, 3))
-    ax.set_xscale("log")
-    ax.set_xlabel("triangles (log)")
-    ax.set_ylabel("ms per frame (1 spp)")
-    ax.set_title(f"Cost against triangle count, max depth {depth}")
+    _line_axes(ax, "triangles (log)", "ms per frame (1 spp)", f"Cost against triangle count, max depth {depth}",
+               logx=True)
+    return _save(fig, folder, "triangles.png")
+
+
+def _line_axes(ax, xlabel: str, ylabel: str, title: str, logx: bool = False, logy: bool = False) -> None:
+    """Labels, log scales, grid and legend of a line plot."""
+    if logx:
+        ax.set_xscale("log")
+    if logy:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, folder, "triangles.png")
 
 
 ALL = (table1, fig6, fig7, kernels, occupancy, rays, triangles)
