@@ -61,6 +61,7 @@ def test_scene_contents(loaded):
     assert school.max_depth == 17
 
 
+@pytest.mark.filterwarnings("ignore:.*not used by pyclpt")
 def test_parameters_override_defaults(shared_scenes):
     scene = pyclpt.load(shared_scenes / "cornell-box" / "scene.xml", resx=32, resy=24, max_depth=3, spp=2)
     assert (scene.film.width, scene.film.height, scene.max_depth, scene.spp) == (32, 24, 3, 2)
@@ -107,3 +108,17 @@ def test_cornell_box_xml_matches_mitsuba(loaded):
 
     rel_mse = np.mean((blocks(img) - blocks(ref)) ** 2) / np.mean(blocks(ref) ** 2)
     assert rel_mse < 2e-4, rel_mse
+
+
+@pytest.mark.filterwarnings("ignore:.*not used by pyclpt")
+def test_cli_renders_an_xml_scene_with_parameters(shared_scenes, tmp_path, capsys):
+    from pyclpt import cli
+
+    out = tmp_path / "box.png"
+    rc = cli.main(["render", str(shared_scenes / "cornell-box" / "scene.xml"), "-D", "resx=24", "-D", "resy=16",
+                   "-D", "spp=2", "-D", "max_depth=3", "--integrator", "wavefront", "--quiet", "-o", str(out)])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    assert "24x16, 2 spp, max depth 3, wavefront" in printed
+    image = pyclpt.read_image(out)
+    assert image.shape == (16, 24, 3) and image.max() > 0
