@@ -14,7 +14,6 @@ events (second run, so compilation is excluded).
 from __future__ import annotations
 
 import argparse
-import gzip
 import os
 import sys
 import time
@@ -29,6 +28,7 @@ import pyopencl as cl  # noqa: E402
 
 from pyclpt import embree  # noqa: E402
 from pyclpt.bvh import DEFAULT_SETTINGS, BuildSettings, build_bvh  # noqa: E402
+from pyclpt.mesh_io import load_mesh  # noqa: E402
 
 KERNELS = r"""
 #include "bvh.h"
@@ -52,17 +52,6 @@ __kernel void any_hit(__global const float* nodes, __global const float* tris,
 
 def scenes_dir() -> Path:
     return Path(os.environ.get("PYCLPT_SCENES", ROOT.parent / "shared" / "scenes"))
-
-
-def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
-
-    if path.suffix == ".gz":
-        with gzip.open(path, "rb") as f:
-            mesh = trimesh.load(f, file_type=path.with_suffix("").suffix.lstrip("."), process=False)
-    else:
-        mesh = trimesh.load(path, process=False)
-    return np.asarray(mesh.vertices, dtype=np.float32), np.asarray(mesh.faces, dtype=np.int64)
 
 
 def random_rays(pos: np.ndarray, n: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -175,7 +164,8 @@ def main() -> None:
           f"{'closest Mr/cpu-s':>16s} {'any Mr/cpu-s':>12s} {'hit %':>5s}")
     for path in meshes:
         t0 = time.perf_counter()
-        pos, idx = load_mesh(path)
+        mesh = load_mesh(path)
+        pos, idx = mesh.positions, mesh.indices
         load_s = time.perf_counter() - t0
         full = "dragon_vrip.ply" in path.name
         org, dirs = random_rays(pos, a.rays)

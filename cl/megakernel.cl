@@ -25,13 +25,13 @@ __kernel void megakernel(SCENE_PARAMS, __global float* frame, volatile __global 
             }
             Surface s = surface_at(&sc, hit.prim, hit.u, hit.v);
             path_hit_emission(&sc, &s, hit.t, &ps);
-            if (depth_allows(ps.depth + 1, max_depth)) {
-                ShadowRay sr;
-                if (path_sample_light(&sc, key, &s, &ps, &sr) &&
-                    !scene_occluded(&sc, key, ps.depth, sr.org, sr.dir, sr.tmax))
-                    ps.L += sr.contrib;
-            }
-            if (!path_sample_bsdf(&sc, key, &s, &ps, max_depth)) break;
+            if (!depth_allows(ps.depth + 1, max_depth)) break;
+            Bsdf b = bsdf_at(&sc, &s); /* the material at the hit, textures looked up once */
+            ShadowRay sr;
+            if (path_sample_light(&sc, key, &s, &b, &ps, &sr) &&
+                !scene_occluded(&sc, key, ps.depth, sr.org, sr.dir, sr.tmax))
+                ps.L += sr.contrib;
+            if (!path_sample_bsdf(key, &s, &b, &ps, max_depth)) break;
         }
     }
     film_commit(frame, dropped, pixel, ps.L);

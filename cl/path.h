@@ -89,10 +89,9 @@ static inline void path_hit_emission(const Scene* sc, const Surface* s, float t,
 
 /* hit processing, part 2: next-event estimation. Writes a shadow ray only for a
  * sample that can contribute (pdf > 0, non-zero value). */
-static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface* s, const PathState* ps,
-                                     ShadowRay* sr) {
-    Bsdf b = bsdf_at(sc, s);
-    if (bsdf_is_delta(&b)) return false;
+static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b,
+                                     const PathState* ps, ShadowRay* sr) {
+    if (bsdf_is_delta(b)) return false;
     LightSample ls;
     float u_sel = rng_1d(key, ps->depth, DIM_LIGHT_SELECT);
     float2 u = rng_2d(key, ps->depth, DIM_LIGHT_U);
@@ -100,7 +99,7 @@ static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface*
     float3 wi = to_local(s->sh, -ps->dir);
     float3 wo = to_local(s->sh, ls.wi);
     float bsdf_pdf;
-    float3 f = bsdf_eval(&b, wi, wo, &bsdf_pdf);
+    float3 f = bsdf_eval(b, wi, wo, &bsdf_pdf);
     /* the geometric normal must agree with the shading frame about the side */
     if (dot(ls.wi, s->ng) * wo.z <= 0.0f) return false;
     /* a delta light (point) cannot be hit by BSDF sampling: its sample takes the whole weight */
@@ -116,15 +115,13 @@ static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface*
 
 /* BSDF sampling: the next direction, throughput update and Russian roulette.
  * Returns false when the path ends (depth limit, no valid sample, roulette). */
-static inline bool path_sample_bsdf(const Scene* sc, RngKey key, const Surface* s, PathState* ps,
-                                    int max_depth) {
+static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b, PathState* ps, int max_depth) {
     if (!depth_allows(ps->depth + 1, max_depth)) return false;
-    Bsdf b = bsdf_at(sc, s);
     float3 wi = to_local(s->sh, -ps->dir);
     BsdfSample bs;
     float u_lobe = rng_1d(key, ps->depth, DIM_BSDF_LOBE);
     float2 u = rng_2d(key, ps->depth, DIM_BSDF_U);
-    if (!bsdf_sample(&b, wi, u_lobe, u, &bs)) return false;
+    if (!bsdf_sample(b, wi, u_lobe, u, &bs)) return false;
     float3 dir = to_world(s->sh, bs.wo);
     /* reject samples whose side disagrees between shading and geometric normals */
     if (dot(dir, s->ng) * bs.wo.z <= 0.0f) return false;

@@ -19,7 +19,8 @@ __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     path_set_L(&P, slot, ps.L);
     if (!depth_allows(bounce + 1, max_depth)) return;
     ShadowRay sr;
-    if (path_sample_light(&sc, path_key(&P, slot, seed, sample), &s, &ps, &sr)) {
+    Bsdf b = bsdf_at(&sc, &s);
+    if (path_sample_light(&sc, path_key(&P, slot, seed, sample), &s, &b, &ps, &sr)) {
         path_set_shadow_org(&P, slot, sr.org);
         path_set_shadow_dir(&P, slot, sr.dir);
         path_set_shadow_tmax(&P, slot, sr.tmax);

@@ -18,7 +18,8 @@ __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     ps.eta_scale = path_get_eta_scale(&P, slot);
     ps.depth = bounce;
     Surface s = surface_at(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
-    if (path_sample_bsdf(&sc, path_key(&P, slot, seed, sample), &s, &ps, max_depth)) {
+    Bsdf b = bsdf_at(&sc, &s);
+    if (path_sample_bsdf(path_key(&P, slot, seed, sample), &s, &b, &ps, max_depth)) {
         path_store_ray(&P, slot, &ps);
         queue_push(next_ray_queue, counters, bounce + 1, Q_RAY, slot);
     } else {

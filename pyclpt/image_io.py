@@ -19,10 +19,13 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
-def srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    """The sRGB transfer curve undone (values in [0, 1] encoded -> linear)."""
-    x = np.asarray(x, np.float32)
-    return np.where(x <= 0.04045, x / 12.92, np.power((np.clip(x, 0.0, None) + 0.055) / 1.055, 2.4)).astype(np.float32)
+def srgb_to_linear(x):
+    """The sRGB transfer curve undone (encoded values in [0, 1] -> linear); float32 arrays stay
+    float32, anything else (a Python float, float64) is computed in float64."""
+    a = np.asarray(x)
+    a = a if a.dtype == np.float32 else a.astype(np.float64)
+    out = np.where(a <= 0.04045, a / 12.92, np.power((np.clip(a, 0.0, None) + 0.055) / 1.055, 2.4)).astype(a.dtype)
+    return float(out) if out.ndim == 0 else out
 
 
 def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0) -> Path:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .microfacet import RP_KNOTS, roughplastic_tables
+from .microfacet import RP_KNOTS, fresnel, roughplastic_tables
 from .scene import (Bitmap, BumpMap, Checkerboard, Color, Conductor, Dielectric, Diffuse, Mask, Material,
                     Plastic, ThinDielectric, base_material)
 
@@ -35,12 +35,7 @@ FILTER = {"nearest": 0, "bilinear": 1}
 
 def fresnel_dielectric(cos_i: np.ndarray, eta: float) -> np.ndarray:
     """Unpolarised Fresnel reflectance from the outside (cos_i >= 0) of an interface int/ext = eta."""
-    cos_i = np.asarray(cos_i, np.float64)
-    sin_t2 = (1.0 - cos_i**2) / eta**2
-    cos_t = np.sqrt(np.clip(1.0 - sin_t2, 0.0, None))
-    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
-    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
-    return np.where(sin_t2 >= 1.0, 1.0, 0.5 * (rs**2 + rp**2))
+    return fresnel(np.asarray(cos_i, np.float64), eta)[0]
 
 
 def fresnel_diffuse_reflectance(eta: float, n: int = 20000) -> float:

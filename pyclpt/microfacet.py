@@ -33,7 +33,7 @@ _QUAD = 96  # Gauss-Legendre nodes per dimension of the normal integrals (t to ~
 _R_INT_RES = 64  # Mitsuba's MI_ROUGH_TRANSMITTANCE_RES: the cosines of the internal reflectance average
 
 
-def _fresnel(cos_i: np.ndarray, eta: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fresnel(cos_i: np.ndarray, eta: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Dielectric Fresnel for a signed cos_i (negative: from inside), eta = int / ext.
 
     Returns (F, signed cos of the refracted direction, eta_ti) like cl/bsdf.h."""
@@ -96,7 +96,7 @@ def _single_scattering(mu: np.ndarray, alpha: float, eta: float, beckmann: bool,
     c = np.maximum(np.asarray(mu, np.float64), 1e-6)[:, None, None]  # (K, 1, 1)
     wi = np.stack(np.broadcast_arrays(np.sqrt(np.maximum(0.0, 1.0 - c * c)), 0.0, c), axis=-1)  # (K, 1, 1, 3)
     dot = (m[None] * wi).sum(-1)  # (K, n, n)
-    f, cos_t, eta_ti = _fresnel(dot, eta)
+    f, cos_t, eta_ti = fresnel(dot, eta)
     if transmit:
         wo = (dot * eta_ti + cos_t)[..., None] * m[None] - eta_ti[..., None] * wi
         val = (1.0 - f) * smith_g1(wo, m, alpha, beckmann) * (wo[..., 2] < 0.0)

@@ -42,6 +42,7 @@ import numpy as np
 from lxml import etree
 
 from . import transform as tf
+from .image_io import srgb_to_linear
 from .load_dict import SceneDictError, load_dict
 from .scene import Scene
 
@@ -149,11 +150,6 @@ def blackbody_to_rgb(temperature: float, scale: float = 1.0) -> list[float]:
     with np.errstate(over="ignore"):
         radiance = 1e-9 * (2.0 * h * c * c) / lam**5 / np.expm1((h * c) / (lam * k * temperature))
     return [scale * v for v in _sampled_to_rgb(radiance, white_balanced=False)]
-
-
-def srgb_to_linear(c: float) -> float:
-    """The sRGB transfer curve, inverted (an encoded sRGB component to linear)."""
-    return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
 
 
 # -- the parsed tree -----------------------------------------------------------------------------
