@@ -25,8 +25,8 @@ import numpy as np
 import pyopencl as cl
 
 import pyclpt
-from pyclpt.accumulator import IMPLEMENTATIONS, Accumulator
-from pyclpt.program import build_program
+from pyclpt.film.accumulator import IMPLEMENTATIONS, Accumulator
+from pyclpt.device.program import build_program
 
 
 def settings(batch: int) -> list[dict]:
@@ -56,7 +56,7 @@ def make(dev, w: int, h: int, channels: int, cfg: dict) -> Accumulator:
         defines = {"ACC_PRECISION": IMPLEMENTATIONS[acc.implementation], "ACC_INPUT": 0, "ACC_CHANNELS": channels,
                    "ACC_LOCAL_X": acc.local_size[0], "ACC_LOCAL_Y": acc.local_size[1],
                    "KAHAN_GUARD": cfg["kahan_guard"]}
-        prog = build_program(dev, ["accumulate.cl"], defines=defines)
+        prog = build_program(dev, ["film/accumulate.cl"], defines=defines)
         acc._batch_kernel = cl.Kernel(prog, "accumulate_batch")
         acc._frame_kernel = cl.Kernel(prog, "accumulate_frame")
     acc.warm_up()

@@ -26,12 +26,12 @@ sys.path.insert(0, str(ROOT))
 
 import pyopencl as cl  # noqa: E402
 
-from pyclpt import embree  # noqa: E402
-from pyclpt.bvh import DEFAULT_SETTINGS, BuildSettings, build_bvh  # noqa: E402
-from pyclpt.mesh_io import load_mesh  # noqa: E402
+from pyclpt.accel import embree  # noqa: E402
+from pyclpt.accel.bvh import DEFAULT_SETTINGS, BuildSettings, build_bvh  # noqa: E402
+from pyclpt.scene.mesh_io import load_mesh  # noqa: E402
 
 KERNELS = r"""
-#include "bvh.h"
+#include "scene/bvh.h"
 __kernel void closest(__global const float* nodes, __global const float* tris,
                       __global const float* org, __global const float* dir,
                       __global float* out_t, __global int* out_prim) {
@@ -73,8 +73,8 @@ def random_rays(pos: np.ndarray, n: int, seed: int = 1) -> tuple[np.ndarray, np.
 class Tracer:
     def __init__(self) -> None:
         try:
-            from pyclpt.device import default_device
-            from pyclpt.program import build_program
+            from pyclpt.device.context import default_device
+            from pyclpt.device.program import build_program
 
             self.dev = default_device()
             self.ctx, self.queue = self.dev.context, self.dev.queue

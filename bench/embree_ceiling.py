@@ -46,7 +46,7 @@ def scene_triangles(scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def camera_rays(scene, width: int, height: int, rng: np.random.Generator,
                 count: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``count`` (default: one per pixel) jittered camera rays, pixel after pixel, as
-    ``camera_path`` in cl/path.h makes them."""
+    ``camera_path`` in cl/integrators/path.h makes them."""
     origin, forward, right, up = (np.asarray(v, np.float64) for v in scene.camera.basis(width, height))
     n = count or width * height
     py, px = np.divmod(np.arange(n) % (width * height), width)

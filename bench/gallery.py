@@ -24,7 +24,7 @@ SCENES = {
 
 def main(argv: list[str] | None = None) -> int:
     import pyclpt
-    from pyclpt.scene_library import scenes_root
+    from pyclpt.scene.library import scenes_root
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", nargs="*", default=list(SCENES))

@@ -23,13 +23,13 @@ from pathlib import Path
 CHILD = r"""
 import json, sys, time, warnings
 warnings.simplefilter("ignore")
-import pyclpt.textures as textures
-import pyclpt.load_dict as load_dict_mod
-from pyclpt.mitsuba_xml import xml_to_dict
-from pyclpt.load_dict import load_dict
-from pyclpt.scene_buffers import pack_scene
+import pyclpt.scene.textures as textures
+import pyclpt.scene.mitsuba_dict as load_dict_mod
+from pyclpt.scene.mitsuba_xml import xml_to_dict
+from pyclpt.scene.mitsuba_dict import load_dict
+from pyclpt.buffers.scene import pack_scene
 
-import pyclpt.scene_buffers as scene_buffers
+import pyclpt.buffers.scene as scene_buffers
 
 spent = {"textures": 0.0, "bvh": 0.0}
 def timed(fn, key):
@@ -67,7 +67,7 @@ def run(path: Path, cache: str) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from pyclpt.scene_library import scenes_root
+    from pyclpt.scene.library import scenes_root
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", nargs="*", default=["cornell-box", "staircase2", "living-room", "staircase",

@@ -85,7 +85,7 @@ def describe(device) -> dict:
 
     embree_lib = None
     try:
-        from pyclpt import embree
+        from pyclpt.accel import embree
 
         embree_lib = embree.library_path()
     except Exception:  # noqa: BLE001 - informational only

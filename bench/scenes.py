@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import pyclpt
-from pyclpt.scene_library import builtin_scenes, scenes_root
+from pyclpt.scene.library import builtin_scenes, scenes_root
 
 
 @dataclass

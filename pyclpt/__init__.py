@@ -5,24 +5,24 @@
     image = pyclpt.render(scene, spp=64, seed=0)          # (H, W, 3) float32, linear
     pyclpt.write_image("cornell.png", image)
 
-Data flow: scene file -> scene model (:mod:`pyclpt.scene`) -> BVH (:mod:`pyclpt.bvh`)
--> device buffers (:mod:`pyclpt.scene_buffers`) -> integrator (:mod:`pyclpt.megakernel`,
-:mod:`pyclpt.wavefront`) -> film and accumulator (:mod:`pyclpt.film`, :mod:`pyclpt.accumulator`;
-progressive rendering: :mod:`pyclpt.progressive`) -> image (:mod:`pyclpt.image_io`).
+Data flow: scene file -> scene model (:mod:`pyclpt.scene.model`) -> BVH (:mod:`pyclpt.accel.bvh`)
+-> device buffers (:mod:`pyclpt.buffers.scene`) -> integrator (:mod:`pyclpt.integrators.megakernel`,
+:mod:`pyclpt.integrators.wavefront`) -> film and accumulator (:mod:`pyclpt.film.film`, :mod:`pyclpt.film.accumulator`;
+progressive rendering: :mod:`pyclpt.rendering.progressive`) -> image (:mod:`pyclpt.common.image_io`).
 """
 from __future__ import annotations
 
-from .accumulator import Accumulator, AccumulatorError
-from .device import Device, DeviceError, default_device, get_device, list_devices, open_device
-from .image_io import read_image, write_image
-from .load_dict import SceneDictError, load_dict
-from .mitsuba_xml import SceneXMLError, load_xml
-from .program import KernelBuildError
-from .progressive import ProgressiveRenderer
-from .renderer import Renderer, RenderStats, render
-from .scene import (Bitmap, BumpMap, Camera, Checkerboard, Conductor, Dielectric, Diffuse, Envmap, Film, Mask, Mesh,
+from pyclpt.film.accumulator import Accumulator, AccumulatorError
+from pyclpt.device.context import Device, DeviceError, default_device, get_device, list_devices, open_device
+from pyclpt.common.image_io import read_image, write_image
+from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
+from pyclpt.scene.mitsuba_xml import SceneXMLError, load_xml
+from pyclpt.device.program import KernelBuildError
+from pyclpt.rendering.progressive import ProgressiveRenderer
+from pyclpt.rendering.renderer import Renderer, RenderStats, render
+from pyclpt.scene.model import (Bitmap, BumpMap, Camera, Checkerboard, Conductor, Dielectric, Diffuse, Envmap, Film, Mask, Mesh,
                     Plastic, PointLight, Scene, ThinDielectric)
-from .scene_library import builtin_scenes, load
+from pyclpt.scene.library import builtin_scenes, load
 
 __version__ = "0.1.0"
 

@@ -80,9 +80,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_render(a: argparse.Namespace) -> int:
-    from .image_io import write_image
-    from .progressive import ProgressiveRenderer
-    from .scene_library import load
+    from pyclpt.common.image_io import write_image
+    from pyclpt.rendering.progressive import ProgressiveRenderer
+    from pyclpt.scene.library import load
 
     if a.frames and a.spp and a.frames != a.spp:
         raise ValueError(f"--frames {a.frames} and --spp {a.spp} disagree (a frame is one sample per pixel)")
@@ -125,7 +125,7 @@ def _cmd_render(a: argparse.Namespace) -> int:
 
 
 def _cmd_devices() -> int:
-    from .device import list_devices
+    from pyclpt.device.context import list_devices
 
     for pi, di, d in list_devices():
         print(f"{pi}:{di}  {d.platform.name.strip()} / {d.name.strip()}  ({d.version.strip()}, "
@@ -134,7 +134,7 @@ def _cmd_devices() -> int:
 
 
 def _cmd_scenes() -> int:
-    from .scene_library import builtin_scenes
+    from pyclpt.scene.library import builtin_scenes
 
     for name, desc in builtin_scenes().items():
         print(f"{name:16s} {desc}")

@@ -12,7 +12,7 @@ import pytest
 os.environ.setdefault("PYCLPT_CACHE_DIR", tempfile.mkdtemp(prefix="pyclpt-test-cache-"))
 
 import pyclpt  # noqa: E402
-from pyclpt.scene_library import scenes_root  # noqa: E402
+from pyclpt.scene.library import scenes_root  # noqa: E402
 
 
 @pytest.fixture(scope="session")

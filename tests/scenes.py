@@ -1,4 +1,4 @@
-"""Small analytic scenes for the tests, built with pyclpt.load_dict."""
+"""Small analytic scenes for the tests, built with pyclpt.scene.mitsuba_dict."""
 from __future__ import annotations
 
 import pyclpt

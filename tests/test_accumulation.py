@@ -11,9 +11,9 @@ import pyopencl as cl
 import pytest
 
 import pyclpt
-from pyclpt.accumulator import UNSAFE_MATH_OPTIONS, Accumulator, AccumulatorError
+from pyclpt.film.accumulator import UNSAFE_MATH_OPTIONS, Accumulator, AccumulatorError
 from pyclpt.cli import main
-from pyclpt.program import build_program
+from pyclpt.device.program import build_program
 
 MODES = [("single", False), ("compensated", False), ("double", False), ("double", True)]
 MODE_IDS = ["single", "compensated", "double", "double-float"]
@@ -81,7 +81,7 @@ def test_compensated_is_built_without_unsafe_math_and_survives_fast_math(device)
     n, value = 100000, np.float32(0.1)
     frames = cl.Buffer(device.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                        hostbuf=np.full(n, value, np.float32))
-    prog = build_program(device, ["accumulate.cl"], options=["-cl-fast-relaxed-math"],
+    prog = build_program(device, ["film/accumulate.cl"], options=["-cl-fast-relaxed-math"],
                          defines={"ACC_PRECISION": 1, "ACC_INPUT": 0, "ACC_CHANNELS": 1})
     state = cl.Buffer(device.context, cl.mem_flags.READ_WRITE, size=8)
     counters = cl.Buffer(device.context, cl.mem_flags.READ_WRITE, size=8)
@@ -238,7 +238,7 @@ def test_nan_and_inf_are_skipped_and_counted(device, precision, emulated):
 def test_single_sum_overflow_is_detected_and_reported(device, caplog):
     big = np.full((3, 4, 3), 3e38, np.float32)
     single = make(device, precision="single")
-    with caplog.at_level(logging.WARNING, logger="pyclpt.accumulator"):
+    with caplog.at_level(logging.WARNING, logger="pyclpt.film.accumulator"):
         for _ in range(3):
             single.add(big)
         img = single.image()

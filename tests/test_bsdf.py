@@ -1,4 +1,4 @@
-"""The materials of the Mitsuba importer on the device (cl/bsdf.h): the Beckmann distribution, the rough
+"""The materials of the Mitsuba importer on the device (cl/scene/bsdf.h): the Beckmann distribution, the rough
 dielectric, the thin dielectric and the smooth and rough plastics.
 
 Built on the harness of test_sampling.py (small kernels calling bsdf_sample / bsdf_eval, chi-square tests
@@ -28,10 +28,10 @@ from test_sampling import (N_COS, PHI_I, Kit, Out, chi2_pvalue, direction, fresn
                            histogram_sphere, integrate_cells, random_directions, sphere_quadrature, uniform,
                            RECIPROCITY_MATERIALS)
 
-from pyclpt.load_dict import METALS  # noqa: E402
-from pyclpt.material_buffers import MAT_FDR_INT, MAT_RP_TRANS, fresnel_dielectric, pack_material  # noqa: E402
-from pyclpt.microfacet import RP_KNOTS, rough_reflectance, rough_transmittance  # noqa: E402
-from pyclpt.scene import Conductor, Dielectric, Plastic, ThinDielectric  # noqa: E402
+from pyclpt.scene.mitsuba_dict import METALS  # noqa: E402
+from pyclpt.buffers.materials import MAT_FDR_INT, MAT_RP_TRANS, fresnel_dielectric, pack_material  # noqa: E402
+from pyclpt.buffers.microfacet import RP_KNOTS, rough_reflectance, rough_transmittance  # noqa: E402
+from pyclpt.scene.model import Conductor, Dielectric, Plastic, ThinDielectric  # noqa: E402
 
 FLIP = np.float32([1, 1, -1])
 # Significance of each chi-square test: about 0.01 for the whole file after Sidak's correction for its ~60
@@ -64,7 +64,7 @@ def ndf(m, alpha, beckmann):
 
 
 def g1_exact(v, m, alpha, beckmann):
-    """Smith G1 with scipy's erfc (the device's closed forms checked independently of pyclpt.microfacet)."""
+    """Smith G1 with scipy's erfc (the device's closed forms checked independently of pyclpt.buffers.microfacet)."""
     xy = np.sqrt(v[..., 0] ** 2 + v[..., 1] ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         a = np.abs(v[..., 2]) / (alpha * xy)
@@ -478,7 +478,7 @@ def test_roughplastic_tables(dist):
     """The host's rough-coating integrals: the knots follow t(cos) closely, t tends to the smooth 1 - F and
     the internal reflectance to the smooth Fdr as the coating gets smooth, and rougher coatings let more
     light in at grazing incidence."""
-    from pyclpt.material_buffers import fresnel_diffuse_reflectance
+    from pyclpt.buffers.materials import fresnel_diffuse_reflectance
     beck = dist == "beckmann"
     cos = np.linspace(0.0, 1.0, 41)
     for alpha in (0.05, 0.3, 0.8):

@@ -1,4 +1,4 @@
-"""BVH build (pyclpt/bvh.py via Embree) and traversal (cl/bvh.h) against Embree's own ray queries."""
+"""BVH build (pyclpt/bvh.py via Embree) and traversal (cl/scene/bvh.h) against Embree's own ray queries."""
 from __future__ import annotations
 
 import os
@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyclpt.bvh import EMPTY_LINK, FlatBVH, build_bvh
+from pyclpt.accel.bvh import EMPTY_LINK, FlatBVH, build_bvh
 
 pyopencl = pytest.importorskip("pyopencl")
 rtcs = pytest.importorskip("embreex.rtcore_scene")
@@ -17,7 +17,7 @@ N_RAYS = 100_000
 AGREE = 0.9999
 
 KERNELS = r"""
-#include "bvh.h"
+#include "scene/bvh.h"
 __kernel void trace_closest(__global const float* nodes, __global const float* tris,
                             __global const float* org, __global const float* dir, float tmax,
                             __global float* out_tuv, __global int* out_prim) {
@@ -56,8 +56,8 @@ def _cache_dir(tmp_path_factory):
 class Tracer:
     def __init__(self) -> None:
         try:
-            from pyclpt.device import default_device
-            from pyclpt.program import build_program
+            from pyclpt.device.context import default_device
+            from pyclpt.device.program import build_program
         except ImportError:  # before the lead's modules exist
             plat = next(p for p in pyopencl.get_platforms() if "Portable" in p.name)
             self.ctx = pyopencl.Context(plat.get_devices())
@@ -395,8 +395,8 @@ def test_build_with_parallel_embree_threads():
 def test_low_quality_build(tracer):
     # RTC_BUILD_QUALITY_LOW (Morton builder) hands leaves copies of the
     # primitives rather than slices of the input array: the copy path.
-    from pyclpt import embree
-    from pyclpt.bvh import BuildSettings
+    from pyclpt.accel import embree
+    from pyclpt.accel.bvh import BuildSettings
 
     pos, idx = soup_mesh(3000, seed=21)
     bvh = build_bvh(pos, idx, use_cache=False,
@@ -411,7 +411,7 @@ def test_low_quality_build(tracer):
 
 
 def test_embree_library_errors(monkeypatch):
-    from pyclpt import embree
+    from pyclpt.accel import embree
 
     assert embree.library_path()  # found in the embreex wheel (or PYCLPT_EMBREE_LIB)
     monkeypatch.setenv("PYCLPT_EMBREE_LIB", "/nonexistent/libembree4.so.4")
@@ -422,8 +422,8 @@ def test_embree_library_errors(monkeypatch):
 def test_build_failure_is_reported():
     # Embree's own error (here its depth limit) surfaces as EmbreeError, and the
     # device stays usable afterwards.
-    from pyclpt import embree
-    from pyclpt.bvh import BuildSettings
+    from pyclpt.accel import embree
+    from pyclpt.accel.bvh import BuildSettings
 
     pos, idx = soup_mesh(20000, seed=2)
     with pytest.raises(embree.EmbreeError, match="rtcBuildBVH"):

@@ -125,12 +125,12 @@ def test_unknown_scene_returns_1(capsys):
 
 
 def test_unwritable_output_fails_before_rendering(tmp_path, capsys, monkeypatch):
-    import pyclpt.renderer
+    import pyclpt.rendering.renderer
 
     def no_render(*args, **kwargs):
         raise AssertionError("must not render when the output cannot be written")
 
-    monkeypatch.setattr(pyclpt.renderer, "Renderer", no_render)
+    monkeypatch.setattr(pyclpt.rendering.renderer, "Renderer", no_render)
     bad = tmp_path / "missing-dir" / "x.exr"
     rc = main(["render", "cornell-box", "--spp", "1", "-o", str(bad)])
     err = capsys.readouterr().err

@@ -8,7 +8,7 @@ import pyopencl as cl
 import pytest
 
 import pyclpt
-from pyclpt.device import (INSTALL_HINT, BufferTooLarge, Device, DeviceError, alloc, check_alloc,
+from pyclpt.device.context import (INSTALL_HINT, BufferTooLarge, Device, DeviceError, alloc, check_alloc,
                            default_device, get_device, list_devices, open_device, upload)
 
 

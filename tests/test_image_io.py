@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 
-from pyclpt.image_io import linear_to_srgb, read_image, write_image
+from pyclpt.common.image_io import linear_to_srgb, read_image, write_image
 
 MAGIC = {".exr": b"\x76\x2f\x31\x01", ".png": b"\x89PNG", ".jpg": b"\xff\xd8\xff", ".jpeg": b"\xff\xd8\xff"}
 

@@ -26,7 +26,7 @@ def test_installed_package_renders_from_another_directory(tmp_path):
     pkg = Path(where.stdout.strip()).resolve().parent
     if pkg == REPO / "pyclpt":
         pytest.skip("pyclpt is installed in editable mode from this checkout")
-    assert (pkg / "cl" / "megakernel.cl").is_file()
+    assert (pkg / "cl" / "integrators" / "megakernel.cl").is_file()
     assert (pkg / "scenes" / "cornell-box.json").is_file()
     out = run("import pyclpt, numpy as np; "
               "img = pyclpt.render('cornell-box', spp=1, width=8, height=8, progress=False); "

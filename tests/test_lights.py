@@ -1,4 +1,4 @@
-"""Emitters (cl/lights.h, pyclpt/light_buffers.py, pyclpt/sunsky.py): environment maps with
+"""Emitters (cl/scene/lights.h, pyclpt/light_buffers.py, pyclpt/sunsky.py): environment maps with
 importance sampling, point lights, the baked sun and sky.
 
 Device-level checks call lights.h through a small test kernel on a real packed scene: the
@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 import pyclpt
-from pyclpt.light_buffers import (LIGHT_CDF, LIGHT_ENVMAP, LIGHT_PMF, LIGHT_POINT, LIGHT_PRIM, LIGHT_TRIANGLE,
+from pyclpt.buffers.lights import (LIGHT_CDF, LIGHT_ENVMAP, LIGHT_PMF, LIGHT_POINT, LIGHT_PRIM, LIGHT_TRIANGLE,
                                   LIGHT_TYPE, envmap_cells, pack_lights)
-from pyclpt.material_buffers import TextureTable
-from pyclpt.scene import Envmap, PointLight
-from pyclpt.scene_buffers import SceneBuffers, pack_scene
-from pyclpt.sunsky import (SUN_RADIUS_DEG, _row_hat_solid_angle, sun_radiance_rgb, sunsky_envmap,
+from pyclpt.buffers.materials import TextureTable
+from pyclpt.scene.model import Envmap, PointLight
+from pyclpt.buffers.scene import SceneBuffers, pack_scene
+from pyclpt.scene.sunsky import (SUN_RADIUS_DEG, _row_hat_solid_angle, sun_radiance_rgb, sunsky_envmap,
                            texel_directions)
-from pyclpt.transform import rotate
+from pyclpt.scene.transform import rotate
 from scenes import FRONT_CAMERA, object_under_sky, sensor
 
 cl = pytest.importorskip("pyopencl")
@@ -31,7 +31,7 @@ DATA = Path(__file__).parent / "data"
 CLASSROOM_SUN = np.array([-0.865804, 0.416766, -0.276929])
 
 KERNELS = r"""
-#include "lights.h"
+#include "scene/lights.h"
 
 /* u: (u_select, u1, u2) per item. out: wi[3] dist radiance[3] pdf delta ok eval_radiance[3] eval_pdf */
 __kernel void light_sample_k(SCENE_PARAMS, __global const float* p, __global const float* u,
@@ -89,7 +89,7 @@ class LightKit:
     """lights.h on the device for one packed scene."""
 
     def __init__(self, device, scene: pyclpt.Scene) -> None:
-        from pyclpt.program import build_program
+        from pyclpt.device.program import build_program
 
         self.device = device
         self.buffers = SceneBuffers(scene, device)

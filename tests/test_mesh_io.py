@@ -1,4 +1,4 @@
-"""Tests for pyclpt.mesh_io: OBJ / PLY / gzip loading, validation, errors and the on-disk cache."""
+"""Tests for pyclpt.scene.mesh_io: OBJ / PLY / gzip loading, validation, errors and the on-disk cache."""
 from __future__ import annotations
 
 import gzip
@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyclpt import mesh_io
-from pyclpt.mesh_io import MeshData, MeshLoadError, load_mesh
+from pyclpt.scene import mesh_io
+from pyclpt.scene.mesh_io import MeshData, MeshLoadError, load_mesh
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = Path(os.environ.get("PYCLPT_SCENES", REPO.parent / "shared" / "scenes"))

@@ -1,4 +1,4 @@
-"""Mitsuba XML import (pyclpt.mitsuba_xml) and the .serialized mesh reader (pyclpt.serialized)."""
+"""Mitsuba XML import (pyclpt.scene.mitsuba_xml) and the .serialized mesh reader (pyclpt.scene.serialized)."""
 from __future__ import annotations
 
 import struct
@@ -13,12 +13,12 @@ import pytest
 
 import pyclpt
 from pyclpt import cli
-from pyclpt import transform as tf
-from pyclpt.load_dict import SceneDictError, load_dict
-from pyclpt.mesh_io import MeshLoadError
-from pyclpt.mitsuba_xml import (WHERE, SceneXMLError, blackbody_to_rgb, load_xml, spectrum_to_rgb,
+from pyclpt.scene import transform as tf
+from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
+from pyclpt.scene.mesh_io import MeshLoadError
+from pyclpt.scene.mitsuba_xml import (WHERE, SceneXMLError, blackbody_to_rgb, load_xml, spectrum_to_rgb,
                                 srgb_to_linear, to_snake_case, xml_to_dict)
-from pyclpt.serialized import read_serialized
+from pyclpt.scene.serialized import read_serialized
 
 
 def _write(folder: Path, body: str, version: str = "3.0.0", name: str = "scene.xml") -> Path:
@@ -423,7 +423,7 @@ def test_cli_define(monkeypatch, capsys):
         seen.update(params, scene=name)
         raise ValueError("stop here")
 
-    monkeypatch.setattr("pyclpt.scene_library.load", fake_load)
+    monkeypatch.setattr("pyclpt.scene.library.load", fake_load)
     assert cli.main(["render", "x.xml", "-D", "spp=16", "--define", "resx=64", "-D", "s=a=b"]) == 1
     assert seen == {"scene": "x.xml", "spp": "16", "resx": "64", "s": "a=b"}
     with pytest.raises(SystemExit) as exc:

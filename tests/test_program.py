@@ -7,7 +7,7 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from pyclpt.program import (KernelBuildError, assemble, build_program, cl_dir, compile_seconds,
+from pyclpt.device.program import (KernelBuildError, assemble, build_program, cl_dir, compile_seconds,
                             define_options)
 
 
@@ -37,17 +37,17 @@ def test_assemble_generated_include_exact_output():
 
 
 def test_assemble_resolves_each_header_once_in_dependency_order():
-    text = assemble(["megakernel.cl"])
+    text = assemble(["integrators/megakernel.cl"])
     lines = text.splitlines()
     markers = [m.group(1) for m in (re.match(r'#line 1 "([^"]+)"$', ln) for ln in lines) if m]
     # every file starts exactly once
     assert len(markers) == len(set(markers)), markers
-    assert markers[0] == "cl/megakernel.cl"
-    for header in ("cl/common.h", "cl/path.h", "cl/bsdf.h", "cl/sampling.h", "cl/rng.h"):
+    assert markers[0] == "cl/integrators/megakernel.cl"
+    for header in ("cl/core/common.h", "cl/integrators/path.h", "cl/scene/bsdf.h", "cl/core/sampling.h", "cl/core/rng.h"):
         assert header in markers
     # common.h (included by everything) comes before the headers that include it
-    assert markers.index("cl/common.h") < markers.index("cl/bsdf.h")
-    assert markers.index("cl/sampling.h") < markers.index("cl/bsdf.h")
+    assert markers.index("cl/core/common.h") < markers.index("cl/scene/bsdf.h")
+    assert markers.index("cl/core/sampling.h") < markers.index("cl/scene/bsdf.h")
     # no include directive survives
     assert not any(re.match(r'\s*#\s*include\s+"', ln) for ln in lines)
     # the common.h body appears once
@@ -55,16 +55,16 @@ def test_assemble_resolves_each_header_once_in_dependency_order():
 
 
 def test_assemble_line_marker_after_include_points_at_next_line():
-    text = assemble(["megakernel.cl"])
-    src = (cl_dir() / "megakernel.cl").read_text().splitlines()
+    text = assemble(["integrators/megakernel.cl"])
+    src = (cl_dir() / "integrators/megakernel.cl").read_text().splitlines()
     inc_line = next(i for i, ln in enumerate(src, start=1) if re.match(r'\s*#\s*include\s+"', ln))
-    assert f'#line {inc_line + 1} "cl/megakernel.cl"' in text.splitlines()
+    assert f'#line {inc_line + 1} "cl/integrators/megakernel.cl"' in text.splitlines()
 
 
 def test_assemble_shared_header_across_files_and_source():
-    text = assemble(["common.h"], source='#include "common.h"\n#include "sampling.h"\nint x;\n')
+    text = assemble(["core/common.h"], source='#include "core/common.h"\n#include "core/sampling.h"\nint x;\n')
     assert text.count("#define PYCLPT_COMMON_H") == 1
-    assert text.count('#line 1 "cl/sampling.h"') == 1
+    assert text.count('#line 1 "cl/core/sampling.h"') == 1
     assert text.rstrip().endswith("int x;")
 
 
@@ -100,14 +100,14 @@ def test_build_error_in_generated_header_names_header(device):
 
 
 def test_build_error_in_cl_header_names_cl_header(device):
-    # Break a function definition inside cl/common.h with a macro defined before the include.
-    lines = (cl_dir() / "common.h").read_text().splitlines()
+    # Break a function definition inside cl/core/common.h with a macro defined before the include.
+    lines = (cl_dir() / "core/common.h").read_text().splitlines()
     lineno, fname = next((i, m.group(1)) for i, ln in enumerate(lines, start=1)
                          if (m := re.match(r"\s*static inline \w+ (\w+)\(", ln)))
-    src = _unique("hdr") + f'#define {fname} 1 +\n#include "common.h"\n__kernel void k(__global float* a) {{}}\n'
+    src = _unique("hdr") + f'#define {fname} 1 +\n#include "core/common.h"\n__kernel void k(__global float* a) {{}}\n'
     with pytest.raises(KernelBuildError) as info:
         build_program(device, source=src, name="tests/hdr.cl")
-    assert f"cl/common.h:{lineno}" in str(info.value)
+    assert f"cl/core/common.h:{lineno}" in str(info.value)
 
 
 # -- defines ------------------------------------------------------------------------
@@ -163,7 +163,7 @@ def test_dump_kernels_writes_assembled_source(device, tmp_path, monkeypatch):
     dump = tmp_path / "dump"
     monkeypatch.setenv("PYCLPT_DUMP_KERNELS", str(dump))
     marker = "dump-test-marker-7f3a"
-    src = f"/* {marker} */\n" + '#include "common.h"\n__kernel void k(__global float* a) { a[0] = PI_F; }\n'
+    src = f"/* {marker} */\n" + '#include "core/common.h"\n__kernel void k(__global float* a) { a[0] = PI_F; }\n'
     build_program(device, source=src, name="tests/dumped.cl", defines={"SOMETHING": 3})
     files = list(dump.glob("dumped-*.cl"))
     assert len(files) == 1, list(dump.iterdir())
@@ -172,5 +172,5 @@ def test_dump_kernels_writes_assembled_source(device, tmp_path, monkeypatch):
     assert "-DSOMETHING=3" in text.splitlines()[0]
     assert marker in text
     assert '#line 1 "tests/dumped.cl"' in text
-    assert '#line 1 "cl/common.h"' in text
+    assert '#line 1 "cl/core/common.h"' in text
     assert "#define PI_F" in text  # the header is inlined, not included

@@ -1,4 +1,4 @@
-"""Random numbers, warping routines and BSDFs (cl/rng.h, cl/sampling.h, cl/bsdf.h) on the device.
+"""Random numbers, warping routines and BSDFs (cl/core/rng.h, cl/core/sampling.h, cl/scene/bsdf.h) on the device.
 
 Small test kernels call the device functions; the host checks them statistically
 (chi-square goodness of fit in the spirit of Mitsuba's ``chi2`` tests, with the
@@ -14,14 +14,14 @@ import pytest
 cl = pytest.importorskip("pyopencl")
 stats = pytest.importorskip("scipy.stats")
 
-from pyclpt.load_dict import METALS  # noqa: E402
-from pyclpt.program import build_program  # noqa: E402
-from pyclpt.scene import Conductor, Dielectric, Diffuse  # noqa: E402
-from pyclpt.material_buffers import pack_material  # noqa: E402
+from pyclpt.scene.mitsuba_dict import METALS  # noqa: E402
+from pyclpt.device.program import build_program  # noqa: E402
+from pyclpt.scene.model import Conductor, Dielectric, Diffuse  # noqa: E402
+from pyclpt.buffers.materials import pack_material  # noqa: E402
 
 KERNELS = r"""
-#include "rng.h"
-#include "bsdf.h"
+#include "core/rng.h"
+#include "scene/bsdf.h"
 
 __kernel void philox_kat(__global const uint* ctr, __global const uint* key, __global uint* out) {
     int i = get_global_id(0);

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import pyclpt
-from pyclpt.scene import Envmap, Mask, Plastic, base_material
+from pyclpt.scene.model import Envmap, Mask, Plastic, base_material
 
 DATA = Path(__file__).parent / "data"
 SCENES = ["cornell-box", "staircase2", "living-room", "staircase", "classroom"]

@@ -1,20 +1,20 @@
-"""Textures (cl/texture.h, pyclpt/material_buffers.py), opacity masks (cl/mask.h) and bump
-maps (cl/scene.h) on the device, checked against numpy references and analytic renders."""
+"""Textures (cl/scene/texture.h, pyclpt/material_buffers.py), opacity masks (cl/scene/mask.h) and bump
+maps (cl/scene/scene.h) on the device, checked against numpy references and analytic renders."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 import pyclpt
-from pyclpt.material_buffers import TextureTable
-from pyclpt.program import build_program
-from pyclpt.scene import Bitmap, Checkerboard
+from pyclpt.buffers.materials import TextureTable
+from pyclpt.device.program import build_program
+from pyclpt.scene.model import Bitmap, Checkerboard
 from scenes import sensor
 
 cl = pytest.importorskip("pyopencl")
 
 KERNEL = r"""
-#include "texture.h"
+#include "scene/texture.h"
 __kernel void tex_lookup(__global const float* info, __global const uchar* t8, __global const float* t32,
                          int id, __global const float* uv, __global float* out) {
     int i = get_global_id(0);
@@ -149,7 +149,7 @@ def test_checkerboard(lookup):
 def test_load_bitmap_srgb_and_raw(tmp_path):
     pixels = np.random.default_rng(3).uniform(0, 1, (4, 6, 3)).astype(np.float32)
     pyclpt.write_image(tmp_path / "t.png", pixels)  # written sRGB-encoded, 8 bit
-    from pyclpt.textures import load_bitmap
+    from pyclpt.scene.textures import load_bitmap
 
     enc = load_bitmap(tmp_path / "t.png")
     raw = load_bitmap(tmp_path / "t.png", raw=True)
@@ -254,7 +254,7 @@ def test_bump_map_tilts_the_shading_normal():
                       "to_world": [{"translate": [3, 0, 1]}, {"rotate": {"axis": [0, 1, 0], "angle": -90}},
                                    {"scale": 0.5}]}}
         sc = pyclpt.load_dict(d)
-        sc.materials[0] = pyclpt.scene.BumpMap(Bitmap(ramp + 0.5 * abs(slope), srgb=False, wrap_mode="clamp"),
+        sc.materials[0] = pyclpt.scene.model.BumpMap(Bitmap(ramp + 0.5 * abs(slope), srgb=False, wrap_mode="clamp"),
                                                sc.materials[0])
         return sc
     flat = pyclpt.render(scene(0.0), spp=4, max_depth=2, progress=False)

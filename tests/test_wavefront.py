@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import pyclpt
-from pyclpt.path_state import FIELDS, bytes_per_path, opencl_header, record_words
-from pyclpt.wavefront import STAGES
+from pyclpt.integrators.path_state import FIELDS, bytes_per_path, opencl_header, record_words
+from pyclpt.integrators.wavefront import STAGES
 
 
 def render(scene, **kw):

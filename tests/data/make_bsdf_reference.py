@@ -1,6 +1,6 @@
 """Regenerate ``bsdf-mitsuba3-eval.npz``: Mitsuba 3's own BSDFs evaluated (value including the cosine
 of wo, and pdf) at random direction pairs, and sampled at given random numbers, for tests/test_bsdf.py
-(pyclpt's cl/bsdf.h against the plug-ins it follows).
+(pyclpt's cl/scene/bsdf.h against the plug-ins it follows).
 
     python -m venv /tmp/mts && /tmp/mts/bin/pip install mitsuba
     /tmp/mts/bin/python tests/data/make_bsdf_reference.py

@@ -1,0 +1,154 @@
+/* path.h: the path-tracing estimator as small stage functions.
+ *
+ * The megakernel calls them in a loop; the wavefront integrator calls each from
+ * its own kernel. Both run the same arithmetic on the same random numbers in the
+ * same order, so they produce the same image for the same seed.
+ *
+ * Depth follows Mitsuba: max_depth = 1 renders emitters seen directly, 2 adds
+ * direct lighting, -1 is unlimited (paths end by Russian roulette). A path's
+ * `depth` is the bounce index of its current ray (0 for the camera ray). */
+#ifndef PYCLPT_PATH_H
+#define PYCLPT_PATH_H
+
+#include "core/common.h"
+#include "core/rng.h"
+#include "core/sampling.h"
+#include "scene/bsdf.h"
+#include "scene/scene.h"
+#include "scene/lights.h"
+#include "scene/bvh.h"
+
+/* Russian roulette starts on rays of this bounce index. */
+#ifndef RR_DEPTH
+#define RR_DEPTH 3
+#endif
+
+#define PATH_PREV_DELTA 1
+
+typedef struct {
+    float3 org, dir;  /* current ray; dir is unit length */
+    float3 beta;      /* throughput */
+    float3 L;         /* radiance gathered so far */
+    float prev_pdf;   /* solid-angle pdf of the BSDF sample that made the ray */
+    float eta_scale;  /* product of the relative IORs crossed (for roulette) */
+    int depth;        /* bounce index of the current ray */
+    int flags;        /* PATH_* */
+} PathState;
+
+typedef struct {
+    float3 org, dir;
+    float tmax;
+    float3 contrib;   /* radiance added if the ray is unoccluded */
+} ShadowRay;
+
+static inline bool depth_allows(int depth, int max_depth) { return max_depth < 0 || depth < max_depth; }
+
+/* path init: the camera ray of (pixel, sample) with a jittered position in the pixel. */
+static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
+    __global const float* c = sc->consts;
+    int width = (int)c[CONST_WIDTH], height = (int)c[CONST_HEIGHT];
+    int px = pixel % width, py = pixel / width;
+    float2 j = rng_2d(key, 0, DIM_CAMERA_X);
+    float sx = 2.0f * (((float)px + j.x) / (float)width) - 1.0f;
+    float sy = 1.0f - 2.0f * (((float)py + j.y) / (float)height);
+    float3 forward = (float3)(c[CONST_CAM_FORWARD], c[CONST_CAM_FORWARD + 1], c[CONST_CAM_FORWARD + 2]);
+    float3 right = (float3)(c[CONST_CAM_RIGHT], c[CONST_CAM_RIGHT + 1], c[CONST_CAM_RIGHT + 2]);
+    float3 up = (float3)(c[CONST_CAM_UP], c[CONST_CAM_UP + 1], c[CONST_CAM_UP + 2]);
+    ps->org = (float3)(c[CONST_CAM_ORIGIN], c[CONST_CAM_ORIGIN + 1], c[CONST_CAM_ORIGIN + 2]);
+    ps->dir = normalize(forward + sx * right + sy * up);
+    ps->beta = (float3)(1.0f);
+    ps->L = (float3)(0.0f);
+    ps->prev_pdf = 0.0f;
+    ps->eta_scale = 1.0f;
+    ps->depth = 0;
+    ps->flags = PATH_PREV_DELTA; /* the camera ray counts as a delta sample: no MIS */
+}
+
+/* miss: the environment seen along the ray, MIS-weighted against light sampling. */
+static inline void path_miss(const Scene* sc, PathState* ps) {
+    bool mis = !(ps->flags & PATH_PREV_DELTA);
+    float light_pdf;
+    float3 le = env_eval(sc, ps->dir, mis, &light_pdf);
+    if (le.x == 0.0f && le.y == 0.0f && le.z == 0.0f) return;
+    float w = 1.0f;
+    if (mis) w = power_heuristic(ps->prev_pdf, light_pdf);
+    ps->L += ps->beta * le * w;
+}
+
+/* hit processing, part 1: emission at the hit, MIS-weighted against light sampling. */
+static inline void path_hit_emission(const Scene* sc, const Surface* s, float t, PathState* ps) {
+    float3 le = light_emitted(sc, s->light, s->ng, ps->dir);
+    if (le.x == 0.0f && le.y == 0.0f && le.z == 0.0f) return;
+    float w = 1.0f;
+    if (!(ps->flags & PATH_PREV_DELTA)) {
+        float light_pdf = light_pdf_area(sc, s->light, t, -dot(s->ng, ps->dir));
+        w = power_heuristic(ps->prev_pdf, light_pdf);
+    }
+    ps->L += ps->beta * le * w;
+}
+
+/* hit processing, part 2: next-event estimation. Writes a shadow ray only for a
+ * sample that can contribute (pdf > 0, non-zero value). */
+static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b,
+                                     const PathState* ps, ShadowRay* sr) {
+    if (bsdf_is_delta(b)) return false;
+    LightSample ls;
+    float u_sel = rng_1d(key, ps->depth, DIM_LIGHT_SELECT);
+    float2 u = rng_2d(key, ps->depth, DIM_LIGHT_U);
+    if (!light_sample(sc, s->p, u_sel, u, &ls)) return false;
+    float3 wi = to_local(s->sh, -ps->dir);
+    float3 wo = to_local(s->sh, ls.wi);
+    float bsdf_pdf;
+    float3 f = bsdf_eval(b, wi, wo, &bsdf_pdf);
+    /* the geometric normal must agree with the shading frame about the side */
+    if (dot(ls.wi, s->ng) * wo.z <= 0.0f) return false;
+    /* a delta light (point) cannot be hit by BSDF sampling: its sample takes the whole weight */
+    float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf);
+    float3 contrib = ps->beta * f * ls.radiance * (w / ls.pdf);
+    if (!(max3(contrib) > 0.0f)) return false;
+    sr->org = spawn_origin(s, ls.wi);
+    sr->dir = ls.wi;
+    sr->tmax = isinf(ls.dist) ? INF_F : ls.dist * (1.0f - 1e-4f) - length(sr->org - s->p);
+    sr->contrib = contrib;
+    return sr->tmax > 0.0f;
+}
+
+/* BSDF sampling: the next direction, throughput update and Russian roulette.
+ * Returns false when the path ends (depth limit, no valid sample, roulette). */
+static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b, PathState* ps, int max_depth) {
+    if (!depth_allows(ps->depth + 1, max_depth)) return false;
+    float3 wi = to_local(s->sh, -ps->dir);
+    BsdfSample bs;
+    float u_lobe = rng_1d(key, ps->depth, DIM_BSDF_LOBE);
+    float2 u = rng_2d(key, ps->depth, DIM_BSDF_U);
+    if (!bsdf_sample(b, wi, u_lobe, u, &bs)) return false;
+    float3 dir = to_world(s->sh, bs.wo);
+    /* reject samples whose side disagrees between shading and geometric normals */
+    if (dot(dir, s->ng) * bs.wo.z <= 0.0f) return false;
+    ps->beta *= bs.weight;
+    ps->eta_scale *= bs.eta;
+    ps->prev_pdf = bs.pdf;
+    ps->flags = bs.delta ? PATH_PREV_DELTA : 0;
+    ps->org = spawn_origin(s, dir);
+    ps->dir = dir;
+    ps->depth += 1;
+    float beta_max = max3(ps->beta);
+    if (!(beta_max > 0.0f)) return false;
+    if (ps->depth >= RR_DEPTH) {
+        float q = fmin(beta_max * ps->eta_scale * ps->eta_scale, 0.95f);
+        if (rng_1d(key, ps->depth - 1, DIM_ROULETTE) >= q) return false;
+        ps->beta /= q;
+    }
+    return true;
+}
+
+/* The end of a path: its radiance goes to the frame, a NaN or inf sample is dropped and counted. */
+static inline void film_commit(__global float* frame, volatile __global int* dropped, int slot, float3 L) {
+    if (!all_finite3(L)) {
+        atomic_inc(dropped);
+        L = (float3)(0.0f);
+    }
+    store3(frame, slot, L);
+}
+
+#endif

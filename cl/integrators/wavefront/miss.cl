@@ -1,0 +1,16 @@
+/* miss: environment radiance for paths that left the scene (MIS-weighted); the path ends.
+ * Consumes: the miss queue of this bounce.
+ * Produces: the path's radiance in frame[pixel]. */
+#include "integrators/wavefront/wavefront.h"
+
+__kernel void miss(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* miss_queue,
+                   __global float* frame, volatile __global int* dropped) {
+    int i = get_global_id(0);
+    if (i >= queue_count(counters, bounce, Q_MISS)) return;
+    Scene sc = SCENE_INIT;
+    PathStore P = PATH_INIT;
+    int slot = miss_queue[i];
+    PathState ps = path_load_shading(&P, slot, bounce);
+    path_miss(&sc, &ps);
+    film_commit(frame, dropped, path_get_pixel(&P, slot), ps.L);
+}

@@ -1,0 +1,65 @@
+/* wavefront.h: what the seven wavefront stages share — the path state accessors
+ * (generated from pyclpt/path_state.py for the SoA or AoS layout), the queues
+ * and the per-bounce counters.
+ *
+ * Queues hold path slots (0 .. wave size - 1). Each is compacted: a producer
+ * takes the next free entry with atomic_inc on its counter. Counters live in
+ * one int buffer, Q_COUNT per bounce (counters[bounce * Q_COUNT + queue]), all
+ * zeroed on the device before a wave; so the counts of every bounce remain for
+ * the statistics. The ray queue is double-buffered across bounces: bounce b
+ * reads ray queue b % 2 and sample_bsdf fills (b + 1) % 2. */
+#ifndef PYCLPT_WAVEFRONT_H
+#define PYCLPT_WAVEFRONT_H
+
+#include "integrators/path.h"
+#include "path_state.h"
+
+#define Q_RAY 0     /* rays to intersect (bounce b) */
+#define Q_HIT 1     /* paths that hit a surface: hit processing, then BSDF sampling */
+#define Q_MISS 2    /* paths that left the scene */
+#define Q_SHADOW 3  /* shadow rays to test */
+#define Q_LIGHT 4   /* unoccluded shadow rays: light contribution */
+#define Q_COUNT 5
+
+#define QUEUE_ARGS __global int *counters, int bounce
+
+static inline int queue_count(__global const int* counters, int bounce, int q) {
+    return counters[bounce * Q_COUNT + q];
+}
+
+static inline void queue_push(__global int* queue, __global int* counters, int bounce, int q, int slot) {
+    int at = atomic_inc((volatile __global int*)&counters[bounce * Q_COUNT + q]);
+    queue[at] = slot;
+}
+
+/* The random-number key of the path in a slot: (seed, pixel, sample). */
+static inline RngKey path_key(const PathStore* P, int slot, uint seed, uint sample) {
+    return rng_key(seed, (uint)path_get_pixel(P, slot), sample);
+}
+
+/* What shading needs of a path: the incoming ray, throughput, radiance and the
+ * previous BSDF sample (miss and process_hit). */
+static inline PathState path_load_shading(const PathStore* P, int slot, int bounce) {
+    PathState ps;
+    ps.dir = path_get_dir(P, slot);
+    ps.beta = path_get_beta(P, slot);
+    ps.L = path_get_L(P, slot);
+    ps.flags = path_get_flags(P, slot);
+    ps.prev_pdf = path_get_prev_pdf(P, slot);
+    ps.depth = bounce;
+    return ps;
+}
+
+/* Store the next ray of a path and what the next bounce needs to weight it
+ * (path_init and sample_bsdf). */
+static inline void path_store_ray(const PathStore* P, int slot, const PathState* ps) {
+    path_set_org(P, slot, ps->org);
+    path_set_dir(P, slot, ps->dir);
+    path_set_beta(P, slot, ps->beta);
+    path_set_eta_scale(P, slot, ps->eta_scale);
+    path_set_prev_pdf(P, slot, ps->prev_pdf);
+    path_set_flags(P, slot, ps->flags);
+    path_set_depth(P, slot, ps->depth);
+}
+
+#endif

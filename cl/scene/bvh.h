@@ -1,0 +1,230 @@
+/* bvh.h: ray queries against the flattened binary BVH of pyclpt/bvh.py.
+ *
+ * Node record (16 floats, 64 bytes, read as four float4):
+ *   [0:3] left min   [3:6] left max   [6:9] right min   [9:12] right max
+ *   [12] left link   [13] right link  (int32 bits)       [14:16] unused
+ * link >= 0: internal node index. link with the high bit set: leaf with
+ * start = (link & 0x7fffffff) >> 5, count = link & 31 (count 0 = empty child,
+ * whose box is inverted and therefore never entered).
+ * Triangles (9 floats each, leaf order): v0, e1 = v1 - v0, e2 = v2 - v0.
+ *
+ * Box test: per-ray precomputed reciprocal direction, components of
+ * magnitude below 1e-18 (zero, denormal) replaced by +-1e18, so it never holds
+ * inf and (bound - org) * inv never forms 0 * inf. The near/far planes are
+ * picked by the sign of the reciprocal, which also rejects inverted (empty)
+ * boxes. The far distance is scaled up by 1 + 2^-21 so rounding in
+ * the slab test cannot cull a box whose triangle the intersector would hit.
+ *
+ * Triangle test: Moeller-Trumbore without backface culling, with the division
+ * deferred until a hit is certain; t must lie in (0, tmax).
+ */
+#ifndef PYCLPT_BVH_H
+#define PYCLPT_BVH_H
+
+#include "core/common.h"
+#include "scene/mask.h"
+
+typedef struct {
+    float t;
+    float u;
+    float v;
+    int prim; /* leaf-order triangle index, -1 for none */
+} Hit;
+
+#define BVH_STACK_SIZE 64
+#define BVH_TFAR_SCALE 1.00000048f /* 1 + 2^-21 */
+
+/* Everything below is written with plain operators rather than builtins
+ * (fmin, select, dot, cross, vload*): the PoCL 3.0 binary distribution calls
+ * those out of line, which made traversal 2.3x slower. Node records are read
+ * through a float4 pointer instead of vload4 (same aligned 16-byte loads on
+ * GPUs); this needs `nodes` 16-byte aligned, which every OpenCL buffer start
+ * is. */
+
+typedef struct {
+    float4 org;       /* xyz; w = 0 */
+    float4 inv;       /* reciprocal direction, never 0 or inf; w = 1 */
+    int4 neg;         /* -1 where inv < 0: the near plane is the box max */
+    float dx, dy, dz; /* direction */
+} BvhRay;
+
+static inline float bvh_safe_rcp(float d) {
+    const float tiny = 1e-18f;
+    return (d >= tiny || d <= -tiny) ? 1.0f / d : (d < 0.0f ? -1e18f : 1e18f);
+}
+
+static inline BvhRay bvh_make_ray(float3 org, float3 dir) {
+    BvhRay r;
+    r.org = (float4)(org.x, org.y, org.z, 0.0f);
+    r.inv = (float4)(bvh_safe_rcp(dir.x), bvh_safe_rcp(dir.y), bvh_safe_rcp(dir.z), 1.0f);
+    r.neg = r.inv < (float4)(0.0f);
+    r.dx = dir.x;
+    r.dy = dir.y;
+    r.dz = dir.z;
+    return r;
+}
+
+static inline float bvh_min(float a, float b) { return a < b ? a : b; }
+static inline float bvh_max(float a, float b) { return a > b ? a : b; }
+
+/* Entry distance of the ray into box [lo, hi] (xyz; w ignored) clipped to
+ * [0, tmax]; +inf when missed, including for inverted (empty) boxes. */
+static inline float bvh_box(float4 lo, float4 hi, float4 org, float4 inv, int4 neg, float tmax) {
+    float4 tn = ((neg ? hi : lo) - org) * inv;
+    float4 tf = ((neg ? lo : hi) - org) * inv;
+    float t0 = bvh_max(bvh_max(tn.x, tn.y), bvh_max(tn.z, 0.0f));
+    float t1 = bvh_min(bvh_min(tf.x, tf.y), bvh_min(tf.z, tmax)) * BVH_TFAR_SCALE;
+    return t0 <= t1 ? t0 : INFINITY;
+}
+
+/* Both children of `node`: entry distances (inf = missed) and links. Node
+ * records are 64-byte aligned in any OpenCL buffer, so they are read as float4. */
+static inline void bvh_node(__global const float* nodes, int node, const BvhRay* r, float tmax,
+                            float* tl, float* tr, int* ll, int* lr) {
+    __global const float4* p = (__global const float4*)nodes + 4 * node;
+    float4 a = p[0]; /* lmin.xyz lmax.x */
+    float4 b = p[1]; /* lmax.yz rmin.xy */
+    float4 c = p[2]; /* rmin.z rmax.xyz */
+    float4 d = p[3]; /* links, padding */
+    *tl = bvh_box(a, (float4)(a.w, b.x, b.y, 0.0f), r->org, r->inv, r->neg, tmax);
+    *tr = bvh_box((float4)(b.z, b.w, c.x, 0.0f), c.yzwx, r->org, r->inv, r->neg, tmax);
+    *ll = as_int(d.x);
+    *lr = as_int(d.y);
+}
+
+/* Moeller-Trumbore, no backface culling, division deferred until the hit is
+ * certain. On a hit with 0 < t < tmax stores t, u, v and returns true. */
+static inline bool bvh_triangle(__global const float* tris, int i, const BvhRay* r, float tmax,
+                                float* t_out, float* u_out, float* v_out) {
+    __global const float* p = tris + 9 * i;
+    float v0x = p[0], v0y = p[1], v0z = p[2];
+    float e1x = p[3], e1y = p[4], e1z = p[5];
+    float e2x = p[6], e2y = p[7], e2z = p[8];
+    /* pv = dir x e2, det = e1 . pv */
+    float pvx = r->dy * e2z - r->dz * e2y;
+    float pvy = r->dz * e2x - r->dx * e2z;
+    float pvz = r->dx * e2y - r->dy * e2x;
+    float det = e1x * pvx + e1y * pvy + e1z * pvz;
+    /* Work with |det| and sign-flipped numerators: no division to reject. */
+    float sgn = det < 0.0f ? -1.0f : 1.0f;
+    float adet = det * sgn;
+    float sx = r->org.x - v0x, sy = r->org.y - v0y, sz = r->org.z - v0z;
+    float u = (sx * pvx + sy * pvy + sz * pvz) * sgn;
+    if (!(u >= 0.0f && u <= adet)) return false; /* also rejects NaN */
+    /* q = s x e1 */
+    float qx = sy * e1z - sz * e1y;
+    float qy = sz * e1x - sx * e1z;
+    float qz = sx * e1y - sy * e1x;
+    float v = (r->dx * qx + r->dy * qy + r->dz * qz) * sgn;
+    if (!(v >= 0.0f && u + v <= adet)) return false;
+    float t = (e2x * qx + e2y * qy + e2z * qz) * sgn;
+    if (!(t > 0.0f && adet > 0.0f && t < tmax * adet)) return false;
+    float inv = 1.0f / adet;
+    float th = t * inv;
+    if (!(th < tmax)) return false; /* the scaled compare may round the other way */
+    *t_out = th;
+    *u_out = u * inv;
+    *v_out = v * inv;
+    return true;
+}
+
+/* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
+ * On a miss hit->prim = -1 and hit->t = tmax. */
+static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, float3 org,
+                                     float3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
+    BvhRay r = bvh_make_ray(org, dir);
+    int stack_node[BVH_STACK_SIZE];
+    float stack_t[BVH_STACK_SIZE];
+    int sp = 0;
+    float best = tmax;
+    float bu = 0.0f, bv = 0.0f;
+    int prim = -1;
+    int cur = 0;
+    for (;;) {
+        if (cur >= 0) {
+            float tl, tr;
+            int ll, lr;
+            bvh_node(nodes, cur, &r, best, &tl, &tr, &ll, &lr);
+            bool hl = tl != INFINITY, hr = tr != INFINITY;
+            if (hl && hr) {
+                /* Visit the nearer child first; keep the other for later. */
+                bool swap = tr < tl;
+                cur = swap ? lr : ll;
+                stack_node[sp] = swap ? ll : lr;
+                stack_t[sp] = swap ? tl : tr;
+                ++sp;
+                continue;
+            }
+            if (hl) { cur = ll; continue; }
+            if (hr) { cur = lr; continue; }
+        } else {
+            int start = (cur & 0x7fffffff) >> 5;
+            int end = start + (cur & 31);
+            for (int i = start; i < end; ++i) {
+                float t, u, v;
+                if (bvh_triangle(tris, i, &r, best, &t, &u, &v) && alpha_accept(alpha, i, u, v)) {
+                    best = t;
+                    bu = u;
+                    bv = v;
+                    prim = i;
+                }
+            }
+        }
+        /* Pop the next subtree that may still hold something nearer. */
+        while (sp > 0 && !(stack_t[sp - 1] < best)) --sp;
+        if (sp == 0) break;
+        cur = stack_node[--sp];
+    }
+    hit->t = best;
+    hit->u = bu;
+    hit->v = bv;
+    hit->prim = prim;
+    return prim >= 0;
+}
+
+/* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */
+static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, float3 org,
+                                 float3 dir, float tmax, const AlphaTest* alpha) {
+    BvhRay r = bvh_make_ray(org, dir);
+    int stack_node[BVH_STACK_SIZE];
+    int sp = 0;
+    int cur = 0;
+    for (;;) {
+        if (cur >= 0) {
+            float tl, tr;
+            int ll, lr;
+            bvh_node(nodes, cur, &r, tmax, &tl, &tr, &ll, &lr);
+            bool hl = tl != INFINITY, hr = tr != INFINITY;
+            if (hl && hr) {
+                bool swap = tr < tl;
+                cur = swap ? lr : ll;
+                stack_node[sp++] = swap ? ll : lr;
+                continue;
+            }
+            if (hl) { cur = ll; continue; }
+            if (hr) { cur = lr; continue; }
+        } else {
+            int start = (cur & 0x7fffffff) >> 5;
+            int end = start + (cur & 31);
+            for (int i = start; i < end; ++i) {
+                float t, u, v;
+                if (bvh_triangle(tris, i, &r, tmax, &t, &u, &v) && alpha_accept(alpha, i, u, v)) return true;
+            }
+        }
+        if (sp == 0) return false;
+        cur = stack_node[--sp];
+    }
+}
+
+/* The queries without opacity (every triangle opaque). */
+static inline bool bvh_closest(__global const float* nodes, __global const float* tris, float3 org,
+                               float3 dir, float tmax, Hit* hit) {
+    return bvh_closest_alpha(nodes, tris, org, dir, tmax, hit, 0);
+}
+
+static inline bool bvh_any(__global const float* nodes, __global const float* tris, float3 org,
+                           float3 dir, float tmax) {
+    return bvh_any_alpha(nodes, tris, org, dir, tmax, 0);
+}
+
+#endif

@@ -1,0 +1,262 @@
+/* lights.h: emitters. Each is LIGHT_STRIDE floats in the `lights` buffer, written
+ * by pyclpt/light_buffers.py (offsets mirrored there):
+ *
+ *   LIGHT_TRIANGLE  an emissive triangle (one-sided area light, Mitsuba `area`)
+ *   LIGHT_POINT     an isotropic point light (Mitsuba `point`): a delta light
+ *   LIGHT_CONSTANT  the constant environment (Mitsuba `constant`)
+ *   LIGHT_ENVMAP    a lat-long environment map (Mitsuba `envmap`; sunsky is baked into one)
+ *
+ * One emitter is chosen by the cumulative `cdf` column (proportional to an
+ * estimate of emitted power). Emitters whose data do not fit a record keep it
+ * in `light_data`, at the offset in LIGHT_PRIM:
+ *
+ *   point light   position (3 floats)
+ *   envmap        ENV_HEADER floats (below), then the sampling tables:
+ *                 marginal CDF over cell rows (R = H - 1 floats), conditional
+ *                 CDF of each row (R * W), solid angle of one cell of each row (R),
+ *                 cos(theta) of each texel row (H).
+ *
+ * Environment-map convention (Mitsuba 3, src/emitters/envmap.cpp): a direction d
+ * in the map's frame (to_world^-1 applied; +y is up) has
+ *     u = atan2(d.x, -d.z) / 2pi,  v = acos(d.y) / pi,
+ * and the radiance is the bilinear interpolation of the texels at
+ *     x = u W - 1/2 (periodic),  y = v (H - 1),
+ * so texel column i is centred on phi = 2pi (i + 1/2) / W and texel row j (row 0
+ * at the top of the image) on theta = pi j / (H - 1): the first and last rows sit
+ * on the poles.
+ *
+ * Importance sampling of an envmap: the sphere is cut into W x (H - 1) cells
+ * between texel centres (cell (r, c) spans x in [c, c+1), y in [r, r+1)), each
+ * chosen with probability proportional to the mean luminance of its 4 corner
+ * texels times its solid angle, then a direction uniform in solid angle inside
+ * the cell (uniform in phi and cos theta). The density is piecewise constant:
+ * pdf(d) = P(cell of d) / solid angle of that cell, exactly what sampling does,
+ * and positive wherever the bilinear radiance is. */
+#ifndef PYCLPT_LIGHTS_H
+#define PYCLPT_LIGHTS_H
+
+#include "scene/scene.h"
+
+#define LIGHT_STRIDE 8
+#define LIGHT_PRIM 0     /* int bits: triangle: leaf-order triangle; point, envmap: offset in light_data */
+#define LIGHT_PMF 1      /* probability of choosing this emitter */
+#define LIGHT_AREA 2     /* triangle area */
+#define LIGHT_RADIANCE 3 /* rgb: triangle and constant environment: radiance; point: intensity (W/sr) */
+#define LIGHT_CDF 6      /* inclusive cumulative pmf */
+#define LIGHT_TYPE 7     /* LIGHT_TRIANGLE ... */
+
+#define LIGHT_TRIANGLE 0
+#define LIGHT_POINT 1
+#define LIGHT_CONSTANT 2
+#define LIGHT_ENVMAP 3
+
+/* envmap block in light_data */
+#define ENV_TO_WORLD 0 /* 3x3 rotation, row-major, map frame -> world */
+#define ENV_WIDTH 9    /* texels */
+#define ENV_HEIGHT 10
+#define ENV_TEXTURE 11 /* texture id of the texels (float RGBA, row 0 at the top) */
+#define ENV_SCALE 12   /* Mitsuba's `scale` */
+#define ENV_HEADER 16
+
+typedef struct {
+    float3 wi;       /* unit direction from the shading point to the emitter */
+    float dist;      /* distance to the sampled point (INF for the environment) */
+    float3 radiance; /* radiance arriving at the shading point (point light: I / dist^2) */
+    float pdf;       /* solid-angle pdf, emitter choice included; for a delta light the choice alone */
+    bool delta;      /* a delta light (point): no BSDF sample can hit it, so no MIS */
+} LightSample;
+
+static inline int num_lights(const Scene* sc) { return (int)sc->consts[CONST_NUM_LIGHTS]; }
+
+/* First index i in [0, n) with u < cdf[i] (the last when none): cdf is inclusive and ends at 1. */
+static inline int cdf_search(__global const float* cdf, int n, float u) {
+    int lo = 0, hi = n - 1;
+    while (lo < hi) {
+        int mid = (lo + hi) >> 1;
+        if (u < cdf[mid]) hi = mid;
+        else lo = mid + 1;
+    }
+    return lo;
+}
+
+static inline float cdf_pmf(__global const float* cdf, int i) { return cdf[i] - (i > 0 ? cdf[i - 1] : 0.0f); }
+
+static inline int light_choose(const Scene* sc, float u) {
+    int lo = 0, hi = num_lights(sc) - 1;
+    while (lo < hi) {
+        int mid = (lo + hi) >> 1;
+        if (u < sc->lights[LIGHT_STRIDE * mid + LIGHT_CDF]) hi = mid;
+        else lo = mid + 1;
+    }
+    return lo;
+}
+
+/* Solid-angle pdf that light sampling gives the point y on emissive triangle `light`,
+ * seen from distance dist with cosine cos_l at the emitter. */
+static inline float light_pdf_area(const Scene* sc, int light, float dist, float cos_l) {
+    __global const float* l = sc->lights + LIGHT_STRIDE * light;
+    if (cos_l <= 0.0f) return 0.0f;
+    return l[LIGHT_PMF] * dist * dist / (l[LIGHT_AREA] * cos_l);
+}
+
+/* ---- environment map -------------------------------------------------------- */
+
+static inline float3 env_to_local(__global const float* e, float3 d) {
+    return (float3)(e[0] * d.x + e[3] * d.y + e[6] * d.z, e[1] * d.x + e[4] * d.y + e[7] * d.z,
+                    e[2] * d.x + e[5] * d.y + e[8] * d.z);
+}
+
+static inline float3 env_to_world(__global const float* e, float3 v) {
+    return (float3)(e[0] * v.x + e[1] * v.y + e[2] * v.z, e[3] * v.x + e[4] * v.y + e[5] * v.z,
+                    e[6] * v.x + e[7] * v.y + e[8] * v.z);
+}
+
+/* Continuous texel coordinates (x in [0, W), y in [0, H - 1]) of a unit direction in the map's frame. */
+static inline float2 env_texel_coords(__global const float* e, float3 d) {
+    float w = e[ENV_WIDTH], h = e[ENV_HEIGHT];
+    float u = atan2(d.x, -d.z) * INV_2PI_F;
+    float v = acos(clamp(d.y, -1.0f, 1.0f)) * INV_PI_F;
+    float x = u * w - 0.5f;
+    x -= w * floor(x / w);
+    if (!(x >= 0.0f && x < w)) x = 0.0f; /* rounding onto w, or NaN */
+    float y = clamp(v * (h - 1.0f), 0.0f, h - 1.0f);
+    if (!(y >= 0.0f)) y = 0.0f;
+    return (float2)(x, y);
+}
+
+/* The map's radiance (scale applied) at texel coordinates xy: bilinear, periodic in x. */
+static inline float3 env_lookup(const Scene* sc, __global const float* e, float2 xy) {
+    int w = (int)e[ENV_WIDTH], h = (int)e[ENV_HEIGHT];
+    int i0 = min((int)xy.x, w - 1), j0 = min((int)xy.y, h - 2);
+    float fx = xy.x - (float)i0, fy = xy.y - (float)j0;
+    int i1 = i0 + 1 == w ? 0 : i0 + 1;
+    __global const float* t = sc->tex.info + TEX_STRIDE * (int)e[ENV_TEXTURE];
+    float4 c00 = tex_texel(&sc->tex, t, i0, j0), c10 = tex_texel(&sc->tex, t, i1, j0);
+    float4 c01 = tex_texel(&sc->tex, t, i0, j0 + 1), c11 = tex_texel(&sc->tex, t, i1, j0 + 1);
+    float4 c = (1.0f - fy) * ((1.0f - fx) * c00 + fx * c10) + fy * ((1.0f - fx) * c01 + fx * c11);
+    return (float3)(c.x, c.y, c.z) * e[ENV_SCALE];
+}
+
+/* Solid-angle density with which env_sample produces the map-frame direction at xy. */
+static inline float env_pdf_at(__global const float* e, float2 xy) {
+    int w = (int)e[ENV_WIDTH], rows = (int)e[ENV_HEIGHT] - 1;
+    __global const float* marginal = e + ENV_HEADER;
+    __global const float* conditional = marginal + rows;
+    __global const float* cell_omega = conditional + rows * w;
+    int c = min((int)xy.x, w - 1), r = min((int)xy.y, rows - 1);
+    float omega = cell_omega[r];
+    if (!(omega > 0.0f)) return 0.0f;
+    return cdf_pmf(marginal, r) * cdf_pmf(conditional + r * w, c) / omega;
+}
+
+/* Inverse of a cdf choice: where u falls inside bin i, in [0, 1). */
+static inline float cdf_remap(__global const float* cdf, int i, float u) {
+    float lo = i > 0 ? cdf[i - 1] : 0.0f;
+    float p = cdf[i] - lo;
+    float t = p > 0.0f ? (u - lo) / p : 0.5f;
+    return clamp(t, 0.0f, 0x1.fffffep-1f);
+}
+
+/* Sample a world direction from the map: returns it with its radiance and solid-angle pdf. */
+static inline float3 env_sample(const Scene* sc, __global const float* e, float2 u, float3* radiance,
+                                float* pdf) {
+    int w = (int)e[ENV_WIDTH], rows = (int)e[ENV_HEIGHT] - 1;
+    __global const float* marginal = e + ENV_HEADER;
+    __global const float* conditional = marginal + rows;
+    __global const float* cell_omega = conditional + rows * w;
+    __global const float* row_cos = cell_omega + rows;
+    int r = cdf_search(marginal, rows, u.x);
+    float ur = cdf_remap(marginal, r, u.x);
+    __global const float* cond = conditional + r * w;
+    int c = cdf_search(cond, w, u.y);
+    float uc = cdf_remap(cond, c, u.y);
+    float cos_t = row_cos[r] + ur * (row_cos[r + 1] - row_cos[r]);
+    float sin_t = sqrt(fmax(0.0f, 1.0f - cos_t * cos_t));
+    float phi = (2.0f * PI_F) * (((float)c + 0.5f + uc) / (float)w);
+    float3 d = (float3)(sin(phi) * sin_t, cos_t, -cos(phi) * sin_t);
+    float omega = cell_omega[r];
+    *pdf = omega > 0.0f ? cdf_pmf(marginal, r) * cdf_pmf(cond, c) / omega : 0.0f;
+    *radiance = env_lookup(sc, e, env_texel_coords(e, d));
+    return normalize(env_to_world(e, d));
+}
+
+/* Radiance of the environment along the world direction dir (zero without one); with want_pdf,
+ * *pdf is the solid-angle density with which light_sample produces dir, emitter choice included. */
+static inline float3 env_eval(const Scene* sc, float3 dir, bool want_pdf, float* pdf) {
+    *pdf = 0.0f;
+    int env = (int)sc->consts[CONST_ENV_LIGHT];
+    if (env < 0) return (float3)(0.0f);
+    __global const float* l = sc->lights + LIGHT_STRIDE * env;
+    if ((int)l[LIGHT_TYPE] == LIGHT_CONSTANT) {
+        if (want_pdf) *pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;
+        return (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
+    }
+    __global const float* e = sc->light_data + as_int(l[LIGHT_PRIM]);
+    float2 xy = env_texel_coords(e, env_to_local(e, dir));
+    if (want_pdf) *pdf = l[LIGHT_PMF] * env_pdf_at(e, xy);
+    return env_lookup(sc, e, xy);
+}
+
+/* ---- sampling any emitter ----------------------------------------------------- */
+
+/* Sample an emitter and a point on it as seen from p; false when the sample carries nothing. */
+static inline bool light_sample(const Scene* sc, float3 p, float u_select, float2 u, LightSample* ls) {
+    int n = num_lights(sc);
+    if (n == 0) return false;
+    int id = light_choose(sc, u_select);
+    __global const float* l = sc->lights + LIGHT_STRIDE * id;
+    int type = (int)l[LIGHT_TYPE];
+    ls->delta = false;
+    if (type == LIGHT_CONSTANT) {
+        ls->wi = square_to_uniform_sphere(u);
+        ls->dist = INF_F;
+        ls->radiance = (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
+        ls->pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;
+        return ls->pdf > 0.0f;
+    }
+    if (type == LIGHT_ENVMAP) {
+        float pdf;
+        ls->wi = env_sample(sc, sc->light_data + as_int(l[LIGHT_PRIM]), u, &ls->radiance, &pdf);
+        ls->dist = INF_F;
+        ls->pdf = l[LIGHT_PMF] * pdf;
+        return ls->pdf > 0.0f;
+    }
+    if (type == LIGHT_POINT) {
+        __global const float* pos = sc->light_data + as_int(l[LIGHT_PRIM]);
+        float3 d = (float3)(pos[0], pos[1], pos[2]) - p;
+        float dist2 = dot(d, d);
+        if (!(dist2 > 0.0f)) return false;
+        ls->dist = sqrt(dist2);
+        ls->wi = d / ls->dist;
+        ls->radiance = (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]) / dist2;
+        ls->pdf = l[LIGHT_PMF];
+        ls->delta = true;
+        return ls->pdf > 0.0f;
+    }
+    int prim = as_int(l[LIGHT_PRIM]);
+    __global const float* t = sc->tris + 9 * prim;
+    float3 v0 = (float3)(t[0], t[1], t[2]);
+    float3 e1 = (float3)(t[3], t[4], t[5]);
+    float3 e2 = (float3)(t[6], t[7], t[8]);
+    float2 b = square_to_triangle(u);
+    float3 y = v0 + b.x * e1 + b.y * e2;
+    float3 ng = normalize(cross(e1, e2));
+    float3 d = y - p;
+    float dist2 = dot(d, d);
+    if (!(dist2 > 0.0f)) return false;
+    ls->dist = sqrt(dist2);
+    ls->wi = d / ls->dist;
+    float cos_l = -dot(ls->wi, ng);
+    ls->pdf = light_pdf_area(sc, id, ls->dist, cos_l);
+    ls->radiance = (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
+    return ls->pdf > 0.0f;
+}
+
+/* Radiance an emissive triangle sends along -dir (one-sided: front faces only). */
+static inline float3 light_emitted(const Scene* sc, int light, float3 ng, float3 dir) {
+    if (light < 0 || dot(ng, dir) >= 0.0f) return (float3)(0.0f);
+    __global const float* l = sc->lights + LIGHT_STRIDE * light;
+    return (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
+}
+
+#endif

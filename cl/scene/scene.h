@@ -1,0 +1,177 @@
+/* scene.h: the scene as the kernels see it, a set of plain buffers written by
+ * pyclpt/scene_buffers.py (the offsets below are mirrored there).
+ *
+ *   nodes      BVH nodes, 16 floats each (bvh.h)
+ *   tris       triangles in BVH leaf order: v0, e1 = v1 - v0, e2 = v2 - v0 (9 floats)
+ *   tri_info   2 ints per triangle: material id | TRI_HAS_* flags, light index or -1
+ *   tri_vidx   3 ints per triangle: vertex indices into vnormals / vuvs
+ *   vnormals   3 floats per vertex (shading normals)
+ *   vuvs       2 floats per vertex
+ *   materials  MAT_STRIDE floats per material (bsdf.h)
+ *   lights     LIGHT_STRIDE floats per emitter (lights.h)
+ *   light_data emitter tables that do not fit a light record (environment-map CDFs, lights.h)
+ *   consts     camera, film and environment (CONST_* below)
+ *   textures, texels8, texels32   texture records and texels (texture.h)
+ */
+#ifndef PYCLPT_SCENE_H
+#define PYCLPT_SCENE_H
+
+#include "core/common.h"
+#include "scene/bvh.h"
+#include "scene/bsdf.h"
+#include "core/sampling.h"
+#include "scene/texture.h"
+#include "scene/mask.h"
+
+#define CONST_CAM_ORIGIN 0
+#define CONST_CAM_FORWARD 3
+#define CONST_CAM_RIGHT 6  /* scaled by tan(fov_x / 2) */
+#define CONST_CAM_UP 9     /* scaled by tan(fov_y / 2) */
+#define CONST_WIDTH 12
+#define CONST_HEIGHT 13
+#define CONST_ENV_RADIANCE 14 /* constant environment (rgb; lights.h reads the light record) */
+#define CONST_ENV_LIGHT 17 /* index of the environment in `lights`, or -1 */
+#define CONST_NUM_LIGHTS 18
+#define CONST_COUNT 20
+
+typedef struct {
+    __global const float* nodes;
+    __global const float* tris;
+    __global const int* tri_info;
+    __global const int* tri_vidx;
+    __global const float* vnormals;
+    __global const float* vuvs;
+    __global const float* materials;
+    __global const float* lights;
+    __global const float* light_data;
+    __global const float* consts;
+    Textures tex;
+} Scene;
+
+#define SCENE_PARAMS                                                                       \
+    __global const float *scene_nodes, __global const float *scene_tris,                   \
+        __global const int *scene_tri_info, __global const int *scene_tri_vidx,            \
+        __global const float *scene_vnormals, __global const float *scene_vuvs,            \
+        __global const float *scene_materials, __global const float *scene_lights,         \
+        __global const float *scene_light_data, __global const float *scene_consts,        \
+        __global const float *scene_textures, __global const uchar *scene_texels8,         \
+        __global const float *scene_texels32
+
+#define SCENE_INIT                                                                          \
+    {scene_nodes, scene_tris, scene_tri_info, scene_tri_vidx, scene_vnormals, scene_vuvs,  \
+     scene_materials, scene_lights, scene_light_data, scene_consts,                        \
+     {scene_textures, scene_texels8, scene_texels32}}
+
+/* What a path needs to know about the point it hit. */
+typedef struct {
+    float3 p;     /* position */
+    float3 ng;    /* geometric normal (winding order), unit */
+    Frame sh;     /* shading frame */
+    float2 uv;    /* texture coordinates (barycentrics where the mesh has none) */
+    int material;
+    int light;    /* emitter index of the triangle, or -1 */
+} Surface;
+
+static inline Material scene_material(const Scene* sc, int id) { return sc->materials + MAT_STRIDE * id; }
+
+/* The material of a surface with its textures looked up at the surface's uv. */
+static inline Bsdf bsdf_at(const Scene* sc, const Surface* s) {
+    Material m = scene_material(sc, s->material);
+    Bsdf b = bsdf_from(m);
+    int t = (int)m[MAT_COLOR_TEX];
+    if (t >= 0) b.color *= tex_eval(&sc->tex, t, s->uv);
+    t = (int)m[MAT_SPEC_TEX];
+    if (t >= 0) b.spec *= tex_eval(&sc->tex, t, s->uv);
+    t = (int)m[MAT_TRANS_TEX];
+    if (t >= 0) b.trans *= tex_eval(&sc->tex, t, s->uv);
+    return b;
+}
+
+/* Bump mapping (Mitsuba `bumpmap`): displace the surface along the shading normal
+ * by scale * height(uv) and take the normal of the displaced surface; the height
+ * gradient is a forward difference over one texel (one hundredth of the unit
+ * square for procedural textures). Needs the mesh's uv parameterisation. */
+static inline float3 bump_normal(const Scene* sc, Material m, int prim, int info, float2 uv, float3 ns) {
+    int t = (int)m[MAT_BUMP_TEX];
+    if (t < 0 || !(info & TRI_HAS_UVS)) return ns;
+    __global const int* vi = sc->tri_vidx + 3 * prim;
+    __global const float* tri = sc->tris + 9 * prim;
+    float3 e1 = (float3)(tri[3], tri[4], tri[5]), e2 = (float3)(tri[6], tri[7], tri[8]);
+    float2 t0 = (float2)(sc->vuvs[2 * vi[0]], sc->vuvs[2 * vi[0] + 1]);
+    float2 d1 = (float2)(sc->vuvs[2 * vi[1]], sc->vuvs[2 * vi[1] + 1]) - t0;
+    float2 d2 = (float2)(sc->vuvs[2 * vi[2]], sc->vuvs[2 * vi[2] + 1]) - t0;
+    float det = d1.x * d2.y - d1.y * d2.x;
+    if (!(fabs(det) > 1e-12f)) return ns;
+    float inv = 1.0f / det;
+    float3 dpdu = (d2.y * e1 - d1.y * e2) * inv;
+    float3 dpdv = (d1.x * e2 - d2.x * e1) * inv;
+    __global const float* rec = sc->tex.info + TEX_STRIDE * t;
+    bool bitmap = (int)rec[TEX_KIND] == TEX_BITMAP;
+    float du = bitmap ? 1.0f / (rec[TEX_WIDTH] * rec[TEX_UV_SCALE]) : 0.01f;
+    float dv = bitmap ? 1.0f / (rec[TEX_HEIGHT] * rec[TEX_UV_SCALE + 1]) : 0.01f;
+    float scale = m[MAT_BUMP_SCALE];
+    float h = tex_eval1(&sc->tex, t, uv);
+    float dhdu = scale * (tex_eval1(&sc->tex, t, uv + (float2)(du, 0.0f)) - h) / du;
+    float dhdv = scale * (tex_eval1(&sc->tex, t, uv + (float2)(0.0f, dv)) - h) / dv;
+    /* tangents made orthogonal to the shading normal, then displaced */
+    float3 pu = dpdu - ns * dot(ns, dpdu) + ns * dhdu;
+    float3 pv = dpdv - ns * dot(ns, dpdv) + ns * dhdv;
+    float3 n = cross(pu, pv);
+    float len = length(n);
+    if (!(len > 0.0f) || !isfinite(len)) return ns;
+    n /= len;
+    return dot(n, ns) < 0.0f ? -n : n;
+}
+
+/* Rebuild the surface from a hit record (leaf-order triangle, barycentrics u, v). */
+static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
+    Surface s;
+    __global const float* t = sc->tris + 9 * prim;
+    float3 v0 = (float3)(t[0], t[1], t[2]);
+    float3 e1 = (float3)(t[3], t[4], t[5]);
+    float3 e2 = (float3)(t[6], t[7], t[8]);
+    s.p = v0 + u * e1 + v * e2;
+    s.ng = normalize(cross(e1, e2));
+    int info = sc->tri_info[2 * prim];
+    s.material = info & TRI_MAT_MASK;
+    s.light = sc->tri_info[2 * prim + 1];
+    s.uv = tri_uv(sc->tri_vidx, sc->vuvs, prim, info, u, v);
+    float3 ns = s.ng;
+    if (info & TRI_HAS_NORMALS) {
+        int i0 = sc->tri_vidx[3 * prim], i1 = sc->tri_vidx[3 * prim + 1], i2 = sc->tri_vidx[3 * prim + 2];
+        float3 n = (1.0f - u - v) * load3(sc->vnormals, i0) + u * load3(sc->vnormals, i1) +
+                   v * load3(sc->vnormals, i2);
+        float len = length(n);
+        if (len > 0.0f && isfinite(len)) ns = n / len;
+    }
+#ifdef SCENE_HAS_BUMPMAPS
+    ns = bump_normal(sc, scene_material(sc, s.material), prim, info, s.uv, ns);
+#endif
+    s.sh = frame_from(ns);
+    return s;
+}
+
+/* The opacity test of a path's query: dim is DIM_MASK_CLOSEST or DIM_MASK_SHADOW. */
+static inline AlphaTest scene_alpha(const Scene* sc, RngKey key, int bounce, uint dim) {
+    AlphaTest a = {sc->tri_info, sc->tri_vidx, sc->vuvs, sc->materials, sc->tex, key, (uint)bounce, dim};
+    return a;
+}
+
+/* Closest hit of a path's ray at `bounce`, honouring opacity. */
+static inline bool scene_closest(const Scene* sc, RngKey key, int bounce, float3 org, float3 dir, Hit* hit) {
+    AlphaTest a = scene_alpha(sc, key, bounce, DIM_MASK_CLOSEST);
+    return bvh_closest_alpha(sc->nodes, sc->tris, org, dir, INF_F, hit, &a);
+}
+
+/* True when a shadow ray of `bounce` is blocked before tmax, honouring opacity. */
+static inline bool scene_occluded(const Scene* sc, RngKey key, int bounce, float3 org, float3 dir, float tmax) {
+    AlphaTest a = scene_alpha(sc, key, bounce, DIM_MASK_SHADOW);
+    return bvh_any_alpha(sc->nodes, sc->tris, org, dir, tmax, &a);
+}
+
+/* Origin for a ray leaving s in direction d: offset to d's side of the surface. */
+static inline float3 spawn_origin(const Surface* s, float3 d) {
+    return offset_ray_origin(s->p, dot(d, s->ng) >= 0.0f ? s->ng : -s->ng);
+}
+
+#endif

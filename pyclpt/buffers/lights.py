@@ -1,0 +1,222 @@
+"""Emitters -> the `lights` and `light_data` buffers of ``cl/scene/lights.h``, and the
+per-resolution constants (camera, environment) of ``cl/scene/scene.h``.
+
+Emitters are the emissive triangles (leaf order), then the point lights, then the
+environment (constant or map); one is chosen by a CDF proportional to an estimate
+of its power:
+
+- triangle: area * luminance of the radiance;
+- point light (intensity I, W/sr): 4 pi * luminance(I);
+- environment (constant or map): pi^2 r^2 * mean radiance over the sphere, r the
+  radius of the scene's bounding sphere (the power a distant emitter sends through
+  the scene's cross-section, ~ pi r^2 * pi L for a constant L).
+
+(For each, the larger of luminance and the mean of rgb, so that a saturated
+colour with little luminance is still sampled.)
+
+Environment maps follow Mitsuba 3's lat-long convention; the layout of their
+sampling tables is documented in ``cl/scene/lights.h``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pyclpt.buffers.materials import TextureTable
+from pyclpt.scene.model import Bitmap, Envmap, Scene
+
+LIGHT_STRIDE = 8
+CONST_COUNT = 20
+# record offsets and types (cl/scene/lights.h)
+LIGHT_PRIM, LIGHT_PMF, LIGHT_AREA, LIGHT_RADIANCE, LIGHT_CDF, LIGHT_TYPE = 0, 1, 2, 3, 6, 7
+LIGHT_TRIANGLE, LIGHT_POINT, LIGHT_CONSTANT, LIGHT_ENVMAP = 0, 1, 2, 3
+ENV_HEADER = 16
+LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
+
+
+def luminance(c) -> float:
+    r, g, b = (float(x) for x in c)  # in double: radiance near FLT_MAX must not overflow
+    return 0.212671 * r + 0.715160 * g + 0.072169 * b
+
+
+@dataclass
+class LightArrays:
+    lights: np.ndarray  # (L, LIGHT_STRIDE) float32
+    light_data: np.ndarray  # float32 tables (point-light positions, environment-map CDFs)
+    env_light: int  # index of the environment in lights, or -1
+    tri_light: np.ndarray  # (T,) int32: light index of each leaf-order triangle, or -1
+
+
+def _int_bits(i: int) -> np.float32:
+    return np.array([i], np.int32).view(np.float32)[0]
+
+
+def envmap_rotation(env: Envmap) -> np.ndarray:
+    """The rotation (3x3) of an environment map's ``to_world``: a uniform scale is divided out
+    (a reflection is kept); a shear, a non-uniform scale or a singular matrix is an error."""
+    m = np.asarray(env.to_world, np.float64)[:3, :3]
+    where = f"environment map {env.name!r}"
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"{where}: to_world holds NaN or infinite values")
+    s = np.linalg.svd(m, compute_uv=False)
+    if not s[-1] > 1e-12 * max(s[0], 1e-300):
+        raise ValueError(f"{where}: to_world is singular")
+    if s[0] - s[-1] > 1e-4 * s[0]:
+        raise ValueError(f"{where}: to_world must be a rotation (with at most a uniform scale), "
+                         f"its singular values are {np.round(s, 6).tolist()}")
+    u, _, vt = np.linalg.svd(m)
+    return u @ vt
+
+
+def envmap_cells(pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The sampling cells of a lat-long map (H, W, 3) under Mitsuba 3's convention (cl/scene/lights.h).
+
+    Returns (lum_weight (H-1, W), rgb_weight (H-1, W, 3), cell_omega (H-1,)): the mean of the 4 corner
+    texels of each cell times the cell's solid angle (luminance, rgb), and the solid angle of one
+    cell of each row. Their sums approximate the integral of the map over the sphere."""
+    px = np.asarray(pixels, np.float64)
+    h, w = px.shape[:2]
+    theta = np.pi * np.arange(h) / (h - 1)
+    # solid angle of a cell between rows r and r+1: (2 pi / W) (cos t_r - cos t_{r+1}), in a stable form
+    mid, half = 0.5 * (theta[1:] + theta[:-1]), 0.5 * (theta[1:] - theta[:-1])
+    cell_omega = (2.0 * np.pi / w) * 2.0 * np.sin(mid) * np.sin(half)
+    nxt = np.roll(px, -1, axis=1)  # column c + 1 (periodic)
+    corners = 0.25 * (px[:-1] + nxt[:-1] + px[1:] + nxt[1:])  # (H-1, W, 3)
+    rgb_weight = corners * cell_omega[:, None, None]
+    lum_weight = rgb_weight @ LUMINANCE
+    return lum_weight, rgb_weight, cell_omega
+
+
+def _cdf(weights: np.ndarray) -> np.ndarray:
+    """Inclusive CDF along the last axis (float64 sums); all-zero rows become uniform."""
+    c = np.cumsum(weights, axis=-1)
+    total = c[..., -1:]
+    n = weights.shape[-1]
+    uniform = np.arange(1, n + 1, dtype=np.float64) / n
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(total > 0, c / np.where(total > 0, total, 1.0), uniform)
+    out[..., -1] = 1.0
+    return out
+
+
+def pack_envmap(env: Envmap, textures: TextureTable) -> tuple[np.ndarray, float]:
+    """The light_data block of an environment map (cl/scene/lights.h) and its estimated mean radiance
+    over the sphere (for the light-selection power); the texels go to ``textures``."""
+    px = np.asarray(env.pixels)
+    where = f"environment map {env.name!r}"
+    if px.ndim != 3 or px.shape[2] != 3 or px.shape[0] < 2 or px.shape[1] < 2:
+        raise ValueError(f"{where}: expected an (H, W, 3) image with H, W >= 2, got shape {px.shape}")
+    if not np.all(np.isfinite(px)) or px.min() < 0:
+        raise ValueError(f"{where}: values must be finite and >= 0")
+    scale = float(env.scale)
+    if not (np.isfinite(scale) and scale >= 0):
+        raise ValueError(f"{where}: scale must be finite and >= 0, got {env.scale}")
+    rot = envmap_rotation(env)
+    h, w = px.shape[:2]
+    lum_w, rgb_w, cell_omega = envmap_cells(px)
+    marginal = _cdf(lum_w.sum(axis=1))
+    conditional = _cdf(lum_w)
+    row_cos = np.cos(np.pi * np.arange(h) / (h - 1))
+    row_cos[0], row_cos[-1] = 1.0, -1.0
+    tex = textures.add(Bitmap(px.astype(np.float32), name=env.name, srgb=False, filter="bilinear",
+                              wrap_mode="repeat"))
+    header = np.zeros(ENV_HEADER, np.float64)
+    header[0:9] = rot.reshape(-1)
+    header[9], header[10], header[11], header[12] = w, h, tex, scale
+    block = np.concatenate([header, marginal, conditional.reshape(-1), cell_omega, row_cos]).astype(np.float32)
+    integral = scale * max(float(lum_w.sum()), float(rgb_w.sum()) / 3.0)
+    return block, integral / (4.0 * np.pi)
+
+
+def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds: np.ndarray,
+                textures: TextureTable) -> LightArrays:
+    """Emitters of ``scene``: ``tris`` (T, 9) and ``tri_emission`` (T, 3) are in leaf order."""
+    tri_light = np.full(tris.shape[0], -1, np.int32)
+    emissive = np.flatnonzero(tri_emission.max(axis=1) > 0)
+    area = 0.5 * np.linalg.norm(np.cross(tris[emissive, 3:6], tris[emissive, 6:9]), axis=1)
+    keep = area > 0
+    emissive, area = emissive[keep], area[keep]
+    em64 = tri_emission[emissive].astype(np.float64)  # double: radiance near FLT_MAX must not overflow
+    lum = np.maximum(em64 @ LUMINANCE, em64.mean(axis=1))
+    tri_records = np.zeros((len(emissive), LIGHT_STRIDE), np.float32)
+    tri_records[:, LIGHT_PRIM] = emissive.astype(np.int32).view(np.float32)
+    tri_records[:, LIGHT_AREA] = area
+    tri_records[:, LIGHT_RADIANCE:LIGHT_RADIANCE + 3] = tri_emission[emissive]
+    tri_records[:, LIGHT_TYPE] = LIGHT_TRIANGLE
+    tri_light[emissive] = np.arange(len(emissive), dtype=np.int32)
+    records: list[np.ndarray] = []  # the emitters after the triangles
+    power: list[float] = list(area * lum)
+    data: list[np.ndarray] = []
+    data_size = 0
+
+    def add_data(block: np.ndarray) -> np.float32:
+        nonlocal data_size
+        offset = data_size
+        data.append(np.asarray(block, np.float32).reshape(-1))
+        data_size += data[-1].size
+        if data_size >= 2**31:
+            raise ValueError("the scene's emitter tables exceed 2^31 floats")
+        return _int_bits(offset)
+
+    for k, light in enumerate(scene.lights):
+        intensity = np.asarray(light.intensity, np.float64)
+        pos = np.asarray(light.position, np.float64)
+        if not (np.all(np.isfinite(intensity)) and intensity.min() >= 0 and np.all(np.isfinite(pos))):
+            raise ValueError(f"point light {k}: position and intensity must be finite, intensity >= 0")
+        p = 4.0 * np.pi * max(luminance(intensity), float(intensity.mean()))
+        if not p > 0:
+            continue
+        rec = np.zeros(LIGHT_STRIDE, np.float32)
+        rec[LIGHT_PRIM] = add_data(pos)
+        rec[LIGHT_RADIANCE:LIGHT_RADIANCE + 3] = intensity
+        rec[LIGHT_TYPE] = LIGHT_POINT
+        records.append(rec)
+        power.append(p)
+
+    env_light = -1
+    env = scene.environment
+    radius = max(0.5 * float(np.linalg.norm(np.asarray(bounds[1], np.float64) - bounds[0])), 1e-3)
+    if isinstance(env, Envmap):
+        block, mean_radiance = pack_envmap(env, textures)
+        if mean_radiance > 0:
+            rec = np.zeros(LIGHT_STRIDE, np.float32)
+            rec[LIGHT_PRIM] = add_data(block)
+            rec[LIGHT_TYPE] = LIGHT_ENVMAP
+            env_light = len(tri_records) + len(records)
+            records.append(rec)
+            power.append(np.pi * np.pi * radius**2 * mean_radiance)
+    elif env is not None and max(env) > 0:
+        rec = np.zeros(LIGHT_STRIDE, np.float32)
+        rec[LIGHT_PRIM] = _int_bits(-1)
+        rec[LIGHT_RADIANCE:LIGHT_RADIANCE + 3] = env
+        rec[LIGHT_TYPE] = LIGHT_CONSTANT
+        env_light = len(tri_records) + len(records)
+        records.append(rec)
+        power.append(np.pi * np.pi * radius**2 * max(luminance(env), float(np.mean(env, dtype=np.float64))))
+
+    lights = np.concatenate([tri_records, *[r[None] for r in records]])
+    if len(lights):
+        power_arr = np.asarray(power, np.float64)
+        if not np.all(np.isfinite(power_arr)):  # powers beyond double range: choose uniformly
+            power_arr = np.ones_like(power_arr)
+        pmf = power_arr / power_arr.sum()
+        cdf = np.cumsum(pmf)
+        cdf[-1] = 1.0
+        lights[:, LIGHT_PMF] = pmf
+        lights[:, LIGHT_CDF] = cdf
+    light_data = np.concatenate(data) if data else np.zeros(1, np.float32)
+    return LightArrays(lights, light_data, env_light, tri_light)
+
+
+def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int) -> np.ndarray:
+    """The CONST_* block of cl/scene/scene.h for one film resolution."""
+    c = np.zeros(CONST_COUNT, np.float32)
+    origin, forward, right, up = scene.camera.basis(width, height)
+    c[0:3], c[3:6], c[6:9], c[9:12] = origin, forward, right, up
+    c[12], c[13] = width, height
+    if scene.environment is not None and not isinstance(scene.environment, Envmap):
+        c[14:17] = scene.environment
+    c[17] = lights.env_light
+    c[18] = lights.lights.shape[0]
+    return c

@@ -1,0 +1,131 @@
+"""Scene model -> flat arrays -> device buffers.
+
+All meshes are concatenated, the BVH is built over every triangle (Embree,
+:mod:`pyclpt.accel.bvh`) and the per-triangle arrays are put into the BVH's leaf
+order so that kernels index everything by the triangle a traversal returns.
+The layout of each array is documented in ``cl/scene/scene.h``, ``cl/scene/bsdf.h`` and
+``cl/scene/lights.h``; the offsets below mirror those headers.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+from pyclpt.accel.bvh import FlatBVH, build_bvh
+from pyclpt.device.context import Device, upload
+from pyclpt.buffers.lights import CONST_COUNT, LightArrays, camera_consts, pack_lights
+from pyclpt.buffers.materials import MAT_STRIDE, TextureTable, pack_material, pack_materials  # noqa: F401
+from pyclpt.scene.model import Scene
+
+TRI_HAS_NORMALS = 1 << 24
+TRI_HAS_UVS = 1 << 25
+TRI_MASKED = 1 << 26
+
+
+@dataclass
+class SceneArrays:
+    """The scene as the flat arrays the kernels read (host copies)."""
+
+    bvh: FlatBVH
+    tri_info: np.ndarray  # (T, 2) int32: material | TRI_* flags, light index
+    tri_vidx: np.ndarray  # (T, 3) int32
+    vnormals: np.ndarray  # (V, 3) float32
+    vuvs: np.ndarray  # (V, 2) float32
+    materials: np.ndarray  # (M, MAT_STRIDE) float32
+    lights: LightArrays
+    textures: TextureTable
+    bounds: np.ndarray  # (2, 3) scene bounding box
+    defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.tri_info.shape[0])
+
+    @property
+    def env_light(self) -> int:
+        return self.lights.env_light
+
+    def device_arrays(self) -> list[tuple[str, np.ndarray]]:
+        """(name, array) of every scene buffer but the constants, in SCENE_PARAMS order."""
+        return [("BVH nodes", self.bvh.nodes), ("triangles", self.bvh.tris), ("triangle info", self.tri_info),
+                ("triangle vertices", self.tri_vidx), ("vertex normals", self.vnormals),
+                ("vertex uvs", self.vuvs), ("materials", self.materials), ("lights", self.lights.lights),
+                ("light data", self.lights.light_data), ("texture records", self.textures.info()),
+                ("8-bit texels", self.textures.texels8()), ("float texels", self.textures.texels32())]
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for _, a in self.device_arrays())
+
+
+def pack_scene(scene: Scene) -> SceneArrays:
+    mats = pack_materials(scene.materials)
+    positions, indices, normals, uvs, info, emission = [], [], [], [], [], []
+    offset = 0
+    for mesh in scene.meshes:
+        positions.append(mesh.positions)
+        indices.append(mesh.indices + offset)
+        nv = mesh.positions.shape[0]
+        normals.append(mesh.normals if mesh.normals is not None else np.zeros((nv, 3), np.float32))
+        uvs.append(mesh.uvs if mesh.uvs is not None else np.zeros((nv, 2), np.float32))
+        flags = ((TRI_HAS_NORMALS if mesh.normals is not None else 0) | (TRI_HAS_UVS if mesh.uvs is not None else 0)
+                 | (TRI_MASKED if mats.masked[mesh.material] else 0))
+        info.append(np.full(mesh.triangle_count, mesh.material | flags, np.int32))
+        em = mesh.emission if mesh.emission is not None and max(mesh.emission) > 0 else (0.0, 0.0, 0.0)
+        emission.append(np.tile(np.asarray(em, np.float32), (mesh.triangle_count, 1)))
+        offset += nv
+    P = np.concatenate(positions)
+    I = np.concatenate(indices)
+    bvh = build_bvh(P, I)
+    order = bvh.tri_order
+    bounds = np.stack([P.min(0), P.max(0)])
+    lights = pack_lights(scene, bvh.tris.reshape(-1, 9), np.concatenate(emission)[order], bounds, mats.textures)
+    tri_info = np.empty((len(order), 2), np.int32)
+    tri_info[:, 0] = np.concatenate(info)[order]
+    tri_info[:, 1] = lights.tri_light
+    return SceneArrays(
+        bvh=bvh,
+        tri_info=tri_info,
+        tri_vidx=np.ascontiguousarray(I[order]),
+        vnormals=np.concatenate(normals).astype(np.float32),
+        vuvs=np.concatenate(uvs).astype(np.float32),
+        materials=mats.materials,
+        lights=lights,
+        textures=mats.textures,
+        bounds=bounds,
+        defines={"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps},
+    )
+
+
+class SceneBuffers:
+    """The scene's arrays on one device, plus the per-render constants (camera, film)."""
+
+    def __init__(self, scene: Scene, device: Device) -> None:
+        start = time.perf_counter()
+        self.scene = scene
+        self.device = device
+        self.arrays = arrays = pack_scene(scene)
+        self.pack_seconds = time.perf_counter() - start
+        self._buffers = [upload(device, a, f"scene {scene.name!r} {n}") for n, a in arrays.device_arrays()]
+        self._consts: dict[tuple[int, int], cl.Buffer] = {}
+
+    @property
+    def defines(self) -> dict:
+        """-D specialisations the kernels need for this scene."""
+        return self.arrays.defines
+
+    def refresh_camera(self) -> None:
+        """Re-read the scene's camera: the constants are rebuilt on the next args() call."""
+        self._consts.clear()
+
+    def args(self, width: int, height: int) -> tuple[cl.Buffer, ...]:
+        """The SCENE_PARAMS kernel arguments for a film of width x height."""
+        key = (width, height)
+        if key not in self._consts:
+            self._consts[key] = upload(self.device, camera_consts(self.scene, self.arrays.lights, width, height),
+                                       "camera constants")
+        b = self._buffers
+        return (*b[:9], self._consts[key], *b[9:])

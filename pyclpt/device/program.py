@@ -1,0 +1,160 @@
+"""Assembling and building OpenCL programs from the sources in ``cl/``.
+
+A program is assembled in Python: ``#include "x.h"`` lines are resolved from
+``cl/`` (each header once, in dependency order) and every piece is preceded by
+a ``#line`` directive, so a compiler message names the real file and line
+(``cl/scene/bsdf.h:42``) although the device compiles one self-contained string. That
+string is what PoCL's kernel cache hashes, so an unchanged program is loaded
+from the cache instead of being compiled; ``PYCLPT_DUMP_KERNELS=DIR`` writes it
+to ``DIR`` for inspection. Specialisations are ``-D`` options.
+
+Build times are logged (logger ``pyclpt.device.program``) and kept apart from render
+times: :func:`compile_seconds` reports the total spent building.
+"""
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import re
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+
+import pyopencl as cl
+
+from pyclpt.device.context import Device
+
+log = logging.getLogger("pyclpt.device.program")
+
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
+
+
+class KernelBuildError(RuntimeError):
+    """An OpenCL program failed to build; the message holds the build log."""
+
+
+def cl_dir() -> Path:
+    """The folder of pyclpt's OpenCL sources (inside the installed package or the source tree)."""
+    package = Path(__file__).resolve().parent.parent
+    for candidate in (package / "cl", package.parent / "cl"):
+        if (candidate / "core" / "common.h").is_file():
+            return candidate
+    raise FileNotFoundError(f"pyclpt's OpenCL sources (cl/core/common.h) are missing next to {package}")
+
+
+def _display_name(path: Path) -> str:
+    try:
+        return f"cl/{path.relative_to(cl_dir()).as_posix()}"
+    except ValueError:
+        return path.as_posix()
+
+
+def assemble(files: Sequence[str] = (), source: str | None = None, source_name: str = "<source>",
+             generated: Mapping[str, str] | None = None) -> str:
+    """Concatenate ``files`` (names under cl/) and ``source``, resolving includes, with #line markers.
+
+    ``generated`` maps include names to text made by Python (e.g. the path-state accessors);
+    such an include is emitted under the name ``<generated NAME>``."""
+    root = cl_dir()
+    seen: set[Path] = set()
+    seen_generated: set[str] = set()
+    out: list[str] = []
+
+    def emit(text: str, name: str, origin: Path | None) -> None:
+        out.append(f'#line 1 "{name}"')
+        for lineno, line in enumerate(text.splitlines(), start=1):
+            m = _INCLUDE.match(line)
+            if m and generated and m.group(1) in generated:
+                if m.group(1) not in seen_generated:
+                    seen_generated.add(m.group(1))
+                    emit(generated[m.group(1)], f"<generated {m.group(1)}>", None)
+                out.append(f'#line {lineno + 1} "{name}"')
+            elif m:
+                base = origin.parent if origin is not None else root
+                inc = (base / m.group(1)).resolve()
+                if not inc.is_file():
+                    inc = (root / m.group(1)).resolve()
+                if not inc.is_file():
+                    raise KernelBuildError(f"{name}:{lineno}: cannot find include \"{m.group(1)}\" in {root}")
+                if inc not in seen:
+                    seen.add(inc)
+                    emit(inc.read_text(), _display_name(inc), inc)
+                out.append(f'#line {lineno + 1} "{name}"')
+            else:
+                out.append(line)
+
+    for f in files:
+        path = (root / f).resolve()
+        if not path.is_file():
+            raise KernelBuildError(f"no OpenCL source {f!r} in {root}")
+        if path not in seen:
+            seen.add(path)
+            emit(path.read_text(), _display_name(path), path)
+    if source is not None:
+        emit(source, source_name, None)
+    return "\n".join(out) + "\n"
+
+
+def define_options(defines: Mapping[str, object] | None) -> list[str]:
+    opts = []
+    for key, value in sorted((defines or {}).items()):
+        if value is True:
+            opts.append(f"-D{key}")
+        elif value is False or value is None:
+            continue
+        elif isinstance(value, float):
+            opts.append(f"-D{key}={value!r}f")
+        else:
+            opts.append(f"-D{key}={value}")
+    return opts
+
+
+_compile_seconds = 0.0
+
+
+def compile_seconds() -> float:
+    """Total wall time this process has spent building OpenCL programs."""
+    return _compile_seconds
+
+
+def build_program(
+    device: Device,
+    files: Sequence[str] = (),
+    *,
+    source: str | None = None,
+    defines: Mapping[str, object] | None = None,
+    options: Iterable[str] = (),
+    name: str | None = None,
+    generated: Mapping[str, str] | None = None,
+) -> cl.Program:
+    """Build (or fetch from the device's in-process cache) a program from cl/ files and/or source text.
+
+    No fast-math options are ever added here: callers pass the options they need.
+    """
+    global _compile_seconds
+    text = assemble(files, source, source_name=name or "<source>", generated=generated)
+    opts = ["-cl-std=CL1.2", *define_options(defines), *options]
+    key = (text, tuple(opts))
+    prog = device.programs.get(key)
+    if prog is not None:
+        return prog
+    label = name or (files[0] if files else "<source>")
+    dump = os.environ.get("PYCLPT_DUMP_KERNELS")
+    if dump:
+        digest = hashlib.sha1(repr(key).encode()).hexdigest()[:10]
+        out = Path(dump)
+        out.mkdir(parents=True, exist_ok=True)
+        stem = re.sub(r"[^A-Za-z0-9_.-]", "_", Path(label).stem)
+        (out / f"{stem}-{digest}.cl").write_text(f"// options: {' '.join(opts)}\n{text}")
+    start = time.perf_counter()
+    try:
+        prog = cl.Program(device.context, text).build(options=opts)
+    except (cl.RuntimeError, cl.Error) as exc:
+        # pyopencl's message carries the build log, whose lines name cl/ files through #line.
+        raise KernelBuildError(f"OpenCL build of {label} failed on {device.name}:\n{exc}") from None
+    elapsed = time.perf_counter() - start
+    _compile_seconds += elapsed
+    log.info("built %s in %.2f s (%s)", label, elapsed, " ".join(opts))
+    device.programs[key] = prog
+    return prog

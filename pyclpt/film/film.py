@@ -1,0 +1,64 @@
+"""The film: one frame buffer that an integrator fills with one sample per
+pixel, averaged on the device by an :class:`~pyclpt.film.accumulator.Accumulator`.
+
+Frames are added in sample order, so the sum does not depend on the order in
+which paths finished. NaN/inf samples never reach the frame: the kernels drop
+them and count them in ``dropped``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from pyclpt.film.accumulator import Accumulator
+from pyclpt.device.context import Device, alloc
+
+# Renderer.render's precision: the sum of the samples in double (emulated double-float on a device
+# without cl_khr_fp64), so a long render's mean is as exact as its float samples allow; the
+# accumulation is one add per pixel per frame, negligible next to the paths.
+DEFAULT_PRECISION = "double"
+
+
+class Film:
+    def __init__(self, device: Device, width: int, height: int, precision: str = DEFAULT_PRECISION,
+                 **accumulator_options) -> None:
+        self.device = device
+        self.width, self.height = width, height
+        self.pixels = width * height
+        self.frame = alloc(device, 4 * self.pixels * 3, f"frame buffer {width}x{height}")
+        self.dropped = alloc(device, 4, "dropped-sample counter")
+        self.accumulator = Accumulator(device, width, height, channels=3, precision=precision,
+                                       input_type="float", **accumulator_options)
+        self.clear()
+
+    @property
+    def frames(self) -> int:
+        """Frames in the current average."""
+        return self.accumulator.frame_count
+
+    def clear(self) -> None:
+        q = self.device.queue
+        self.accumulator.reset()
+        cl.enqueue_fill_buffer(q, self.frame, np.float32(0), 0, 4 * self.pixels * 3)
+        cl.enqueue_fill_buffer(q, self.dropped, np.int32(0), 0, 4)
+
+    def add_frame(self) -> cl.Event | None:
+        """Add the frame buffer to the accumulation (None when the accumulator has stopped)."""
+        return self.accumulator.add(self.frame)
+
+    def warm_up(self) -> None:
+        self.accumulator.warm_up()
+
+    def read_frame(self) -> np.ndarray:
+        out = np.empty((self.height, self.width, 3), np.float32)
+        cl.enqueue_copy(self.device.queue, out, self.frame)
+        return out
+
+    def image(self) -> np.ndarray:
+        """The average of the frames added so far, (H, W, 3) float32."""
+        return self.accumulator.image()
+
+    def dropped_samples(self) -> int:
+        out = np.zeros(1, np.int32)
+        cl.enqueue_copy(self.device.queue, out, self.dropped)
+        return int(out[0])

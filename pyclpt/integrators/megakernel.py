@@ -1,0 +1,48 @@
+"""The megakernel integrator: one work-item runs one whole path (``cl/integrators/megakernel.cl``).
+
+The baseline against which the wavefront integrator is measured; it runs the
+same estimator (``cl/integrators/path.h``) on the same random numbers.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from pyclpt.device.context import Device
+from pyclpt.film.film import Film
+from pyclpt.device.profile import KernelProfile
+from pyclpt.device.program import build_program
+from pyclpt.buffers.scene import SceneBuffers
+
+
+class Megakernel:
+    name = "megakernel"
+
+    def __init__(self, device: Device, scene: SceneBuffers, film: Film, max_depth: int,
+                 wave_size: int = 1 << 20, local_size: int = 64) -> None:
+        self.device, self.scene, self.film = device, scene, film
+        self.max_depth = max_depth
+        self.wave_size = wave_size
+        self.local_size = local_size
+        self.kernel = cl.Kernel(build_program(device, ["integrators/megakernel.cl"], defines=scene.defines), "megakernel")
+        self.profile = KernelProfile()
+
+    def warm_up(self) -> None:
+        """One empty launch, so that the driver's lazy compilation counts as compile time."""
+        args = self.scene.args(self.film.width, self.film.height)
+        self.kernel(self.device.queue, (self.local_size,), (self.local_size,), *args, self.film.frame,
+                    self.film.dropped, np.uint32(0), np.uint32(0), np.int32(0), np.int32(0),
+                    np.int32(self.max_depth))
+        self.device.queue.finish()
+
+    def render_frame(self, seed: int, sample: int) -> None:
+        """Render sample ``sample`` of every pixel into the film's frame buffer."""
+        args = self.scene.args(self.film.width, self.film.height)
+        for offset in range(0, self.film.pixels, self.wave_size):
+            count = min(self.wave_size, self.film.pixels - offset)
+            # fixed work-group size: PoCL compiles once per size; extra work-items return at once
+            g = -(-count // self.local_size) * self.local_size
+            ev = self.kernel(self.device.queue, (g,), (self.local_size,), *args, self.film.frame, self.film.dropped,
+                             np.uint32(seed), np.uint32(sample), np.int32(offset), np.int32(count),
+                             np.int32(self.max_depth))
+            self.profile.record("megakernel", ev)

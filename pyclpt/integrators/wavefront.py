@@ -1,0 +1,175 @@
+"""The wavefront (streaming) integrator: the path loop split into seven small
+kernels that pass paths to each other through compacted queues (``cl/*.cl``,
+one file per stage; see docs/wavefront.md).
+
+Per wave (a chunk of at most ``wave_size`` pixels of one sample index):
+
+    path_init -> [ intersect -> miss -> process_hit -> shadow_test
+                   -> light_contribution -> sample_bsdf ] per bounce
+
+Each method of :class:`Wavefront` named after a stage launches that stage's
+kernel. Paths in flight never exceed ``wave_size`` whatever the image size or
+spp, and the state of each path is stored in the SoA or AoS layout generated
+from :mod:`pyclpt.integrators.path_state`.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from pyclpt.device.context import Device, alloc
+from pyclpt.film.film import Film
+from pyclpt.integrators.path_state import PathStorage, bytes_per_path, opencl_header
+from pyclpt.device.profile import KernelProfile
+from pyclpt.device.program import build_program
+from pyclpt.buffers.scene import SceneBuffers
+
+STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf")
+QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")  # counter order, as Q_* in cl/integrators/wavefront/wavefront.h
+Q_COUNT = len(QUEUES)
+SCHEDULES = ("readback", "capacity")
+DEFAULT_WAVE_SIZE = 1 << 18
+CAPACITY_CHECK = 4
+
+
+class Wavefront:
+    name = "wavefront"
+
+    def __init__(self, device: Device, scene: SceneBuffers, film: Film, max_depth: int, *,
+                 layout: str = "soa", wave_size: int = DEFAULT_WAVE_SIZE, schedule: str = "readback",
+                 local_size: int = 64) -> None:
+        if schedule not in SCHEDULES:
+            raise ValueError(f"unknown wavefront schedule {schedule!r} ({', '.join(SCHEDULES)})")
+        if max_depth < 0:
+            raise ValueError("the wavefront needs a finite max_depth (the renderer caps -1)")
+        if wave_size < 1:
+            raise ValueError(f"wave_size must be positive, got {wave_size}")
+        self.device, self.scene, self.film = device, scene, film
+        self.max_depth, self.layout, self.schedule = max_depth, layout, schedule
+        self.local_size = local_size
+        self.capacity = min(wave_size, film.pixels)
+        self.paths = PathStorage(device, layout, self.capacity)
+        nbytes = 4 * self.capacity
+        self.ray_queues = [alloc(device, nbytes, "ray queue"), alloc(device, nbytes, "ray queue")]
+        self.hit_queue = alloc(device, nbytes, "hit queue")
+        self.miss_queue = alloc(device, nbytes, "miss queue")
+        self.shadow_queue = alloc(device, nbytes, "shadow queue")
+        self.light_queue = alloc(device, nbytes, "light-contribution queue")
+        self.counters = alloc(device, 4 * Q_COUNT * (max_depth + 2), "queue counters")
+        generated = {"path_state.h": opencl_header(layout)}
+        self.kernels = {s: cl.Kernel(build_program(device, [f"integrators/wavefront/{s}.cl"], generated=generated,
+                                                   defines=scene.defines), s) for s in STAGES}
+        self.profile = KernelProfile()
+        self._bounce_totals = np.zeros((max_depth + 2, Q_COUNT), np.int64)
+        self._counts = np.zeros((max_depth + 2, Q_COUNT), np.int32)
+
+    @property
+    def bytes_per_path(self) -> int:
+        """Path state plus one entry in each of the six queues."""
+        return bytes_per_path() + 6 * 4
+
+    # -- stages: each launches the kernel of the same name --------------------------
+    def _launch(self, stage: str, n: int, *args) -> None:
+        if n <= 0:
+            return
+        # A fixed work-group size: PoCL compiles a kernel once per work-group size, and the
+        # kernels ignore the work-items past their queue's count.
+        g = -(-n // self.local_size) * self.local_size
+        ev = self.kernels[stage](self.device.queue, (g,), (self.local_size,), *args)
+        self.profile.record(stage, ev)
+
+    def _common(self, bounce: int) -> tuple:
+        return (*self.paths.buffers, self.counters, np.int32(bounce))
+
+    def path_init(self, n: int, seed: int, sample: int, offset: int) -> None:
+        f = self.film
+        self._launch("path_init", n, *self._scene_args, *self._common(0), self.ray_queues[0], f.frame,
+                     f.dropped, np.uint32(seed), np.uint32(sample), np.int32(offset), np.int32(n),
+                     np.int32(self.max_depth))
+
+    def intersect(self, n: int, bounce: int, seed: int, sample: int) -> None:
+        self._launch("intersect", n, *self._scene_args, *self._common(bounce), self.ray_queues[bounce % 2],
+                     self.hit_queue, self.miss_queue, np.uint32(seed), np.uint32(sample))
+
+    def miss(self, n: int, bounce: int) -> None:
+        self._launch("miss", n, *self._scene_args, *self._common(bounce), self.miss_queue, self.film.frame,
+                     self.film.dropped)
+
+    def process_hit(self, n: int, bounce: int, seed: int, sample: int) -> None:
+        self._launch("process_hit", n, *self._scene_args, *self._common(bounce), self.hit_queue,
+                     self.shadow_queue, np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
+
+    def shadow_test(self, n: int, bounce: int, seed: int, sample: int) -> None:
+        self._launch("shadow_test", n, *self._scene_args, *self._common(bounce), self.shadow_queue,
+                     self.light_queue, np.uint32(seed), np.uint32(sample))
+
+    def light_contribution(self, n: int, bounce: int) -> None:
+        self._launch("light_contribution", n, *self._common(bounce), self.light_queue)
+
+    def sample_bsdf(self, n: int, bounce: int, seed: int, sample: int) -> None:
+        self._launch("sample_bsdf", n, *self._scene_args, *self._common(bounce), self.hit_queue,
+                     self.ray_queues[(bounce + 1) % 2], self.film.frame, self.film.dropped,
+                     np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
+
+    def warm_up(self) -> None:
+        """Launch every stage once with empty queues, so that the driver's lazy compilation
+        (PoCL builds a work-group function on first launch) is counted as compile time."""
+        self._scene_args = self.scene.args(self.film.width, self.film.height)
+        q = self.device.queue
+        cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
+        self.path_init(1, 0, 0, 0)
+        cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
+        for stage in STAGES[1:]:
+            getattr(self, stage)(*((1, 0) if stage in ("miss", "light_contribution") else (1, 0, 0, 0)))
+        cl.enqueue_fill_buffer(q, self.film.frame, np.float32(0), 0, 4 * 3 * self.film.pixels)
+        q.finish()
+        self.profile.clear()
+
+    # -- the host loop -------------------------------------------------------------
+    def render_frame(self, seed: int, sample: int) -> None:
+        """Render sample ``sample`` of every pixel into the film's frame buffer, wave by wave."""
+        self._scene_args = self.scene.args(self.film.width, self.film.height)
+        q = self.device.queue
+        for offset in range(0, self.film.pixels, self.capacity):
+            n = min(self.capacity, self.film.pixels - offset)
+            cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
+            self.path_init(n, seed, sample, offset)
+            rays = n if self.max_depth != 0 else 0
+            for bounce in range(self.max_depth):
+                if self.schedule == "readback":
+                    rays = self._read_count(bounce, 0)
+                    if rays == 0:
+                        break
+                else:
+                    # launch at capacity; kernels read their counts on the device. The host
+                    # looks at the ray count only every CAPACITY_CHECK bounces to stop early.
+                    rays = n
+                    if bounce and bounce % CAPACITY_CHECK == 0 and self._read_count(bounce, 0) == 0:
+                        break
+                self.intersect(rays, bounce, seed, sample)
+                self.miss(rays, bounce)
+                self.process_hit(rays, bounce, seed, sample)
+                self.shadow_test(rays, bounce, seed, sample)
+                self.light_contribution(rays, bounce)
+                self.sample_bsdf(rays, bounce, seed, sample)
+            cl.enqueue_copy(q, self._counts, self.counters)
+            self._bounce_totals += self._counts
+
+    def _read_count(self, bounce: int, queue: int) -> int:
+        out = np.zeros(1, np.int32)
+        cl.enqueue_copy(self.device.queue, out, self.counters,
+                        src_offset=4 * (bounce * Q_COUNT + queue))
+        return int(out[0])
+
+    def bounce_stats(self) -> list[dict[str, int]]:
+        """Per bounce since the last reset: paths alive (rays), hits, misses, shadow rays, unoccluded."""
+        rows = []
+        for b in range(self.max_depth + 1):
+            row = {"bounce": b, **{name: int(self._bounce_totals[b, i]) for i, name in enumerate(QUEUES)}}
+            if row["rays"] == 0 and b > 0:
+                break
+            rows.append(row)
+        return rows
+
+    def reset_stats(self) -> None:
+        self._bounce_totals[:] = 0

@@ -1,0 +1,310 @@
+"""Progressive rendering: one frame (one sample of every pixel) at a time, averaged on the
+device by the film's :class:`~pyclpt.film.accumulator.Accumulator`, with automatic reset when the
+scene changes.
+
+    pr = pyclpt.ProgressiveRenderer(scene, seed=0, precision="double")
+    for _ in range(64):
+        pr.step()                 # renders sample index pr.sample_index, then advances it
+        show(pr.image())          # the average so far
+    pr.set_camera(pyclpt.Camera.look_at(...))   # resets: the next frame is sample 0 again
+
+Sample indices: the k-th frame rendered since the last reset uses sample index k, so the
+image after N frames equals ``Renderer(scene).render(N, seed)`` bit for bit (same precision),
+and a run is reproducible from its seed. With ``overflow="reset"`` or ``"ema"`` the sample
+index keeps advancing past ``max_frame_count`` (each restart averages new samples); with
+``"stop"`` no more frames are rendered once the count is reached.
+
+Auto-reset: before the frames of every ``step``/``run`` call (the scene cannot change between
+the frames of one call) a fingerprint of the scene (camera, materials, emitters, geometry,
+resolution; numpy arrays by CRC-32 of their bytes: about 0.1 s for the 263k-triangle, 9-texture
+staircase) is compared with the one the device holds. A change rebuilds what is on the device and, with ``auto_reset`` (the default),
+restarts the accumulation at sample 0; camera jitter is part of each sample (its random
+numbers), not of the scene, so new frames never reset. Changing the scene dataclasses directly
+is detected the same way as the setters (:meth:`set_camera`, :meth:`set_material`,
+:meth:`set_emission`, :meth:`set_environment`, :meth:`set_meshes`, :meth:`set_resolution`).
+A resolution change always resets (the buffers change size).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+import zlib
+from collections import Counter
+from collections.abc import Hashable, Sequence
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from pyclpt.film.accumulator import Accumulator, check_options
+from pyclpt.device.context import Device
+from pyclpt.film.film import DEFAULT_PRECISION
+from pyclpt.rendering.renderer import Renderer, RenderStats
+from pyclpt.scene.model import Camera, Mesh, Scene, rgb
+
+log = logging.getLogger("pyclpt.rendering.progressive")
+
+# What each change of the scene is called; fields not listed are "scene", spp/name/source are ignored.
+SCENE_FIELDS = {"camera": "camera", "materials": "material", "environment": "emitter", "lights": "emitter",
+                "film": "resolution", "max_depth": "max_depth"}
+MESH_FIELDS = {"emission": "emitter", "material": "material"}  # all other mesh fields: "geometry"
+IGNORED_FIELDS = ("spp", "name", "source")
+CHANGE_KINDS = ("camera", "material", "emitter", "geometry", "resolution", "max_depth", "scene")
+
+
+def digest(obj: Any) -> Hashable:
+    """A hashable summary of a value: dataclasses field by field, sequences item by item,
+    numpy arrays by dtype, shape and the CRC-32 of their bytes."""
+    if isinstance(obj, np.ndarray):
+        data = np.ascontiguousarray(obj).reshape(-1).view(np.uint8)
+        return ("ndarray", obj.dtype.str, obj.shape, zlib.crc32(data))
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return (type(obj).__name__,) + tuple((f.name, digest(getattr(obj, f.name)))
+                                             for f in dataclasses.fields(obj))
+    if isinstance(obj, (list, tuple)):
+        return (type(obj).__name__,) + tuple(digest(x) for x in obj)
+    if isinstance(obj, dict):
+        return ("dict",) + tuple((k, digest(v)) for k, v in sorted(obj.items(), key=lambda kv: str(kv[0])))
+    if isinstance(obj, np.generic):
+        return obj.item()
+    try:
+        hash(obj)
+    except TypeError:
+        return (type(obj).__name__, repr(obj))
+    return obj
+
+
+def scene_fingerprint(scene: Scene, *, resolution: tuple[int, int] | None = None,
+                      max_depth: int | None = None) -> dict[str, Hashable]:
+    """The scene's state by kind of change (see CHANGE_KINDS). ``resolution`` / ``max_depth``:
+    the renderer's own overrides, which replace the scene's film / max_depth."""
+    parts: dict[str, list] = {k: [] for k in CHANGE_KINDS}
+    for f in dataclasses.fields(scene):
+        name = f.name
+        if name in IGNORED_FIELDS:
+            continue
+        value = getattr(scene, name)
+        if name == "meshes":
+            parts["geometry"].append(len(value))
+            for mesh in value:
+                for mf in dataclasses.fields(mesh):
+                    parts[MESH_FIELDS.get(mf.name, "geometry")].append((mf.name, digest(getattr(mesh, mf.name))))
+        elif name == "film" and resolution is not None:
+            parts["resolution"].append(tuple(resolution))
+        elif name == "max_depth" and max_depth is not None:
+            parts["max_depth"].append(max_depth)
+        else:
+            parts[SCENE_FIELDS.get(name, "scene")].append((name, digest(value)))
+    return {k: tuple(v) for k, v in parts.items()}
+
+
+class ProgressiveRenderer:
+    """A scene rendered one frame at a time into a device-side accumulation."""
+
+    def __init__(self, scene: Scene, *, seed: int = 0, integrator: str = "megakernel", layout: str = "soa",
+                 max_depth: int | None = None, width: int | None = None, height: int | None = None,
+                 device: Device | str | None = None, precision: str = DEFAULT_PRECISION,
+                 max_frame_count: int = 0, overflow: str = "stop", enabled: bool = True,
+                 auto_reset: bool = True, wave_size: int | None = None, local_size: int | None = None,
+                 schedule: str | None = None) -> None:
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) < 2**32:
+            raise ValueError(f"seed must be an integer in [0, 2**32), got {seed!r}")
+        if (width is None) != (height is None):
+            raise ValueError(f"give both width and height or neither, got width={width}, height={height}")
+        check_options(precision=precision, overflow=overflow, max_frame_count=max_frame_count, enabled=enabled)
+        self.scene = scene
+        self.seed = int(seed)
+        self.auto_reset = bool(auto_reset)
+        self._max_depth = max_depth
+        self._size = (int(width), int(height)) if width is not None else None
+        self._renderer_options = dict(integrator=integrator, layout=layout, device=device, wave_size=wave_size,
+                                      local_size=local_size, schedule=schedule, precision=precision)
+        self._accumulation = dict(max_frame_count=int(max_frame_count), overflow=overflow, enabled=bool(enabled))
+        self.sample_index = 0  # the sample index of the next frame
+        self.reset_count = 0
+        self.resets: Counter[str] = Counter()  # resets by reason (a change kind, or "explicit")
+        self.last_reset_reason: str | None = None
+        self.stats = RenderStats()
+        self.renderer: Renderer = self._make_renderer()
+        self._fingerprint = self.fingerprint()
+
+    # -- the device side -------------------------------------------------------------------------
+    def _make_renderer(self) -> Renderer:
+        w, h = self._size if self._size else (None, None)
+        r = Renderer(self.scene, max_depth=self._max_depth, width=w, height=h, **self._renderer_options)
+        r.film.accumulator.configure(**self._accumulation)
+        return r
+
+    @property
+    def device(self) -> Device:
+        return self.renderer.device
+
+    @property
+    def accumulator(self) -> Accumulator:
+        return self.renderer.film.accumulator
+
+    @property
+    def width(self) -> int:
+        return self.renderer.width
+
+    @property
+    def height(self) -> int:
+        return self.renderer.height
+
+    @property
+    def frame_count(self) -> int:
+        """Frames in the current average."""
+        return self.accumulator.frame_count
+
+    def fingerprint(self) -> dict[str, Hashable]:
+        return scene_fingerprint(self.scene, resolution=self._size, max_depth=self._max_depth)
+
+    def sync(self) -> list[str]:
+        """Compare the scene with what the device holds; on a change, rebuild the device side and
+        (with auto_reset, or always for a resolution change) reset. Returns the kinds that changed."""
+        fp = self.fingerprint()
+        changed = [k for k in CHANGE_KINDS if fp[k] != self._fingerprint[k]]
+        if not changed:
+            return []
+        t = time.perf_counter()
+        old = self.renderer
+        if changed == ["camera"]:  # only the per-resolution constants depend on the camera
+            self.renderer.scene_buffers.refresh_camera()
+        else:
+            self.renderer = self._make_renderer()  # scene buffers, integrator (its specialisation), film
+        self._fingerprint = fp
+        keep = not self.auto_reset and "resolution" not in changed
+        if keep:  # accumulate on: the old sum continues under the new scene
+            self.renderer.film.accumulator = old.film.accumulator
+        log.info("scene change (%s): device side rebuilt in %.3f s%s", ", ".join(changed),
+                 time.perf_counter() - t, "" if keep else ", accumulation reset")
+        if not keep:
+            self._restart(",".join(changed))
+        return changed
+
+    def _restart(self, reason: str) -> None:
+        self.renderer.film.clear()
+        self.sample_index = 0
+        self.reset_count += 1
+        self.resets[reason] += 1
+        self.last_reset_reason = reason
+
+    def reset(self) -> None:
+        """Start the accumulation over, from sample index 0."""
+        self._restart("explicit")
+
+    # -- setters: change the scene, then sync ------------------------------------------------------
+    def set_camera(self, camera: Camera) -> None:
+        if not isinstance(camera, Camera):
+            raise TypeError(f"set_camera expects a pyclpt.Camera, got {type(camera).__name__}")
+        self.scene.camera = camera
+        self.sync()
+
+    def set_material(self, index: int, material: Any) -> None:
+        n = len(self.scene.materials)
+        if not isinstance(index, (int, np.integer)) or not -n <= index < n:
+            raise IndexError(f"material index {index!r} out of range: the scene has {n} materials")
+        self.scene.materials[index] = material
+        self.sync()
+
+    def _mesh(self, mesh: int | str) -> Mesh:
+        meshes = self.scene.meshes
+        if isinstance(mesh, str):
+            for m in meshes:
+                if m.name == mesh:
+                    return m
+            raise KeyError(f"no mesh named {mesh!r} (meshes: {', '.join(m.name for m in meshes)})")
+        if not -len(meshes) <= mesh < len(meshes):
+            raise IndexError(f"mesh index {mesh} out of range: the scene has {len(meshes)} meshes")
+        return meshes[mesh]
+
+    def set_emission(self, mesh: int | str, radiance: object | None) -> None:
+        """The area-emitter radiance of a mesh (by index or name); None makes it not emit."""
+        m = self._mesh(mesh)
+        value = None if radiance is None else rgb(radiance, f"mesh {m.name!r} emission")
+        if value is not None and min(value) < 0:
+            raise ValueError(f"mesh {m.name!r}: negative emitted radiance {value}")
+        m.emission = value
+        self.sync()
+
+    def set_environment(self, radiance: object | None) -> None:
+        """The constant environment radiance (None: none)."""
+        self.scene.environment = None if radiance is None else rgb(radiance, "environment radiance")
+        self.sync()
+
+    def set_meshes(self, meshes: Sequence[Mesh]) -> None:
+        """Replace the geometry (every mesh's material must exist in the scene)."""
+        meshes = list(meshes)
+        if not meshes:
+            raise ValueError("set_meshes: a scene needs at least one mesh")
+        for m in meshes:
+            if not 0 <= m.material < len(self.scene.materials):
+                raise ValueError(f"mesh {m.name!r} has material {m.material}, but the scene has "
+                                 f"{len(self.scene.materials)} materials")
+        self.scene.meshes = meshes
+        self.sync()
+
+    def set_resolution(self, width: int, height: int) -> None:
+        for name, v in (("width", width), ("height", height)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 < v <= 65536:
+                raise ValueError(f"resolution {name} must be an integer in 1..65536, got {v!r}")
+        self._size = (int(width), int(height))
+        self.sync()
+
+    # -- rendering -------------------------------------------------------------------------------
+    def step(self, frames: int = 1) -> int:
+        """Render ``frames`` frames (fewer once overflow='stop' has reached max_frame_count).
+        The scene is checked for changes once, before the first: nothing can change it between
+        the frames of one call. Returns the number of frames rendered."""
+        if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 0:
+            raise ValueError(f"frames must be an integer >= 0, got {frames!r}")
+        self.sync()
+        done = 0
+        while done < int(frames) and self._frame():
+            done += 1
+        if done < int(frames):
+            self.accumulator.ignored_frames += int(frames) - done
+        return done
+
+    def _frame(self) -> bool:
+        """Render and accumulate the next sample index; False once the accumulator has stopped."""
+        if self.accumulator.stopped:
+            return False
+        if self.sample_index >= 2**32:
+            raise OverflowError(f"sample index {self.sample_index} does not fit the 32-bit counter; reset()")
+        self.renderer.integrator.render_frame(self.seed, self.sample_index)
+        self.renderer.film.add_frame()
+        self.sample_index += 1
+        return True
+
+    def image(self) -> np.ndarray:
+        """The current average, (H, W, 3) float32."""
+        return self.renderer.film.image()
+
+    def run(self, frames: int, progress: bool | None = None) -> np.ndarray:
+        """Render ``frames`` frames with a progress bar and return the image; ``stats`` describes the run.
+        ``progress``: True shows a bar, False never, None on runs longer than a few seconds."""
+        if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1:
+            raise ValueError(f"frames must be an integer >= 1, got {frames!r}")
+        self.sync()  # once: the scene cannot change during the run
+        r = self.renderer
+        r.integrator.profile.clear()
+        if hasattr(r.integrator, "reset_stats"):
+            r.integrator.reset_stats()
+        start = time.perf_counter()
+        done = 0
+        bar = tqdm(total=int(frames), desc=f"{self.scene.name} {r.integrator.name}", unit="frame",
+                   disable=(progress is False), delay=0 if progress else 3.0, leave=False)
+        with bar:
+            for _ in range(int(frames)):
+                if not self._frame():
+                    self.accumulator.ignored_frames += int(frames) - done
+                    break
+                done += 1
+                if progress is not False:
+                    self.device.queue.finish()
+                    bar.update(1)
+        image = self.image()
+        self.stats = self.renderer.collect_stats(self.frame_count, time.perf_counter() - start)
+        return image

@@ -1,0 +1,155 @@
+"""Rendering a scene: scene buffers + an integrator + the film, one sample per
+pixel per frame, frames averaged on the device.
+
+Frames are summed by the film's accumulator (:mod:`pyclpt.film.accumulator`) in double precision
+by default (``precision=``; emulated double-float on a device without fp64).
+:class:`pyclpt.rendering.progressive.ProgressiveRenderer` renders frame by frame with auto-reset.
+
+Seed contract: the image is a pure function of (scene, seed, spp, max_depth,
+resolution). Sample ``s`` of pixel ``p`` draws its random numbers from the
+counter-based generator keyed by (seed, p, s, bounce, dimension) whatever
+integrator, layout or wave size renders it, so integrators can be compared
+image to image.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from pyclpt.device.context import Device, get_device
+from pyclpt.film.film import DEFAULT_PRECISION, Film
+from pyclpt.integrators.megakernel import Megakernel
+from pyclpt.scene.model import Scene
+from pyclpt.buffers.scene import SceneBuffers
+
+log = logging.getLogger("pyclpt")
+
+INTEGRATORS = ("megakernel", "wavefront")
+# max_depth -1 (unlimited: paths end by Russian roulette) runs as this many bounces at most.
+UNLIMITED_DEPTH = 1024
+LAYOUTS = ("soa", "aos")
+
+
+@dataclass
+class RenderStats:
+    spp: int = 0
+    seconds: float = 0.0  # device + host time of the frames, compile and scene setup excluded
+    compile_seconds: float = 0.0
+    setup_seconds: float = 0.0  # scene packing (BVH build or cache load) and upload
+    dropped_samples: int = 0  # NaN/inf samples dropped
+    kernels: list[dict] = field(default_factory=list)
+    bounces: list[dict] = field(default_factory=list)
+    memory: dict = field(default_factory=dict)  # wavefront: wave size, bytes per path, path-state bytes
+    accumulation: dict = field(default_factory=dict)  # Accumulator.stats(): precision, frames, counters
+
+
+class Renderer:
+    """A scene prepared on a device for one integrator and resolution."""
+
+    def __init__(self, scene: Scene, *, integrator: str = "megakernel", layout: str = "soa",
+                 max_depth: int | None = None, width: int | None = None, height: int | None = None,
+                 device: Device | str | None = None, wave_size: int | None = None,
+                 local_size: int | None = None, schedule: str | None = None,
+                 precision: str = DEFAULT_PRECISION) -> None:
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+        if layout not in LAYOUTS:
+            raise ValueError(f"unknown layout {layout!r} (choose from {', '.join(LAYOUTS)})")
+        self.scene = scene
+        self.device = get_device(device)
+        self.max_depth = scene.max_depth if max_depth is None else int(max_depth)
+        if self.max_depth < -1:
+            raise ValueError(f"max_depth must be -1 (unlimited) or >= 0, got {self.max_depth}")
+        self.width = int(width or scene.film.width)
+        self.height = int(height or scene.film.height)
+        if not (0 < self.width <= 65536 and 0 < self.height <= 65536):
+            raise ValueError(f"resolution must be 1..65536 pixels a side, got {self.width}x{self.height}")
+        self.depth_limit = UNLIMITED_DEPTH if self.max_depth == -1 else self.max_depth
+        self.stats = RenderStats()
+        t0 = time.perf_counter()
+        self.scene_buffers = SceneBuffers(scene, self.device)
+        self.device.queue.finish()
+        t1 = time.perf_counter()
+        self.film = Film(self.device, self.width, self.height, precision=precision)
+        options: dict = {"wave_size": wave_size} if wave_size else {}
+        if local_size:
+            options["local_size"] = int(local_size)
+        if integrator == "megakernel":
+            self.integrator = Megakernel(self.device, self.scene_buffers, self.film, self.depth_limit, **options)
+        else:
+            from pyclpt.integrators.wavefront import Wavefront
+
+            if schedule:
+                options["schedule"] = schedule
+            self.integrator = Wavefront(self.device, self.scene_buffers, self.film, self.depth_limit,
+                                        layout=layout, **options)
+        self.integrator.warm_up()
+        self.film.warm_up()
+        # setup: scene packing (BVH build or cache load) and upload;
+        # compile: program builds plus the driver's lazy compilation on the first launches
+        self.stats.setup_seconds = t1 - t0
+        self.stats.compile_seconds = time.perf_counter() - t1
+
+    def render(self, spp: int, seed: int = 0, progress: bool | None = None, first_sample: int = 0) -> np.ndarray:
+        """Average of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float32."""
+        if int(spp) < 1:
+            raise ValueError(f"spp must be >= 1, got {spp}")
+        if not 0 <= int(seed) < 2**32:
+            raise ValueError(f"seed must be in [0, 2**32), got {seed}")
+        self.film.clear()
+        self.integrator.profile.clear()
+        if hasattr(self.integrator, "reset_stats"):
+            self.integrator.reset_stats()
+        start = time.perf_counter()
+        bar = tqdm(total=spp, desc=f"{self.scene.name} {self.integrator.name}", unit="spp",
+                   disable=(progress is False), delay=0 if progress else 3.0, leave=False)
+        with bar:
+            for s in range(first_sample, first_sample + spp):
+                self.integrator.render_frame(int(seed), s)
+                self.film.add_frame()
+                if progress is not False:
+                    self.device.queue.finish()
+                    bar.update(1)
+        image = self.film.image()
+        self.collect_stats(spp, time.perf_counter() - start)
+        return image
+
+    def collect_stats(self, spp: int, seconds: float) -> RenderStats:
+        """Fill ``stats`` after frames were rendered (profile, bounces, memory, counters); returns it."""
+        self.stats.spp = spp
+        self.stats.seconds = seconds
+        self.stats.dropped_samples = self.film.dropped_samples()
+        self.stats.accumulation = self.film.accumulator.stats()
+        self.stats.kernels = self.integrator.profile.table()
+        self.stats.bounces = getattr(self.integrator, "bounce_stats", lambda: [])()
+        if hasattr(self.integrator, "paths"):
+            self.stats.memory = {"wave_size": self.integrator.capacity,
+                                 "bytes_per_path": self.integrator.bytes_per_path,
+                                 "path_state_bytes": self.integrator.paths.nbytes}
+        if self.stats.dropped_samples:
+            log.warning("%s: dropped %d NaN/inf samples", self.scene.name, self.stats.dropped_samples)
+        return self.stats
+
+
+def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = None, seed: int = 0,
+           integrator: str = "megakernel", width: int | None = None, height: int | None = None,
+           device: Device | str | None = None, layout: str = "soa", progress: bool | None = None,
+           wave_size: int | None = None, precision: str = DEFAULT_PRECISION) -> np.ndarray:
+    """Render ``scene`` (a Scene or a built-in scene name / file) to a (H, W, 3) float32 linear image.
+
+    ``spp`` and ``max_depth`` default to the scene's; ``width``/``height`` override its film.
+    ``progress``: True shows a bar, False never, None shows one on renders longer than a few seconds.
+    ``precision``: how the frames are summed (``single``, ``compensated``, ``double``; see
+    :mod:`pyclpt.film.accumulator`).
+    """
+    if isinstance(scene, str):
+        from pyclpt.scene.library import load
+
+        scene = load(scene)
+    r = Renderer(scene, integrator=integrator, layout=layout, max_depth=max_depth, width=width,
+                 height=height, device=device, wave_size=wave_size, precision=precision)
+    return r.render(scene.spp if spp is None else spp, seed=seed, progress=progress)
