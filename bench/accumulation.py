@@ -25,8 +25,8 @@ import numpy as np
 import pyopencl as cl
 
 import pyclpt
-from pyclpt.film.accumulator import IMPLEMENTATIONS, Accumulator
 from pyclpt.device.program import build_program
+from pyclpt.film.accumulator import IMPLEMENTATIONS, Accumulator
 
 
 def settings(batch: int) -> list[dict]:

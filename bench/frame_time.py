@@ -53,7 +53,7 @@ def main() -> None:
     print(f"# {scene.triangle_count} triangles\n")
     for depth in a.depths:
         base = None
-        print(f"| depth | integrator | layout | median ms | min | max | device ms | speed-up | compile s |")
+        print("| depth | integrator | layout | median ms | min | max | device ms | speed-up | compile s |")
         print("|---|---|---|---|---|---|---|---|---|")
         for integrator, layout in CONFIGS:
             r = pyclpt.Renderer(scene, integrator=integrator, layout=layout, max_depth=depth,

@@ -12,17 +12,32 @@ progressive rendering: :mod:`pyclpt.rendering.progressive`) -> image (:mod:`pycl
 """
 from __future__ import annotations
 
-from pyclpt.film.accumulator import Accumulator, AccumulatorError
-from pyclpt.device.context import Device, DeviceError, default_device, get_device, list_devices, open_device
 from pyclpt.common.image_io import read_image, write_image
-from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
-from pyclpt.scene.mitsuba_xml import SceneXMLError, load_xml
+from pyclpt.device.context import Device, DeviceError, default_device, get_device, list_devices, open_device
 from pyclpt.device.program import KernelBuildError
+from pyclpt.film.accumulator import Accumulator, AccumulatorError
 from pyclpt.rendering.progressive import ProgressiveRenderer
 from pyclpt.rendering.renderer import Renderer, RenderStats, render
-from pyclpt.scene.model import (Bitmap, BumpMap, Camera, Checkerboard, Conductor, Dielectric, Diffuse, Envmap, Film, Mask, Mesh,
-                    Plastic, PointLight, Scene, ThinDielectric)
 from pyclpt.scene.library import builtin_scenes, load
+from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
+from pyclpt.scene.mitsuba_xml import SceneXMLError, load_xml
+from pyclpt.scene.model import (
+                    Bitmap,
+                    BumpMap,
+                    Camera,
+                    Checkerboard,
+                    Conductor,
+                    Dielectric,
+                    Diffuse,
+                    Envmap,
+                    Film,
+                    Mask,
+                    Mesh,
+                    Plastic,
+                    PointLight,
+                    Scene,
+                    ThinDielectric,
+)
 
 __version__ = "0.1.0"
 

@@ -11,9 +11,9 @@ import pyopencl as cl
 import pytest
 
 import pyclpt
-from pyclpt.film.accumulator import UNSAFE_MATH_OPTIONS, Accumulator, AccumulatorError
 from pyclpt.cli import main
 from pyclpt.device.program import build_program
+from pyclpt.film.accumulator import UNSAFE_MATH_OPTIONS, Accumulator, AccumulatorError
 
 MODES = [("single", False), ("compensated", False), ("double", False), ("double", True)]
 MODE_IDS = ["single", "compensated", "double", "double-float"]

@@ -24,13 +24,25 @@ cl = pytest.importorskip("pyopencl")
 pytest.importorskip("scipy.stats")  # test_sampling needs it
 special = pytest.importorskip("scipy.special")
 
-from test_sampling import (N_COS, PHI_I, Kit, Out, chi2_pvalue, direction, fresnel_ref,  # noqa: E402
-                           histogram_sphere, integrate_cells, random_directions, sphere_quadrature, uniform,
-                           RECIPROCITY_MATERIALS)
+from test_sampling import (  # noqa: E402
+    N_COS,
+    PHI_I,
+    RECIPROCITY_MATERIALS,
+    Kit,
+    Out,
+    chi2_pvalue,
+    direction,
+    fresnel_ref,
+    histogram_sphere,
+    integrate_cells,
+    random_directions,
+    sphere_quadrature,
+    uniform,
+)
 
-from pyclpt.scene.mitsuba_dict import METALS  # noqa: E402
 from pyclpt.buffers.materials import MAT_FDR_INT, MAT_RP_TRANS, fresnel_dielectric, pack_material  # noqa: E402
 from pyclpt.buffers.microfacet import RP_KNOTS, rough_reflectance, rough_transmittance  # noqa: E402
+from pyclpt.scene.mitsuba_dict import METALS  # noqa: E402
 from pyclpt.scene.model import Conductor, Dielectric, Plastic, ThinDielectric  # noqa: E402
 
 FLIP = np.float32([1, 1, -1])

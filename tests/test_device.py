@@ -8,8 +8,19 @@ import pyopencl as cl
 import pytest
 
 import pyclpt
-from pyclpt.device.context import (INSTALL_HINT, BufferTooLarge, Device, DeviceError, alloc, check_alloc,
-                           default_device, get_device, list_devices, open_device, upload)
+from pyclpt.device.context import (
+    INSTALL_HINT,
+    BufferTooLarge,
+    Device,
+    DeviceError,
+    alloc,
+    check_alloc,
+    default_device,
+    get_device,
+    list_devices,
+    open_device,
+    upload,
+)
 
 
 def _pocl_entries():

@@ -14,13 +14,21 @@ import numpy as np
 import pytest
 
 import pyclpt
-from pyclpt.buffers.lights import (LIGHT_CDF, LIGHT_ENVMAP, LIGHT_PMF, LIGHT_POINT, LIGHT_PRIM, LIGHT_TRIANGLE,
-                                  LIGHT_TYPE, envmap_cells, pack_lights)
+from pyclpt.buffers.lights import (
+    LIGHT_CDF,
+    LIGHT_ENVMAP,
+    LIGHT_PMF,
+    LIGHT_POINT,
+    LIGHT_PRIM,
+    LIGHT_TRIANGLE,
+    LIGHT_TYPE,
+    envmap_cells,
+    pack_lights,
+)
 from pyclpt.buffers.materials import TextureTable
-from pyclpt.scene.model import Envmap, PointLight
 from pyclpt.buffers.scene import SceneBuffers, pack_scene
-from pyclpt.scene.sunsky import (SUN_RADIUS_DEG, _row_hat_solid_angle, sun_radiance_rgb, sunsky_envmap,
-                           texel_directions)
+from pyclpt.scene.model import Envmap, PointLight
+from pyclpt.scene.sunsky import SUN_RADIUS_DEG, _row_hat_solid_angle, sun_radiance_rgb, sunsky_envmap, texel_directions
 from pyclpt.scene.transform import rotate
 from scenes import FRONT_CAMERA, object_under_sky, sensor
 

@@ -14,10 +14,18 @@ import pytest
 import pyclpt
 from pyclpt import cli
 from pyclpt.scene import transform as tf
-from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
 from pyclpt.scene.mesh_io import MeshLoadError
-from pyclpt.scene.mitsuba_xml import (WHERE, SceneXMLError, blackbody_to_rgb, load_xml, spectrum_to_rgb,
-                                srgb_to_linear, to_snake_case, xml_to_dict)
+from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
+from pyclpt.scene.mitsuba_xml import (
+    WHERE,
+    SceneXMLError,
+    blackbody_to_rgb,
+    load_xml,
+    spectrum_to_rgb,
+    srgb_to_linear,
+    to_snake_case,
+    xml_to_dict,
+)
 from pyclpt.scene.serialized import read_serialized
 
 

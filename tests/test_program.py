@@ -7,8 +7,7 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from pyclpt.device.program import (KernelBuildError, assemble, build_program, cl_dir, compile_seconds,
-                            define_options)
+from pyclpt.device.program import KernelBuildError, assemble, build_program, cl_dir, compile_seconds, define_options
 
 
 def _unique(tag: str) -> str:
@@ -43,7 +42,8 @@ def test_assemble_resolves_each_header_once_in_dependency_order():
     # every file starts exactly once
     assert len(markers) == len(set(markers)), markers
     assert markers[0] == "cl/integrators/megakernel.cl"
-    for header in ("cl/core/common.h", "cl/integrators/path.h", "cl/scene/bsdf.h", "cl/core/sampling.h", "cl/core/rng.h"):
+    for header in ("cl/core/common.h", "cl/integrators/path.h", "cl/scene/bsdf.h", "cl/core/sampling.h",
+                   "cl/core/rng.h"):
         assert header in markers
     # common.h (included by everything) comes before the headers that include it
     assert markers.index("cl/core/common.h") < markers.index("cl/scene/bsdf.h")

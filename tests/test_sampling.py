@@ -14,10 +14,10 @@ import pytest
 cl = pytest.importorskip("pyopencl")
 stats = pytest.importorskip("scipy.stats")
 
-from pyclpt.scene.mitsuba_dict import METALS  # noqa: E402
-from pyclpt.device.program import build_program  # noqa: E402
-from pyclpt.scene.model import Conductor, Dielectric, Diffuse  # noqa: E402
 from pyclpt.buffers.materials import pack_material  # noqa: E402
+from pyclpt.device.program import build_program  # noqa: E402
+from pyclpt.scene.mitsuba_dict import METALS  # noqa: E402
+from pyclpt.scene.model import Conductor, Dielectric, Diffuse  # noqa: E402
 
 KERNELS = r"""
 #include "core/rng.h"

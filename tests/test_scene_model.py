@@ -11,9 +11,9 @@ import pytest
 
 import pyclpt
 from pyclpt.scene import transform as tf
+from pyclpt.scene.library import builtin_scenes
 from pyclpt.scene.mitsuba_dict import METALS, SceneDictError, load_dict
 from pyclpt.scene.model import Camera, Conductor, Dielectric, Diffuse, Film, Mesh, Scene
-from pyclpt.scene.library import builtin_scenes
 
 
 def _geometric_normals(mesh: Mesh) -> np.ndarray:

@@ -139,7 +139,8 @@ CreateNodeFunc = ctypes.CFUNCTYPE(c_void_p, c_void_p, c_uint, c_void_p)
 SetNodeChildrenFunc = ctypes.CFUNCTYPE(None, c_void_p, POINTER(c_void_p), c_uint, c_void_p)
 #   void setNodeBounds(void* nodePtr, const struct RTCBounds** bounds, unsigned int childCount, void* userPtr)
 SetNodeBoundsFunc = ctypes.CFUNCTYPE(None, c_void_p, POINTER(c_void_p), c_uint, c_void_p)
-#   void* createLeaf(RTCThreadLocalAllocator alloc, const struct RTCBuildPrimitive* prims, size_t primitiveCount, void* userPtr)
+#   void* createLeaf(RTCThreadLocalAllocator alloc, const struct RTCBuildPrimitive* prims,
+#                    size_t primitiveCount, void* userPtr)
 CreateLeafFunc = ctypes.CFUNCTYPE(c_void_p, c_void_p, c_void_p, c_size_t, c_void_p)
 #   void splitPrimitive(const struct RTCBuildPrimitive* prim, unsigned int dim, float pos,
 #                       struct RTCBounds* lbounds, struct RTCBounds* rbounds, void* userPtr)

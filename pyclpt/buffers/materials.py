@@ -13,8 +13,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.buffers.microfacet import RP_KNOTS, fresnel, roughplastic_tables
-from pyclpt.scene.model import (Bitmap, BumpMap, Checkerboard, Color, Conductor, Dielectric, Diffuse, Mask, Material,
-                    Plastic, ThinDielectric, base_material)
+from pyclpt.scene.model import (
+    Bitmap,
+    BumpMap,
+    Checkerboard,
+    Color,
+    Conductor,
+    Dielectric,
+    Diffuse,
+    Mask,
+    Material,
+    Plastic,
+    ThinDielectric,
+    base_material,
+)
 
 MAT_STRIDE = 32
 MAT_TYPES = {"diffuse": 0, "conductor": 1, "roughconductor": 2, "dielectric": 3, "roughdielectric": 4,

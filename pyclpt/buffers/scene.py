@@ -15,9 +15,9 @@ import numpy as np
 import pyopencl as cl
 
 from pyclpt.accel.bvh import FlatBVH, build_bvh
-from pyclpt.device.context import Device, upload
-from pyclpt.buffers.lights import CONST_COUNT, LightArrays, camera_consts, pack_lights
+from pyclpt.buffers.lights import LightArrays, camera_consts, pack_lights
 from pyclpt.buffers.materials import MAT_STRIDE, TextureTable, pack_material, pack_materials  # noqa: F401
+from pyclpt.device.context import Device, upload
 from pyclpt.scene.model import Scene
 
 TRI_HAS_NORMALS = 1 << 24
@@ -78,8 +78,8 @@ def pack_scene(scene: Scene) -> SceneArrays:
         emission.append(np.tile(np.asarray(em, np.float32), (mesh.triangle_count, 1)))
         offset += nv
     P = np.concatenate(positions)
-    I = np.concatenate(indices)
-    bvh = build_bvh(P, I)
+    tris = np.concatenate(indices)
+    bvh = build_bvh(P, tris)
     order = bvh.tri_order
     bounds = np.stack([P.min(0), P.max(0)])
     lights = pack_lights(scene, bvh.tris.reshape(-1, 9), np.concatenate(emission)[order], bounds, mats.textures)
@@ -89,7 +89,7 @@ def pack_scene(scene: Scene) -> SceneArrays:
     return SceneArrays(
         bvh=bvh,
         tri_info=tri_info,
-        tri_vidx=np.ascontiguousarray(I[order]),
+        tri_vidx=np.ascontiguousarray(tris[order]),
         vnormals=np.concatenate(normals).astype(np.float32),
         vuvs=np.concatenate(uvs).astype(np.float32),
         materials=mats.materials,

@@ -3,5 +3,15 @@ assembled from ``cl/`` with ``#line`` markers and ``-D`` specialisations (``prog
 timing (``profile``).
 
 May import: :mod:`pyclpt.common`. Knows nothing of scenes."""
-from pyclpt.device.context import (BufferTooLarge, Device, DeviceError, alloc, check_alloc,  # noqa: F401
-                                   default_device, get_device, list_devices, open_device, upload)
+from pyclpt.device.context import (  # noqa: F401
+                                   BufferTooLarge,
+                                   Device,
+                                   DeviceError,
+                                   alloc,
+                                   check_alloc,
+                                   default_device,
+                                   get_device,
+                                   list_devices,
+                                   open_device,
+                                   upload,
+)

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.film.accumulator import Accumulator
 from pyclpt.device.context import Device, alloc
+from pyclpt.film.accumulator import Accumulator
 
 # Renderer.render's precision: the sum of the samples in double (emulated double-float on a device
 # without cl_khr_fp64), so a long render's mean is as exact as its float samples allow; the

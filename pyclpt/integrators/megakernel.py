@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from pyclpt.buffers.scene import SceneBuffers
 from pyclpt.device.context import Device
-from pyclpt.film.film import Film
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
-from pyclpt.buffers.scene import SceneBuffers
+from pyclpt.film.film import Film
 
 
 class Megakernel:
@@ -24,7 +24,8 @@ class Megakernel:
         self.max_depth = max_depth
         self.wave_size = wave_size
         self.local_size = local_size
-        self.kernel = cl.Kernel(build_program(device, ["integrators/megakernel.cl"], defines=scene.defines), "megakernel")
+        program = build_program(device, ["integrators/megakernel.cl"], defines=scene.defines)
+        self.kernel = cl.Kernel(program, "megakernel")
         self.profile = KernelProfile()
 
     def warm_up(self) -> None:

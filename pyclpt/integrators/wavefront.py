@@ -17,15 +17,16 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from pyclpt.buffers.scene import SceneBuffers
 from pyclpt.device.context import Device, alloc
-from pyclpt.film.film import Film
-from pyclpt.integrators.path_state import PathStorage, bytes_per_path, opencl_header
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
-from pyclpt.buffers.scene import SceneBuffers
+from pyclpt.film.film import Film
+from pyclpt.integrators.path_state import PathStorage, bytes_per_path, opencl_header
 
 STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf")
-QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")  # counter order, as Q_* in cl/integrators/wavefront/wavefront.h
+# counter order, as Q_* in cl/integrators/wavefront/wavefront.h
+QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")
 Q_COUNT = len(QUEUES)
 SCHEDULES = ("readback", "capacity")
 DEFAULT_WAVE_SIZE = 1 << 18

@@ -17,10 +17,11 @@ index keeps advancing past ``max_frame_count`` (each restart averages new sample
 Auto-reset: before the frames of every ``step``/``run`` call (the scene cannot change between
 the frames of one call) a fingerprint of the scene (camera, materials, emitters, geometry,
 resolution; numpy arrays by CRC-32 of their bytes: about 0.1 s for the 263k-triangle, 9-texture
-staircase) is compared with the one the device holds. A change rebuilds what is on the device and, with ``auto_reset`` (the default),
-restarts the accumulation at sample 0; camera jitter is part of each sample (its random
-numbers), not of the scene, so new frames never reset. Changing the scene dataclasses directly
-is detected the same way as the setters (:meth:`set_camera`, :meth:`set_material`,
+staircase) is compared with the one the device holds. A change rebuilds what is on the device
+and, with ``auto_reset`` (the default), restarts the accumulation at sample 0; camera jitter is
+part of each sample (its random numbers), not of the scene, so new frames never reset.
+Changing the scene dataclasses directly is detected the same way as the setters
+(:meth:`set_camera`, :meth:`set_material`,
 :meth:`set_emission`, :meth:`set_environment`, :meth:`set_meshes`, :meth:`set_resolution`).
 A resolution change always resets (the buffers change size).
 """
@@ -37,8 +38,8 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from pyclpt.film.accumulator import Accumulator, check_options
 from pyclpt.device.context import Device
+from pyclpt.film.accumulator import Accumulator, check_options
 from pyclpt.film.film import DEFAULT_PRECISION
 from pyclpt.rendering.renderer import Renderer, RenderStats
 from pyclpt.scene.model import Camera, Mesh, Scene, rgb

@@ -20,11 +20,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm.auto import tqdm
 
+from pyclpt.buffers.scene import SceneBuffers
 from pyclpt.device.context import Device, get_device
 from pyclpt.film.film import DEFAULT_PRECISION, Film
 from pyclpt.integrators.megakernel import Megakernel
 from pyclpt.scene.model import Scene
-from pyclpt.buffers.scene import SceneBuffers
 
 log = logging.getLogger("pyclpt")
 

@@ -660,7 +660,8 @@ def _ply_via_trimesh(data: bytes, name: str) -> tuple[dict[str, np.ndarray], np.
         except Exception:
             texcoord = None
         if texcoord is None or texcoord.dtype == object or texcoord.shape != (nf, 6) or len(faces) != nf:
-            warnings.warn(f"{name}: per-face texcoords are only supported on triangle meshes; UVs ignored")
+            warnings.warn(f"{name}: per-face texcoords are only supported on triangle meshes; UVs ignored",
+                          stacklevel=2)
             texcoord = None
     return columns, faces, texcoord
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Union
 
 import numpy as np
 
@@ -121,9 +120,9 @@ class Checkerboard:
         self.scale = rgb(self.scale, f"texture {self.name!r} scale")
 
 
-Texture = Union[Bitmap, Checkerboard]
+Texture = Bitmap | Checkerboard
 # A material parameter: a constant RGB or a texture.
-Color = Union[RGB, Bitmap, Checkerboard]
+Color = RGB | Bitmap | Checkerboard
 
 
 def color(value: object, what: str) -> Color:
@@ -246,7 +245,7 @@ class Plastic:
         self.distribution = _distribution(self.distribution, "plastic")
 
 
-BaseMaterial = Union[Diffuse, Conductor, Dielectric, ThinDielectric, Plastic]
+BaseMaterial = Diffuse | Conductor | Dielectric | ThinDielectric | Plastic
 
 
 @dataclass
@@ -255,7 +254,7 @@ class Mask:
     ray passes through (honoured by closest-hit and shadow queries alike)."""
 
     opacity: Color
-    material: "Material"
+    material: Material
 
     def __post_init__(self) -> None:
         self.opacity = color(self.opacity, "mask opacity")
@@ -266,11 +265,11 @@ class BumpMap:
     """Mitsuba ``bumpmap``: the shading normal perturbed by the gradient of a height texture."""
 
     height: Texture
-    material: "Material"
+    material: Material
     scale: float = 1.0
 
 
-Material = Union[Diffuse, Conductor, Dielectric, ThinDielectric, Plastic, Mask, BumpMap]
+Material = Diffuse | Conductor | Dielectric | ThinDielectric | Plastic | Mask | BumpMap
 
 
 @dataclass
@@ -389,7 +388,7 @@ class Camera:
             raise ValueError(f"camera fov_axis must be x, y, diagonal, smaller or larger, got {self.fov_axis!r}")
 
     @staticmethod
-    def look_at(origin, target, up=(0.0, 1.0, 0.0), fov: float = 45.0, fov_axis: str = "x") -> "Camera":
+    def look_at(origin, target, up=(0.0, 1.0, 0.0), fov: float = 45.0, fov_axis: str = "x") -> Camera:
         from pyclpt.scene.transform import look_at
 
         return Camera(look_at(origin, target, up), fov, fov_axis)

@@ -25,8 +25,27 @@ import numpy as np
 
 from pyclpt.scene import shapes as shape_lib
 from pyclpt.scene import transform as tf
-from pyclpt.scene.model import (RGB, Bitmap, BumpMap, Camera, Checkerboard, Color, Conductor, Dielectric, Diffuse, Envmap,
-                    Film, Mask, Material, Mesh, Plastic, PointLight, Scene, ThinDielectric, rgb)
+from pyclpt.scene.model import (
+    RGB,
+    Bitmap,
+    BumpMap,
+    Camera,
+    Checkerboard,
+    Color,
+    Conductor,
+    Dielectric,
+    Diffuse,
+    Envmap,
+    Film,
+    Mask,
+    Material,
+    Mesh,
+    Plastic,
+    PointLight,
+    Scene,
+    ThinDielectric,
+    rgb,
+)
 
 # Complex IORs (eta, k) of Mitsuba's named conductors, as RGB: the values Mitsuba 3.9.1's own
 # `conductor` reports in its scalar_rgb variant (its tabulated spectra converted to sRGB), so a
@@ -83,7 +102,7 @@ SENSOR_TYPES = {"perspective", "thinlens", "orthographic", "radiancemeter", "irr
 INTEGRATOR_TYPES = {"path", "volpath", "volpathmis", "direct", "aov", "sppm", "bdpt", "pssmlt", "mlt", "erpt",
                     "ptracer", "photonmapper", "ppm", "vpl", "ao", "prb", "prb_basic", "direct_projective",
                     "prb_projective", "stokes", "moment", "depth", "field", "adaptive", "irrcache",
-                    "multichannel", "volpath_simple", "volpathmis"}
+                    "multichannel", "volpath_simple"}
 OTHER_TOP_TYPES = {"homogeneous", "heterogeneous", "isotropic", "hg", "medium"}
 # XML tags of elements pyclpt does not use (mitsuba_xml keys untyped objects by their tag)
 OTHER_TAGS = {"medium", "phase", "volume", "subsurface", "film", "sampler", "rfilter"}
@@ -343,7 +362,8 @@ class _Loader:
             au = self.number(d, "alpha_u", 0.1, where)
             av = self.number(d, "alpha_v", au, where)
             if au != av:
-                self.note(d, where, f"anisotropic roughness ({au}, {av}) not supported; alpha {np.sqrt(au * av):.4g} used")
+                self.note(d, where, f"anisotropic roughness ({au}, {av}) not supported; "
+                                    f"alpha {np.sqrt(au * av):.4g} used")
             alpha = float(np.sqrt(au * av))
         else:
             alpha = self.number(d, "alpha", 0.1, where)
@@ -479,7 +499,8 @@ class _Loader:
         bsdfs = [(k, v) for k, v in d.items() if _is_dict(v) and k not in _META_KEYS and (
             k.startswith("bsdf") or self.deref(v, f"{where}.{k}").get("type") in BSDF_TYPES | OTHER_BSDF_TYPES)]
         emitters = [(k, v) for k, v in d.items() if _is_dict(v) and k not in _META_KEYS and (
-            k.startswith("emitter") or self.deref(v, f"{where}.{k}").get("type") in EMITTER_TYPES | OTHER_EMITTER_TYPES)]
+            k.startswith("emitter")
+            or self.deref(v, f"{where}.{k}").get("type") in EMITTER_TYPES | OTHER_EMITTER_TYPES)]
         others = [k for k, v in d.items() if k not in _META_KEYS and _is_dict(v)
                   and k not in {b for b, _ in bsdfs} | {e for e, _ in emitters} and k not in used]
         for k in others:
@@ -727,7 +748,7 @@ class _Loader:
         rfilter = next((v for v in f.values() if _is_dict(v)), None)
         self.note_unused(f"{where}.film", {k: v for k, v in f.items() if v is not rfilter},
                          {"width", "height", "pixel_format", "component_format", "file_format", "banner",
-                          "high_quality_edges", "pixel_format", "rfilter"})
+                          "high_quality_edges", "rfilter"})
         if rfilter is not None and rfilter.get("type", "box") != "box":
             self.note(rfilter, f"{where}.film.rfilter", f"reconstruction filter {rfilter.get('type')!r}: "
                                                         "box filter used")

@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from pyclpt.scene import transform as tf
 from pyclpt.common.image_io import srgb_to_linear
+from pyclpt.scene import transform as tf
 from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
 from pyclpt.scene.model import Scene
 
