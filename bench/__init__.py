@@ -13,4 +13,6 @@
 
 The scripts ``frame_time.py``, ``variants.py`` and ``bvh_build.py`` run from a checkout
 (``python bench/frame_time.py``).
+
+The top layer beside the CLI: may import every layer of pyclpt; nothing in pyclpt imports it.
 """

@@ -1,0 +1,24 @@
+/* diffuse.h: Mitsuba 3's `diffuse` (MAT_DIFFUSE, src/bsdfs/diffuse.cpp): Lambertian reflection of
+ * the diffuse reflectance b->color, cosine-weighted sampling. One-sided: scene/bsdf.h, which
+ * includes this file after the Bsdf record, calls it with wi.z > 0 (and wo.z > 0 for eval). */
+#ifndef PYCLPT_BSDF_H
+#error "diffuse.h is part of scene/bsdf.h: include that instead"
+#endif
+#ifndef PYCLPT_BSDFS_DIFFUSE_H
+#define PYCLPT_BSDFS_DIFFUSE_H
+
+#include "core/sampling.h"
+
+static inline float3 diffuse_eval(const Bsdf* b, float3 wi, float3 wo, float* pdf) {
+    *pdf = cosine_hemisphere_pdf(wo);
+    return b->color * (INV_PI_F * wo.z);
+}
+
+static inline bool diffuse_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+    s->wo = square_to_cosine_hemisphere(u);
+    s->pdf = cosine_hemisphere_pdf(s->wo);
+    s->weight = b->color;
+    return true;
+}
+
+#endif

@@ -1,0 +1,125 @@
+"""The package layout: layers along the data flow, checked by import-linter's contract in setup.cfg;
+each subpackage says what it holds and what it may import; cl/ mirrors the package; a wavefront
+stage has one name for its .cl file, its kernel and the Python method that launches it; the
+project's own code is ruff-clean."""
+from __future__ import annotations
+
+import configparser
+import importlib
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import pyclpt
+from pyclpt.device.program import cl_dir
+from pyclpt.integrators.wavefront import STAGES, Wavefront
+
+ROOT = Path(__file__).resolve().parent.parent
+SETUP_CFG = ROOT / "setup.cfg"
+
+
+def _layers() -> list[list[str]]:
+    """The layers of the contract, top first; each a list of sibling names (optional ones unwrapped)."""
+    cfg = configparser.ConfigParser()
+    cfg.read(SETUP_CFG)
+    text = cfg["importlinter:contract:layers"]["layers"]
+    return [[name.strip().strip("()") for name in line.split("|")] for line in text.strip().splitlines()]
+
+
+def _present(name: str) -> bool:
+    try:
+        importlib.import_module(f"pyclpt.{name}")
+    except ModuleNotFoundError:
+        return False
+    return True
+
+
+def test_import_contract_is_kept():
+    importlinter = pytest.importorskip("importlinter")
+    from importlinter.cli import lint_imports
+
+    assert importlinter is not None
+    # lint_imports prints its report; exit code 0 = every contract kept
+    assert lint_imports(config_filename=str(SETUP_CFG)) == 0
+
+
+def test_contract_covers_every_subpackage():
+    """A subpackage missing from the contract would escape the layer rules."""
+    layered = {name for layer in _layers() for name in layer}
+    package = Path(pyclpt.__file__).resolve().parent
+    subpackages = {p.parent.name for p in package.glob("*/__init__.py")}
+    subpackages -= {"cl", "scenes"}  # data, no Python
+    assert subpackages, package
+    assert subpackages <= layered, f"not in setup.cfg's layers: {sorted(subpackages - layered)}"
+
+
+def test_layers_are_not_vacuous():
+    """The contract is checked against real imports: the renderer does import the integrators and the
+    scene buffers, which import the scene model, the BVH and the device layer."""
+    grimp = pytest.importorskip("grimp")
+    graph = grimp.build_graph("pyclpt")
+    assert graph.direct_import_exists(importer="pyclpt.rendering.renderer",
+                                      imported="pyclpt.integrators.megakernel")
+    assert graph.direct_import_exists(importer="pyclpt.buffers.scene", imported="pyclpt.accel.bvh")
+    assert graph.direct_import_exists(importer="pyclpt.integrators.megakernel", imported="pyclpt.device.program")
+    # and nothing of the scene layer reaches OpenCL
+    assert not graph.chain_exists(importer="pyclpt.scene.model", imported="pyclpt.device.context")
+
+
+@pytest.mark.parametrize("name", [n for layer in _layers() for n in layer if n not in ("cli", "__main__")])
+def test_subpackage_docstring_says_what_it_may_import(name):
+    if not _present(name):
+        pytest.skip(f"pyclpt.{name} has not landed yet (an optional layer)")
+    module = importlib.import_module(f"pyclpt.{name}")
+    doc = module.__doc__ or ""
+    assert len(doc.split()) >= 15, f"pyclpt.{name} needs a docstring saying what it holds"
+    assert "may import" in doc.lower() or "imports nothing" in doc.lower(), \
+        f"pyclpt.{name}'s docstring must say which layers it may import"
+
+
+def test_cl_tree_mirrors_the_package():
+    root = cl_dir()
+    for folder in ("core", "scene", "integrators", "integrators/wavefront", "film"):
+        assert (root / folder).is_dir(), folder
+    assert not list(root.glob("*.h")) and not list(root.glob("*.cl")), "sources belong in a subfolder of cl/"
+
+
+def test_every_include_is_root_relative_and_exists():
+    root = cl_dir()
+    generated = {"path_state.h"}
+    for src in list(root.rglob("*.h")) + list(root.rglob("*.cl")):
+        for lineno, line in enumerate(src.read_text().splitlines(), 1):
+            m = re.match(r'\s*#\s*include\s+"([^"]+)"', line)
+            if m and m.group(1) not in generated:
+                assert (root / m.group(1)).is_file(), f"{src.relative_to(root)}:{lineno}: {m.group(1)}"
+
+
+@pytest.mark.parametrize("stage", STAGES)
+def test_stage_has_one_name(stage):
+    """The stage's .cl file, its kernel and the Python method that launches it share a name."""
+    src = cl_dir() / "integrators" / "wavefront" / f"{stage}.cl"
+    assert src.is_file()
+    text = src.read_text()
+    assert re.search(rf"__kernel\s+void\s+{stage}\s*\(", text), f"{src}: no kernel named {stage}"
+    assert "Consumes:" in text.split("*/")[0] and "Produces:" in text.split("*/")[0], \
+        f"{src}: the header comment says what the kernel consumes and produces"
+    assert callable(getattr(Wavefront, stage, None)), f"Wavefront.{stage}"
+
+
+def test_kernel_files_say_what_they_consume_and_produce():
+    for src in cl_dir().rglob("*.cl"):
+        head = src.read_text().split("*/")[0]
+        assert "Consumes:" in head and "Produces:" in head, src
+
+
+def test_ruff_is_clean():
+    ruff = shutil.which("ruff") or shutil.which("ruff", path=str(Path(sys.executable).parent))
+    if ruff is None:
+        pytest.skip("ruff is not installed (pip install '.[test]')")
+    paths = [str(ROOT / p) for p in ("pyclpt", "bench", "tests") if (ROOT / p).is_dir()]
+    proc = subprocess.run([ruff, "check", "--no-cache", *paths], cwd=ROOT, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
