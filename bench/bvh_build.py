@@ -14,7 +14,6 @@ events (second run, so compilation is excluded).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -28,6 +27,7 @@ import pyopencl as cl  # noqa: E402
 
 from pyclpt.accel import embree  # noqa: E402
 from pyclpt.accel.bvh import DEFAULT_SETTINGS, BuildSettings, build_bvh  # noqa: E402
+from pyclpt.scene.library import scenes_root  # noqa: E402
 from pyclpt.scene.mesh_io import load_mesh  # noqa: E402
 
 KERNELS = r"""
@@ -51,7 +51,10 @@ __kernel void any_hit(__global const float* nodes, __global const float* tris,
 
 
 def scenes_dir() -> Path:
-    return Path(os.environ.get("PYCLPT_SCENES", ROOT.parent / "shared" / "scenes"))
+    root = scenes_root()
+    if root is None:
+        raise SystemExit("the shared scene folder was not found (set PYCLPT_SCENES)")
+    return root
 
 
 def random_rays(pos: np.ndarray, n: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:

@@ -21,10 +21,9 @@ import tempfile
 from pathlib import Path
 
 CHILD = r"""
-import json, sys, time, warnings
-warnings.simplefilter("ignore")
-import pyclpt.scene.textures as textures
-import pyclpt.scene.mitsuba_dict as load_dict_mod
+import json, logging, sys, time
+logging.getLogger("pyclpt").setLevel(logging.ERROR)  # what a scene does not use is not timed here
+import pyclpt.scene.textures as textures  # the mitsuba_dict loaders look read_texture_image up here per call
 from pyclpt.scene.mitsuba_xml import xml_to_dict
 from pyclpt.scene.mitsuba_dict import load_dict
 from pyclpt.buffers.scene import pack_scene

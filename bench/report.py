@@ -621,6 +621,10 @@ def _argv(st: dict) -> list[str]:
 
 
 # -- entry point -----------------------------------------------------------------------------------
+class NothingMeasured(RuntimeError):
+    """A run (or a results file) without a single measurement: no report, a non-zero exit."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     try:
@@ -629,6 +633,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             res = json.loads(src.read_text())
             if res.get("format") != FORMAT:
                 raise ValueError(f"{src}: not a pyclpt bench results file of format {FORMAT}")
+            if not res.get("runs"):
+                raise NothingMeasured(f"{src} holds no measurement (every scene was skipped): no report to write")
             out_dir = Path(a.output) if a.output else src.parent
             if out_dir.resolve() != src.parent.resolve():
                 write_json(res, out_dir)
@@ -639,6 +645,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         out_dir = Path(a.output or "bench-report")
         res = run(settings, out_dir, progress=not a.no_progress)
         write_json(res, out_dir)
+        if not res["runs"]:
+            for s in A.skipped(res):
+                print(f"skipped {s['scene']}: {s['skipped']}", file=sys.stderr)
+            raise NothingMeasured(f"nothing was measured: every scene was skipped (reasons above and in "
+                                  f"{out_dir / 'results.json'}); no report written")
         report = write_report(res, out_dir)
         print(f"{report}: {len(A.scenes(res))} scene(s), {len(res['runs'])} configurations, "
               f"{res['meta']['elapsed_s']:.0f} s; also report.html, results.json, results.csv and the plots in "

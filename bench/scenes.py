@@ -13,9 +13,9 @@ Real scenes are labelled ``shared/<folder>``.
 """
 from __future__ import annotations
 
+import logging
 import time
 import traceback
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -91,17 +91,30 @@ def reason(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
+class _Warnings(logging.Handler):
+    """The warnings logged under ``pyclpt`` while attached."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
 def load(entry: SceneEntry) -> SceneEntry:
     """Load the entry's scene; on any failure mark it skipped with the reason (never raises)."""
     if entry.skipped:
         return entry
     t0 = time.perf_counter()
     try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        caught = _Warnings()  # what the importer ignored or approximated, for the report's scene notes
+        logging.getLogger("pyclpt").addHandler(caught)
+        try:
             scene = pyclpt.load(entry.source)
-        # what the importer ignored or approximated, for the report's scene notes
-        notes = [" ".join(str(w.message).split()) for w in caught]
+        finally:
+            logging.getLogger("pyclpt").removeHandler(caught)
+        notes = [" ".join(m.split()) for m in caught.messages]
         if notes:
             entry.info["load_warnings"] = notes
         scene.name = entry.label

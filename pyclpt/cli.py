@@ -4,11 +4,19 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import re
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+
+from pyclpt.common.image_io import MAX_EXPOSURE
+
+log = logging.getLogger("pyclpt.cli")
+
+# Exit status of a command stopped by Ctrl-C (128 + SIGINT), as shells report it.
+EXIT_INTERRUPTED = 130
 
 
 def _int_in(lo: int, hi: int | None, note: str = ""):
@@ -36,6 +44,24 @@ def _define(text: str) -> tuple[str, str]:
     return name, value
 
 
+def _exposure(text: str) -> float:
+    """An argparse type: exposure in stops, a finite number in [-MAX_EXPOSURE, MAX_EXPOSURE]."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of stops, got {text!r}") from None
+    if not math.isfinite(v) or abs(v) > MAX_EXPOSURE:
+        raise argparse.ArgumentTypeError(f"must be a finite number of stops in [-{MAX_EXPOSURE:g}, "
+                                         f"{MAX_EXPOSURE:g}], got {text!r}")
+    return v
+
+
+def _version() -> str:
+    from pyclpt import __version__
+
+    return f"pyclpt {__version__}"
+
+
 _positive = _int_in(1, None)
 _depth = _int_in(-1, None, " (-1 = unlimited)")
 _seed = _int_in(0, 2**32)
@@ -43,6 +69,7 @@ _seed = _int_in(0, 2**32)
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pyclpt", description="OpenCL wavefront path tracer")
+    p.add_argument("--version", action="version", version=_version())
     p.add_argument("-v", "--verbose", action="store_true", help="log compile times and progress details")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a scene to an image file")
@@ -68,9 +95,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--integrator", choices=("megakernel", "wavefront"), default="megakernel")
     r.add_argument("--layout", choices=("soa", "aos"), default="soa", help="wavefront path-state layout")
     r.add_argument("--device", default=None, help="OpenCL device: pocl, gpu, cpu, P:D or a name substring")
-    r.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for PNG/JPEG output")
+    r.add_argument("--exposure", type=_exposure, default=0.0,
+                   help=f"exposure in stops for PNG/JPEG output, within +-{MAX_EXPOSURE:g} (default 0)")
     r.add_argument("--stats", action="store_true", help="print per-kernel and per-bounce statistics")
-    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--quiet", action="store_true", help="no progress bar (shown on renders longer than a "
+                                                       "couple of seconds otherwise)")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     sub.add_parser("scenes", help="list built-in scenes")
     # Everything after `bench` goes to the report generator's own parser (`pyclpt bench --help`).
@@ -80,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_render(a: argparse.Namespace) -> int:
-    from pyclpt.common.image_io import write_image
+    from pyclpt.common.image_io import check_output_path, write_image
     from pyclpt.rendering.progressive import ProgressiveRenderer
     from pyclpt.scene.library import load
 
@@ -89,21 +118,23 @@ def _cmd_render(a: argparse.Namespace) -> int:
     if a.overflow != "stop" and not a.max_frames:
         raise ValueError(f"--overflow {a.overflow} acts once --max-frames frames are accumulated; "
                          f"give --max-frames > 0")
+    # Fail before loading and rendering (possibly long) rather than when writing the result.
+    if a.output:
+        check_output_path(a.output)
     scene = load(a.scene, **dict(a.define))
     out = a.output or f"{scene.name}.png"
-    # Fail before a possibly long render rather than when writing its result.
-    if not Path(out).suffix:
-        raise ValueError(f"{out}: no file extension to choose the image format from (.exr, .png, .jpg)")
-    if not Path(out).resolve().parent.is_dir():
-        raise OSError(f"{out}: the output folder {Path(out).resolve().parent} does not exist")
+    if not a.output:
+        check_output_path(out)
     t0 = time.perf_counter()
     size = {"width": a.width or scene.film.width, "height": a.height or scene.film.height}
     pr = ProgressiveRenderer(scene, seed=a.seed, integrator=a.integrator, layout=a.layout, max_depth=a.max_depth,
                              device=a.device, precision=a.precision, max_frame_count=a.max_frames,
                              overflow=a.overflow, **size)
     frames = a.frames or a.spp or scene.spp
-    image = pr.run(frames, progress=False if a.quiet else None)
+    log.info("rendering %d frame(s) of %dx%d into %s", frames, pr.width, pr.height, out)
+    image = pr.run(frames, progress=not a.quiet)
     write_image(out, image, exposure=a.exposure)
+    a.written = out
     r, st = pr.renderer, pr.stats
     spp = pr.sample_index
     print(f"{out}: {r.width}x{r.height}, {spp} spp, max depth {r.max_depth}, {a.integrator}"
@@ -155,22 +186,46 @@ def _cmd_bench(argv: list[str]) -> int:
     return bench_main(argv)
 
 
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """What bad input (arguments, scene files, output paths, devices, memory) raises: reported in one
+    line with exit status 1. Anything else is a bug in pyclpt and keeps its traceback."""
+    import pyopencl as cl
+
+    return (OSError, ValueError, RuntimeError, MemoryError, OverflowError, cl.Error)
+
+
+def _message(exc: BaseException) -> str:
+    """The exception's own message (pyclpt's errors name the file, element or setting), with the type's
+    name where the message alone says too little (``math range error``)."""
+    text = str(exc)
+    if isinstance(exc, (OSError, ValueError, RuntimeError, MemoryError)) and text:
+        return text
+    if type(exc).__module__.startswith("pyopencl"):
+        return f"OpenCL: {text}"
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     a, rest = parser.parse_known_args(argv)
     if rest and a.command != "bench":
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING, format="%(name)s: %(message)s")
-    if a.command == "bench":
-        return _cmd_bench(rest)
+    a.written = None
     try:
+        if a.command == "bench":
+            return _cmd_bench(rest)
         if a.command == "render":
             return _cmd_render(a)
         if a.command == "devices":
             return _cmd_devices()
         return _cmd_scenes()
-    except (OSError, ValueError, RuntimeError, MemoryError) as exc:
-        print(f"pyclpt: error: {exc}", file=sys.stderr)
+    except KeyboardInterrupt:
+        done = f"{a.written} was written" if a.written else "nothing written"
+        print(f"pyclpt: interrupted; {done}" if a.command == "render" else "pyclpt: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except _user_errors() as exc:
+        print(f"pyclpt: error: {_message(exc)}", file=sys.stderr)
         return 1
 
 

@@ -21,10 +21,10 @@ if str(REPO) not in sys.path:  # a source checkout: bench/ beside pyclpt/ (insta
     sys.path.insert(0, str(REPO))
 try:
     from pyclpt.bench import analysis as A
-    from pyclpt.bench import document, embree_ceiling, report
+    from pyclpt.bench import document, embree_ceiling, report, runner
 except ModuleNotFoundError:
     from bench import analysis as A
-    from bench import document, embree_ceiling, report
+    from bench import document, embree_ceiling, report, runner
 
 SECTIONS = ["Summary", "Machine and software", "Settings", "Scenes", "Table 1 analog: frames per second",
             "Fig. 6 analog: render time for many samples", "Fig. 7 analog: time against depth",
@@ -110,14 +110,22 @@ def test_quick_report_figures_are_sane(quick):
         assert all(k["ms"] >= 0 for k in r["kernels"])
         assert math.isclose(sum(k["ms"] for k in r["kernels"]),
                             sum(r["frames_device_ms"]) / len(r["frames_device_ms"]), rel_tol=1e-6)
-        # rays: every pixel shoots a camera ray; the megakernel counts are the wavefront's
+        # rays: every pixel shoots a camera ray; depth 1 traces nothing else (no bounce, no light sample)
         c = r["counts"]
         assert c["camera"] == r["pixels"] == r["width"] * r["height"]
         assert c["total"] == c["camera"] + c["extension"] + c["shadow"] >= r["pixels"]
         if r["depth"] == 1:
-            assert c["extension"] == 0
-        wf = A.find(res, r["scene"], "wavefront-soa", r["depth"])
-        assert c == wf["counts"]
+            assert c["extension"] == 0 and c["shadow"] == 0
+        # the two wavefront layouts count their rays independently and must agree (same estimator, same
+        # seeds); the megakernel cannot count: its counts are the SoA run's, and its row says so
+        soa = A.find(res, r["scene"], "wavefront-soa", r["depth"])
+        if r["method"] == "megakernel":
+            assert r["counts_source"] == "wavefront-soa run of the same seeds" and c == soa["counts"]
+        else:
+            assert r["counts_source"] == "measured"
+        if r["method"] == "wavefront-aos":
+            assert c == soa["counts"]
+            assert r["bounces"] == soa["bounces"]
         # derived figures agree with the times
         d = A.derived(res, r)
         assert math.isclose(d["fps"], 1e3 / ms["median"])
@@ -144,6 +152,11 @@ def test_quick_report_figures_are_sane(quick):
         else:
             assert "spp_run" not in r
     assert A.counts_agree(res) is True
+    # and a fresh wavefront renderer, not a copy, counts the same rays for the same seeds
+    first = A.find(res, "cornell-box", "wavefront-soa", max(st["depths"]))
+    recount = runner.count_rays(pyclpt.load("cornell-box"), first["depth"], first["width"], first["height"],
+                                first["seeds"])
+    assert recount == first["counts"]
     for s in measured:
         e = res["embree"][s["scene"]]
         assert e["triangles"] == s["triangles"]
@@ -227,6 +240,23 @@ def test_a_scene_that_fails_to_load_is_a_note_not_an_error(tmp_path):
     assert skip["scene"] == "broken" and "could not be loaded" in skip["skipped"]
     assert [r["method"] for r in res["runs"]] == ["wavefront-soa"]
     assert A.derived(res, res["runs"][0])["speedup"] is None  # no megakernel to compare with
+
+
+def test_nothing_measured_exits_non_zero(tmp_path, capsys):
+    """Every scene skipped: no empty report and exit status 0, but an error naming why."""
+    bad = tmp_path / "broken.json"
+    bad.write_text("{ not json")
+    out = tmp_path / "r"
+    rc = main(["bench", "--scenes", str(bad), "no-such-scene", "--no-embree", "--no-progress", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 1, err
+    assert "nothing was measured" in err and "broken" in err and "no-such-scene" in err
+    assert not (out / "report.md").exists()
+    res = json.loads((out / "results.json").read_text())  # the reasons are kept
+    assert res["runs"] == [] and len(A.skipped(res)) == 2
+    assert main(["bench", "--from-json", str(out / "results.json")]) == 1  # nor regenerated from it
+    assert "no measurement" in capsys.readouterr().err
+    assert not (out / "report.md").exists()
 
 
 def test_bench_arguments_are_checked(capsys):

@@ -249,6 +249,27 @@ def test_single_triangle_and_tiny_meshes(tracer):
     assert np.all(bvh.nodes[0, 6:9] == np.inf) and np.all(bvh.nodes[0, 9:12] == -np.inf)
 
 
+def test_ray_starting_on_a_triangle_ignores_it(tracer):
+    """A ray whose origin lies exactly on a triangle (t = 0) must not hit that triangle: hits need
+    0 < t < tmax. Parallel triangles at z = 0 and z = 2; from (0.25, 0.25, 0), +z hits the upper one
+    at t = 2 and -z misses, for the closest-hit and the any-hit query; likewise from the upper one."""
+    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    pos = np.concatenate([tri, tri + np.float32([0, 0, 2])])
+    bvh = build_bvh(pos, np.arange(6, dtype=np.int64).reshape(2, 3), use_cache=False)
+    org = np.array([[0.25, 0.25, 0], [0.25, 0.25, 0], [0.25, 0.25, 2], [0.25, 0.25, 2]], np.float32)
+    dirs = np.array([[0, 0, 1], [0, 0, -1], [0, 0, -1], [0, 0, 1]], np.float32)
+    tuv, prim, anyhit = tracer.trace(bvh, org, dirs)
+    hit_tri = np.where(prim >= 0, bvh.tri_order[np.maximum(prim, 0)], -1)
+    np.testing.assert_array_equal(hit_tri, [1, -1, 0, -1])
+    np.testing.assert_array_equal(tuv[[0, 2], 0], [2.0, 2.0])
+    np.testing.assert_allclose(tuv[[0, 2], 1:], [[0.25, 0.25], [0.25, 0.25]], atol=1e-7)
+    assert np.all(tuv[[1, 3], 0] == np.inf)
+    np.testing.assert_array_equal(anyhit, [True, False, True, False])
+    # with tmax short of the other triangle, nothing is hit at all
+    _, prim, anyhit = tracer.trace(bvh, org, dirs, tmax=1.5)
+    assert np.all(prim == -1) and not anyhit.any()
+
+
 # --------------------------------------------------------------------------
 # Structure
 

@@ -188,3 +188,140 @@ def test_module_entry_point_scenes_and_bad_args():
                           capture_output=True, text=True, timeout=120, env=_env())
     assert proc.returncode == 2
     assert "--spp" in proc.stderr
+
+
+# -- the front door: output checked first, bad values, Ctrl-C, progress bar ---------------------------
+def _forbid_loading_and_rendering(monkeypatch):
+    import pyclpt.rendering.progressive
+    import pyclpt.scene.library
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("must not load or render when the output cannot be written")
+
+    monkeypatch.setattr(pyclpt.scene.library, "load", forbidden)
+    monkeypatch.setattr(pyclpt.rendering.progressive, "ProgressiveRenderer", forbidden)
+
+
+@pytest.mark.parametrize("output, needle", [
+    ("x.xyz", "cannot write '.xyz' images"),
+    ("/proc/x.png", "cannot write in the output folder /proc"),
+    ("missing/x.png", "does not exist"),
+    (".", "is a folder"),
+])
+def test_bad_output_fails_before_loading_the_scene(tmp_path, capsys, monkeypatch, output, needle):
+    monkeypatch.chdir(tmp_path)
+    _forbid_loading_and_rendering(monkeypatch)
+    rc = main(["render", "cornell-box", "--spp", "16", "--quiet", "-o", output])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert err.startswith(f"pyclpt: error: {output}: ") and err.count("\n") == 1, err
+    assert needle in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_default_output_is_checked_before_rendering(capsys, monkeypatch):
+    import pyclpt.rendering.progressive
+
+    def no_render(*args, **kwargs):
+        raise AssertionError("must not render when the output cannot be written")
+
+    monkeypatch.setattr(pyclpt.rendering.progressive, "ProgressiveRenderer", no_render)
+    monkeypatch.chdir("/proc")  # the default output, ./cornell-box.png, cannot be created here
+    rc = main(["render", "cornell-box", "--spp", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert "cornell-box.png" in err and "cannot write" in err
+
+
+@pytest.mark.parametrize("value", ["1100", "-65", "nan", "inf", "-inf", "abc"])
+def test_bad_exposure_exits_2_before_rendering(tmp_path, capsys, monkeypatch, value):
+    _forbid_loading_and_rendering(monkeypatch)
+    with pytest.raises(SystemExit) as info:
+        main(["render", "cornell-box", "--quiet", "-o", str(tmp_path / "x.png"), f"--exposure={value}"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "--exposure" in err and repr(value) in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_exposure_within_range_is_applied(tmp_path, capsys):
+    args = ["render", "cornell-box", "--spp", "1", "--width", "8", "--height", "8", "--quiet"]
+    assert main([*args, "-o", str(tmp_path / "a.png")]) == 0
+    assert main([*args, "-o", str(tmp_path / "b.png"), "--exposure", "-64"]) == 0
+    assert pyclpt.read_image(tmp_path / "a.png").max() > 0
+    assert pyclpt.read_image(tmp_path / "b.png").max() == 0  # 2**-64: black, but asked for
+
+
+@pytest.mark.parametrize("text, kind", [("[1, 2]", "an array"), ("null", "null"), ('"scene"', "a string")])
+def test_json_scene_that_is_not_an_object_returns_1(tmp_path, capsys, text, kind):
+    scene = tmp_path / "list.json"
+    scene.write_text(text)
+    rc = main(["render", str(scene), "-o", str(tmp_path / "x.png"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert err.startswith(f"pyclpt: error: {scene}: ") and f"not {kind}" in err and err.count("\n") == 1
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out == f"pyclpt {pyclpt.__version__}\n"
+
+
+def test_interrupted_render_writes_nothing_and_exits_130(tmp_path, capsys, monkeypatch):
+    import pyclpt.rendering.progressive
+
+    def interrupted(self, frames, progress=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pyclpt.rendering.progressive.ProgressiveRenderer, "run", interrupted)
+    out = tmp_path / "x.png"
+    rc = main(["render", "cornell-box", "--spp", "4", "--width", "8", "--height", "8", "-o", str(out)])
+    captured = capsys.readouterr()
+    assert rc == 130
+    assert captured.err == "pyclpt: interrupted; nothing written\n"
+    assert captured.out == ""
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_interrupted_write_keeps_the_old_image(tmp_path, capsys, monkeypatch):
+    from pyclpt.common import image_io
+
+    out = tmp_path / "x.png"
+    out.write_bytes(b"an earlier image")
+
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(image_io, "_write", interrupted)
+    rc = main(["render", "cornell-box", "--spp", "1", "--width", "8", "--height", "8", "--quiet", "-o", str(out)])
+    assert rc == 130
+    assert capsys.readouterr().err == "pyclpt: interrupted; nothing written\n"
+    assert out.read_bytes() == b"an earlier image"
+    assert [p.name for p in tmp_path.iterdir()] == ["x.png"]
+
+
+def test_user_errors_of_any_kind_are_one_line(tmp_path, capsys, monkeypatch):
+    import pyclpt.scene.library
+
+    def overflow(*args, **kwargs):
+        raise OverflowError("math range error")
+
+    monkeypatch.setattr(pyclpt.scene.library, "load", overflow)
+    rc = main(["render", "cornell-box", "-o", str(tmp_path / "x.png")])
+    assert rc == 1
+    assert capsys.readouterr().err == "pyclpt: error: OverflowError: math range error\n"
+
+
+def test_progress_bar_unless_quiet(tmp_path, capsys, monkeypatch):
+    from pyclpt.rendering import frame_loop
+
+    monkeypatch.setattr(frame_loop, "PROGRESS_DELAY_S", 0.0)  # a long render: the bar shows
+    args = ["render", "cornell-box", "--spp", "3", "--width", "8", "--height", "8"]
+    assert main([*args, "-o", str(tmp_path / "a.png")]) == 0
+    err = capsys.readouterr().err
+    assert "frame" in err and "cornell-box megakernel" in err
+    assert main([*args, "-o", str(tmp_path / "b.png"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""

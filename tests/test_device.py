@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 
 import numpy as np
 import pyopencl as cl
@@ -9,18 +10,22 @@ import pytest
 
 import pyclpt
 from pyclpt.device.context import (
+    CPU_RESERVE,
     INSTALL_HINT,
     BufferTooLarge,
     Device,
     DeviceError,
+    DeviceMemoryError,
     alloc,
     check_alloc,
+    check_memory,
     default_device,
     get_device,
     list_devices,
     open_device,
     upload,
 )
+from pyclpt.rendering.memory import render_memory
 
 
 def _pocl_entries():
@@ -204,3 +209,95 @@ def test_describe_keys(device):
 def test_public_exports():
     assert pyclpt.DeviceError is DeviceError
     assert pyclpt.open_device is open_device
+
+
+# -- the memory of a render, all buffers together -----------------------------------------------------
+
+class _SmallMemoryDevice(Device):
+    """The session device with 1 MiB of global memory (each buffer still allowed on its own)."""
+
+    global_mem = 2**20
+
+
+def _small_memory(device: Device) -> Device:
+    return _SmallMemoryDevice(device=device.device, context=device.context, queue=device.queue,
+                              programs=device.programs)
+
+
+def test_check_memory_counts_all_buffers_together(device):
+    small = _small_memory(device)
+    check_memory(small, {"a": 2**19, "b": 2**19})  # exactly the global memory
+    with pytest.raises(DeviceMemoryError) as info:
+        check_memory(small, {"frame": 3 * 2**19, "sum": 2**20}, hint="to fit, lower it")
+    assert isinstance(info.value, MemoryError)
+    msg = str(info.value)
+    assert msg.startswith("this render needs 2 MiB (frame 2 MiB, sum 1 MiB), more than the 1 MiB available: ")
+    assert "CL_DEVICE_GLOBAL_MEM_SIZE" in msg and small.name in msg and msg.endswith("; to fit, lower it")
+
+
+def test_check_memory_of_the_process(device, monkeypatch):
+    """A CPU device's buffers are this process's memory: RLIMIT_AS (ulimit -v) and free RAM apply."""
+    import pyclpt.device.context as context
+
+    monkeypatch.setattr(context, "host_memory_limits", lambda: [(CPU_RESERVE + 2**20, "test limit")])
+    host = {"image read back": 2**19}
+    if device.is_cpu:
+        with pytest.raises(DeviceMemoryError, match=r"needs 2 MiB .* more than the 1 MiB available: the test "
+                                                    r"limit, less 256 MiB kept free"):
+            check_memory(device, {"frame": 3 * 2**19}, host=host)
+    check_memory(device, {"frame": 2**19}, host=host)
+
+
+def test_render_too_large_for_memory_fails_before_allocating(device, cornell_box, monkeypatch):
+    small = _small_memory(device)
+
+    def no_buffers(*args, **kwargs):
+        raise AssertionError("nothing may be allocated for a render that does not fit")
+
+    monkeypatch.setattr(cl, "Buffer", no_buffers)
+    with pytest.raises(DeviceMemoryError) as info:
+        pyclpt.Renderer(cornell_box, device=small, width=256, height=256)
+    msg = str(info.value)
+    assert "needs 3 MiB" in msg and "frame buffer 256x256 0 MiB" not in msg
+    assert "accumulation sum (double) 2 MiB" in msg and "more than the 1 MiB available" in msg
+    assert "lower the resolution (width, height) or sum in single precision (precision='single'" in msg
+    with pytest.raises(DeviceMemoryError, match="path state and queues .* use a smaller wave_size"):
+        pyclpt.Renderer(cornell_box, device=small, width=128, height=128, integrator="wavefront",
+                        precision="single")
+
+
+def test_render_memory_parts(cornell_box):
+    single = render_memory(cornell_box, 100, 50, precision="single", integrator="megakernel")
+    double = render_memory(cornell_box, 100, 50, precision="double", integrator="wavefront", wave_size=1000,
+                           max_depth=4)
+    assert single["frame buffer 100x50"] == single["accumulated image"] == 12 * 5000
+    assert single["accumulation sum (single)"] == 12 * 5000 and double["accumulation sum (double)"] == 24 * 5000
+    assert not any(k.startswith("path state") for k in single)
+    assert double["path state and queues (1000 paths)"] > 1000 * 6 * 4
+    assert 0 < single["scene buffers (estimate)"] < 2**20
+
+
+def test_huge_render_under_ulimit_exits_1_with_a_message(tmp_path):
+    """Buffers that each pass the per-buffer limit but together exceed the address space the process
+    may use: a clear error and exit code 1 before anything is allocated (it used to crash in the
+    driver, exit 139, or fail after minutes of rendering when the image was read back)."""
+    import resource
+    import subprocess
+    import sys
+
+    if not default_device().is_cpu:
+        pytest.skip("the default device is not a CPU device: its buffers are not this process's memory")
+    limit = 3 * 2**30
+
+    def limit_address_space():
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    out = tmp_path / "huge.exr"
+    proc = subprocess.run([sys.executable, "-m", "pyclpt.cli", "render", "cornell-box", "--width", "8000",
+                           "--height", "8000", "--precision", "single", "--quiet", "-o", str(out)],
+                          preexec_fn=limit_address_space, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, (proc.returncode, proc.stderr[-2000:])
+    assert "Traceback" not in proc.stderr
+    assert re.search(r"this render needs [\d,]+ MiB .* more than the [\d,]+ MiB available", proc.stderr), proc.stderr
+    assert "lower the resolution" in proc.stderr
+    assert not out.exists()

@@ -1,12 +1,15 @@
 """Image writing and reading: linear EXR, sRGB-encoded PNG/JPEG, errors."""
 from __future__ import annotations
 
+import os
 import re
+import stat
 
 import numpy as np
 import pytest
 
-from pyclpt.common.image_io import linear_to_srgb, read_image, write_image
+from pyclpt.common import image_io
+from pyclpt.common.image_io import check_output_path, linear_to_srgb, read_image, write_image
 
 MAGIC = {".exr": b"\x76\x2f\x31\x01", ".png": b"\x89PNG", ".jpg": b"\xff\xd8\xff", ".jpeg": b"\xff\xd8\xff"}
 
@@ -41,14 +44,14 @@ def test_png_is_srgb_encoded(tmp_path):
     img = np.full((4, 6, 3), 0.5, np.float32)
     img[0, 0] = (0.0, 1.0, 2.0)  # clamped at 1
     img[0, 1] = (0.002, 0.0031308, 0.2)  # linear segment / curve
-    img[0, 2] = (-1.0, np.nan, np.inf)
+    img[0, 2] = (-1.0, 0.0, 1e30)
     back = read_image(write_image(tmp_path / "a.png", img)) * 255.0
     assert back.shape == (4, 6, 3)
     assert abs(back[2, 3, 0] - 188) <= 1  # 0.5 linear is 188 in 8-bit sRGB, not 128
     assert abs(back[2, 3, 0] - 128) > 50
     np.testing.assert_allclose(back[0, 0], (0, 255, 255), atol=0.5)
     np.testing.assert_allclose(back[0, 1, :2], np.round(12.92 * np.array([0.002, 0.0031308]) * 255), atol=1)
-    np.testing.assert_allclose(back[0, 2], (0, 0, 255), atol=0.5)  # negative -> 0, NaN -> 0, +inf -> 1
+    np.testing.assert_allclose(back[0, 2], (0, 0, 255), atol=0.5)  # negative -> 0, huge -> 1
 
 
 def test_png_exposure_doubles_per_stop(tmp_path):
@@ -122,3 +125,125 @@ def test_bad_shape_is_rejected(tmp_path, shape):
 def test_read_missing_file_raises(tmp_path):
     with pytest.raises(OSError, match="missing.exr"):
         read_image(tmp_path / "missing.exr")
+
+
+# -- the output is checked before anything is written ---------------------------------------------
+def _no_temporary_files(folder):
+    return [p.name for p in folder.iterdir() if ".tmp-" in p.name or p.name.startswith(".pyclpt-probe")]
+
+
+@pytest.mark.parametrize("name", ["x.xyz", "x.psd", "x.cin"])  # unknown to OpenImageIO, or read-only formats
+def test_format_without_writer_is_rejected(tmp_path, name):
+    with pytest.raises(ValueError, match=re.escape(str(tmp_path / name)) + r".*cannot write"):
+        check_output_path(tmp_path / name)
+    with pytest.raises(ValueError, match="cannot write"):
+        write_image(tmp_path / name, np.zeros((2, 2, 3), np.float32))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_folder_that_takes_no_files_is_rejected():
+    with pytest.raises(OSError, match=re.escape("/proc/x.png") + ".*cannot write in the output folder /proc"):
+        check_output_path("/proc/x.png")
+
+
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="needs POSIX permissions (root writes anyway)")
+def test_read_only_folder_is_rejected(tmp_path):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        with pytest.raises(PermissionError, match=re.escape(str(folder / "x.exr"))):
+            check_output_path(folder / "x.exr")
+    finally:
+        folder.chmod(0o755)
+
+
+def test_output_checks_name_the_path(tmp_path):
+    with pytest.raises(IsADirectoryError, match="is a folder"):
+        check_output_path(tmp_path)
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        check_output_path(tmp_path / "missing" / "x.png")
+    (tmp_path / "file").write_text("")
+    with pytest.raises(NotADirectoryError, match="is not a folder"):
+        check_output_path(tmp_path / "file" / "x.png")
+    assert check_output_path(tmp_path / "ok.EXR") == tmp_path / "ok.EXR"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # the probe left nothing behind
+
+
+# -- atomic writes -------------------------------------------------------------------------------
+@pytest.mark.parametrize("error", [OSError("disk full"), KeyboardInterrupt()])
+def test_failed_write_keeps_the_old_image_and_leaves_no_temporary_file(tmp_path, monkeypatch, error):
+    target = tmp_path / "keep.png"
+    write_image(target, np.full((4, 4, 3), 0.5, np.float32))
+    before = target.read_bytes()
+    real_write = image_io._write
+    seen = []
+
+    def half_write(out, path, *args):
+        real_write(out, path, *args)  # the temporary file exists, complete, beside the target
+        seen.append(path)
+        assert path.parent == tmp_path and path.is_file() and path != target
+        raise error
+
+    monkeypatch.setattr(image_io, "_write", half_write)
+    with pytest.raises(type(error)):
+        write_image(target, np.zeros((4, 4, 3), np.float32))
+    assert seen
+    assert target.read_bytes() == before
+    assert _no_temporary_files(tmp_path) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.png"]
+
+
+def test_overwrite_replaces_the_image_and_keeps_its_permissions(tmp_path):
+    target = tmp_path / "a.exr"
+    write_image(target, np.zeros((2, 2, 3), np.float32))
+    target.chmod(0o640)
+    write_image(target, np.ones((2, 2, 3), np.float32))
+    np.testing.assert_array_equal(read_image(target), np.ones((2, 2, 3), np.float32))
+    assert stat.S_IMODE(target.stat().st_mode) == 0o640
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr"]
+
+
+# -- pixels and exposure -------------------------------------------------------------------------
+@pytest.mark.parametrize("ext", [".exr", ".png", ".jpg", ".hdr"])
+def test_nan_pixels_are_refused_with_their_count(tmp_path, ext):
+    img = np.ones((4, 5, 3), np.float32)
+    img[0, 0, 1] = np.nan
+    img[2, 3] = np.nan
+    with pytest.raises(ValueError, match=r"2 NaN pixel\(s\) of 20"):
+        write_image(tmp_path / f"n{ext}", img)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("ext", [".png", ".jpg", ".hdr"])
+def test_infinite_pixels_are_refused_where_the_format_cannot_hold_them(tmp_path, ext):
+    img = np.ones((3, 3, 3), np.float32)
+    img[1, 1, 0] = np.inf
+    with pytest.raises(ValueError, match=r"1 infinite pixel"):
+        write_image(tmp_path / f"i{ext}", img)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_exr_keeps_infinity(tmp_path):
+    img = np.ones((2, 2, 3), np.float32)
+    img[0, 1] = (np.inf, -np.inf, 1.0)
+    np.testing.assert_array_equal(read_image(write_image(tmp_path / "i.exr", img)), img)
+
+
+@pytest.mark.parametrize("exposure", [float("nan"), float("inf"), -float("inf"), 1100, -64.5, 65])
+def test_bad_exposure_is_refused(tmp_path, exposure):
+    with pytest.raises(ValueError, match=r"exposure must be a finite number of stops in \[-64, 64\]"):
+        write_image(tmp_path / "e.png", np.ones((2, 2, 3), np.float32), exposure=exposure)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("exposure", ["1", True, None])
+def test_exposure_must_be_a_number(tmp_path, exposure):
+    with pytest.raises(TypeError, match="exposure must be a number"):
+        write_image(tmp_path / "e.png", np.ones((2, 2, 3), np.float32), exposure=exposure)
+
+
+def test_exposure_at_the_limits(tmp_path):
+    img = np.full((2, 2, 3), 0.5, np.float32)
+    assert read_image(write_image(tmp_path / "hi.png", img, exposure=64)).min() == 1.0
+    assert read_image(write_image(tmp_path / "lo.png", img, exposure=-64.0)).max() == 0.0

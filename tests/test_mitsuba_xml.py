@@ -1,6 +1,7 @@
 """Mitsuba XML import (pyclpt.scene.mitsuba_xml) and the .serialized mesh reader (pyclpt.scene.serialized)."""
 from __future__ import annotations
 
+import logging
 import struct
 import warnings
 import zlib
@@ -79,6 +80,19 @@ def test_old_versions_are_upgraded(tmp_path):
     assert d3["integrator"]["maxDepth"] == 5
 
 
+def test_upgrade_renames_are_a_table_keyed_by_plugin(tmp_path, monkeypatch):
+    """A per-plug-in rename of old files is one entry of upgrade.PARAMETER_RENAMES (keyed by tag and type)."""
+    from pyclpt.scene.mitsuba_xml import upgrade
+
+    assert upgrade.PARAMETER_RENAMES[("bsdf", "diffuse")] == {"diffuse_reflectance": "reflectance"}
+    monkeypatch.setitem(upgrade.PARAMETER_RENAMES, ("emitter", "point"), {"position_ws": "position"})
+    body = """<emitter type="point" id="a"><point name="positionWS" x="1" y="2" z="3"/></emitter>
+    <emitter type="spot" id="b"><point name="positionWS" x="1" y="2" z="3"/></emitter>"""
+    d = xml_to_dict(_write(tmp_path, body, "0.6.0"))
+    assert d["a"]["position"] == [1.0, 2.0, 3.0] and d["b"]["position_ws"] == [1.0, 2.0, 3.0]
+    assert xml_to_dict(_write(tmp_path, body, "3.0.0"))["a"]["positionWS"] == [1.0, 2.0, 3.0]  # not upgraded
+
+
 def test_version_and_root_errors(tmp_path):
     (tmp_path / "a.xml").write_text('<scene>\n</scene>')
     with pytest.raises(SceneXMLError, match=r"a\.xml:1: .*version"):
@@ -130,13 +144,18 @@ def test_undefined_parameter_is_an_error(tmp_path):
     assert xml_to_dict(path, {"depth": "7"})["integrator"]["max_depth"] == 7
 
 
-def test_unused_parameter_warns(tmp_path):
+def test_unused_parameter_warns(tmp_path, caplog):
     path = _write(tmp_path, DEFAULTS)
-    with pytest.warns(UserWarning, match="resx not used"):
+    with warnings.catch_warnings(), caplog.at_level(logging.WARNING, logger="pyclpt"):
+        warnings.simplefilter("error")  # through logging, never warnings
         xml_to_dict(path, {"spp": "4", "resx": "64"})
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
+    (record,) = caplog.records
+    assert record.name == "pyclpt.scene.mitsuba_xml" and record.levelno == logging.WARNING
+    assert record.getMessage() == f"{path}: parameter resx not used by the scene"
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="pyclpt"):
         xml_to_dict(path, {"spp": "4"})
+    assert not caplog.records, caplog.text
 
 
 # -- objects, ids, references ---------------------------------------------------------------------

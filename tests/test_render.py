@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from closed_forms import camera_rays, emitter_pixels
 
 import pyclpt
-from scenes import interior_furnace, object_under_sky
+from scenes import interior_furnace, object_under_sky, sensor
 
 INTEGRATORS = [("megakernel", "soa"), ("wavefront", "soa"), ("wavefront", "aos")]
 DATA = Path(__file__).parent / "data"
@@ -18,11 +19,30 @@ def render(scene, integrator="megakernel", layout="soa", **kw):
     return pyclpt.render(scene, integrator=integrator, layout=layout, progress=False, **kw)
 
 
+def interior_cube_furnace(albedo: float, radiance: float = 1.0) -> pyclpt.Scene:
+    """A camera inside a closed emissive diffuse cube (side 6, normals inward), off its centre:
+    radiance is Le * sum_{k<d} albedo^k, as in the sphere; but here, unlike inside a sphere, the
+    light-sampling pdf differs from the BSDF's, so MIS weights that do not sum to 1 show."""
+    return pyclpt.load_dict({
+        "type": "scene",
+        "sensor": sensor([{"look_at": {"origin": [1.0, 0.5, 0.5], "target": [-2.0, -1.5, -3.0], "up": [0, 1, 0]}}]),
+        "shell": {"type": "cube", "flip_normals": True, "to_world": [{"scale": 3.0}],
+                  "bsdf": {"type": "diffuse", "reflectance": albedo},
+                  "emitter": {"type": "area", "radiance": radiance}},
+    }, name="interior-cube-furnace")
+
+
+FURNACES = {"sphere": interior_furnace, "cube": interior_cube_furnace}
+
+
 @pytest.mark.parametrize("integrator,layout", INTEGRATORS)
-@pytest.mark.parametrize("depth,albedo", [(1, 0.5), (2, 0.5), (3, 0.5), (-1, 0.5), (-1, 0.8)])
-def test_interior_furnace(integrator, layout, depth, albedo):
-    """Le * sum_{k<depth} albedo^k: exercises emission, NEE, MIS, depth and roulette."""
-    scene = interior_furnace(albedo)
+@pytest.mark.parametrize("shape,depth,albedo", [
+    ("sphere", 1, 0.5), ("sphere", 2, 0.5), ("sphere", 3, 0.5), ("sphere", -1, 0.5), ("sphere", -1, 0.8),
+    ("cube", 2, 0.5), ("cube", 3, 0.8), ("cube", -1, 0.8)])
+def test_interior_furnace(integrator, layout, shape, depth, albedo):
+    """Le * sum_{k<depth} albedo^k: exercises emission, NEE, depth and roulette; MIS in the cube only
+    (inside a sphere the light pdf equals the BSDF pdf, so any symmetric weighting passes there)."""
+    scene = FURNACES[shape](albedo)
     img = render(scene, integrator, layout, spp=64, max_depth=depth, seed=1)
     n = 50 if depth == -1 else depth
     expected = sum(albedo**k for k in range(n))
@@ -43,11 +63,21 @@ def test_diffuse_cube_under_constant_sky(integrator, layout):
 
 @pytest.mark.parametrize("integrator,layout", INTEGRATORS[:2])
 def test_glass_sphere_under_constant_sky_is_invisible(integrator, layout):
-    """A lossless dielectric under a uniform sky: every path escapes with weight 1."""
+    """A lossless dielectric under a uniform sky: every path escapes with weight 1, so the pixels that
+    see the sphere show the sky's radiance. (Entering and leaving scale radiance by 1/eta^2 and eta^2,
+    which cancel: a dropped eta^2 or an inverted Fresnel eta passes here; see
+    tests/test_analytic.py::test_camera_inside_glass_sphere_sees_eta_squared.)"""
     scene = object_under_sky({"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0}, radiance=1.0,
                              shape="sphere")
     img = render(scene, integrator, layout, spp=128, max_depth=-1, seed=3)
-    assert img.mean() == pytest.approx(1.0, rel=0.01)
+    origin, dirs = camera_rays(scene, 24, 24, np.linspace(0.0, 1.0, 3))
+    miss_distance = np.linalg.norm(np.cross(dirs, -origin), axis=-1)  # from the sphere's centre to each ray
+    sphere = (miss_distance < 0.95).all(-1)  # the pixel sees the (faceted, unit) sphere everywhere
+    background = (miss_distance > 1.0).all(-1)
+    assert sphere.sum() > 150 and background.sum() > 150
+    assert np.all(img[background] == 1.0)
+    assert img[sphere].mean() == pytest.approx(1.0, rel=0.005)
+    np.testing.assert_allclose(img[sphere], 1.0, rtol=0.05)
 
 
 def test_cornell_box_matches_mitsuba(cornell_box):
@@ -66,17 +96,35 @@ def test_cornell_box_matches_mitsuba(cornell_box):
 
 
 def test_depth_one_shows_only_emitters(cornell_box):
-    img = render(cornell_box, spp=1, max_depth=1, width=32, height=32)
-    lit = img.max(axis=2) > 0
-    assert 0 < lit.sum() < 16  # the small ceiling light only
-    assert lit[:8].all(axis=1).sum() == 0 or lit[:8].any()  # the light is in the top rows
-    assert not lit[16:].any()
+    """max_depth 1: each sample is the radiance of the emitter its camera ray sees first, else 0.
+    Where the whole pixel sees the same thing (ray casting in numpy at the pixel's corners, edges and
+    centre) the pixel is exactly that; at the light's edges it is one of the two. The light is in the
+    top rows; max_depth 0 is black."""
+    w = h = 128  # the light is seen nearly edge-on: ~4 rows
+    expected, certain = emitter_pixels(cornell_box, w, h)
+    le = np.asarray(next(m.emission for m in cornell_box.meshes if m.emission is not None), np.float32)
+    lit_for_sure = certain & (expected.max(-1) > 0)
+    assert lit_for_sure.sum() >= 20 and (~certain).sum() < 80
+    rows = np.flatnonzero((expected.max(-1) > 0).any(1))
+    assert rows.max() < h // 4  # the ceiling light is in the top rows
+    for seed in (1, 2):
+        img = render(cornell_box, spp=1, max_depth=1, width=w, height=h, seed=seed)
+        np.testing.assert_array_equal(img[certain], expected[certain].astype(np.float32))
+        edge = img[~certain]
+        assert np.all((edge == 0).all(-1) | (edge == le).all(-1))
     assert render(cornell_box, spp=1, max_depth=0, width=8, height=8).max() == 0.0
 
 
-def test_deeper_paths_add_light(cornell_box):
-    means = [render(cornell_box, spp=8, max_depth=d, width=16, height=16, seed=4).mean() for d in (1, 2, 3)]
-    assert means[0] < means[1] < means[2]
+def test_deeper_paths_add_light():
+    """Each extra bounce adds exactly the light of paths of that length: in the closed emissive cube,
+    Le albedo^(d-1) for max depth d (a closed form, not just an increase). With the same seed the
+    renders share their first bounces, so the differences are far less noisy than the images."""
+    albedo = 0.6
+    scene = interior_cube_furnace(albedo, radiance=2.0)
+    means = [render(scene, spp=128, max_depth=d, width=16, height=16, seed=4).mean() for d in (1, 2, 3, 4)]
+    assert means[0] == pytest.approx(2.0, rel=1e-6)  # depth 1: the emission itself, exactly
+    for d in (2, 3, 4):
+        assert means[d - 1] - means[d - 2] == pytest.approx(2.0 * albedo ** (d - 1), rel=0.03), d
 
 
 def test_inf_samples_are_dropped_and_counted():

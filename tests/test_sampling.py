@@ -546,6 +546,34 @@ def test_triangle_chi2(warped):
     assert abs(b1.mean() - 1 / 3) < 5 * np.sqrt(1 / 18 / N_WARP)
 
 
+POWER_HEURISTIC_KERNEL = r"""
+#include "core/sampling.h"
+__kernel void power_heuristic_k(__global const float* a, __global const float* b, __global float* out) {
+    int i = get_global_id(0);
+    out[i] = power_heuristic(a[i], b[i]);
+}
+"""
+
+
+def test_power_heuristic(device):
+    """Veach's power heuristic (beta = 2), w = a^2 / (a^2 + b^2), 0 where a = 0: exact values, so
+    that the balance heuristic (unbiased, so no render can see it) or swapped arguments fail here."""
+    cases = [(1, 2, 0.2), (2, 1, 0.8), (0, 5, 0.0), (5, 0, 1.0), (0, 0, 0.0), (3, 3, 0.5), (3, 4, 9 / 25),
+             (1, 3, 0.1), (1e-20, 1, 0.0), (1e15, 1, 1.0), (0.25, 0.5, 0.2), (7, 1, 49 / 50)]
+    a, b, want = (np.array(c, np.float32) for c in zip(*cases))
+    ctx, queue, mf = device.context, device.queue, cl.mem_flags
+    prg = build_program(device, source=POWER_HEURISTIC_KERNEL, name="test_power_heuristic")
+    bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x) for x in (a, b)]
+    out = np.empty(len(cases), np.float32)
+    obuf = cl.Buffer(ctx, mf.WRITE_ONLY, out.nbytes)
+    cl.Kernel(prg, "power_heuristic_k")(queue, (len(cases),), None, *bufs, obuf)
+    cl.enqueue_copy(queue, out, obuf)
+    queue.finish()
+    np.testing.assert_allclose(out, want, rtol=1e-6, atol=1e-30)
+    # the weights of the two techniques sum to 1 wherever either pdf is positive
+    np.testing.assert_allclose(out[[0, 2]] + out[[1, 3]], 1.0, rtol=1e-6)
+
+
 # --------------------------------------------------------------------------
 # 3. BSDF sampling against evaluation
 

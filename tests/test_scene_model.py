@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 import warnings
@@ -394,30 +395,33 @@ def test_nan_vertex_in_obj_names_shape(tmp_path):
     assert str(info.value).count("o.json") == 1
 
 
-def test_unused_parameters_one_warning():
+def test_unused_parameters_one_warning(caplog):
     d = _scene(
         mat={"type": "diffuse", "reflectance": 0.5, "foo": 1},
         s={**RECT, "bsdf": {"type": "ref", "id": "mat"}, "bar": 2},
         sensor={"type": "perspective", "baz": 3, "film": {"width": 8, "height": 8, "qux": 4}},
         integrator={"type": "path", "max_depth": 3, "hide_emitters": True},
     )
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings.catch_warnings(), caplog.at_level(logging.WARNING, logger="pyclpt"):
+        warnings.simplefilter("error")  # reported through logging, never warnings
         load_dict(d)
-    user = [w for w in caught if issubclass(w.category, UserWarning)]
-    assert len(user) == 1, [str(w.message) for w in user]
-    msg = str(user[0].message)
+    records = [r for r in caplog.records if r.name.startswith("pyclpt")]
+    assert len(records) == 1, [r.getMessage() for r in records]
+    assert records[0].levelno == logging.WARNING and records[0].name == "pyclpt.scene.mitsuba_dict.scene"
+    msg = records[0].getMessage()
+    assert "\n" not in msg and msg.startswith("scene: not used by pyclpt (5): "), msg  # one line
+    entries = msg.split(": not used by pyclpt (5): ")[1].split("; ")
+    assert len(entries) == 5, entries
     for key in ("mat.foo", "s.bar", "sensor.baz", "sensor.film.qux", "integrator.hide_emitters"):
-        assert key in msg, (key, msg)
-    with pytest.warns(UserWarning, match="not used by pyclpt"):
-        load_dict(d)
+        assert any(e.startswith(key) for e in entries), (key, msg)
 
 
-def test_no_warning_for_clean_dict():
-    with warnings.catch_warnings():
+def test_no_warning_for_clean_dict(caplog):
+    with warnings.catch_warnings(), caplog.at_level(logging.WARNING, logger="pyclpt"):
         warnings.simplefilter("error")
         load_dict(_scene(s={**RECT, "bsdf": {"type": "diffuse", "reflectance": 0.3}}))
         pyclpt.load("cornell-box")
+    assert not caplog.records, caplog.text
 
 
 # -- built-in scenes ----------------------------------------------------------------------

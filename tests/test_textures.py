@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from closed_forms import camera_rays, form_factor
 
 import pyclpt
 from pyclpt.buffers.materials import TextureTable
@@ -243,8 +244,11 @@ def test_textured_diffuse_quad_shows_the_texture():
 
 
 def test_bump_map_tilts_the_shading_normal():
-    """A height ramp h = k u along x tilts the normal of a quad lit from one side: brighter
-    when tilted towards the light, darker when tilted away; no ramp, no change."""
+    """A height ramp h = k u along x tilts the shading normal of a quad lit from one side by a square
+    lamp: the normal is Blinn's cross(dp/du + n dh/du, dp/dv + n dh/dv) = (-2 dh/du, 0, 4) (the quad
+    is 2 wide in u), and a diffuse quad with that normal shows albedo Le F, F the form factor from a
+    differential area with the tilted normal to the lamp (closed form): brighter when tilted towards
+    the lamp, darker when tilted away, unchanged without a ramp."""
     def scene(slope):
         ramp = np.tile(np.linspace(0, 1, 64, dtype=np.float32)[None, :, None] * slope, (4, 1, 3))
         d = {"type": "scene", "sensor": sensor(FRONT, fov=20.0, size=8),
@@ -257,8 +261,24 @@ def test_bump_map_tilts_the_shading_normal():
         sc.materials[0] = pyclpt.scene.model.BumpMap(Bitmap(ramp + 0.5 * abs(slope), srgb=False, wrap_mode="clamp"),
                                                sc.materials[0])
         return sc
-    flat = pyclpt.render(scene(0.0), spp=4, max_depth=2, progress=False)
-    toward = pyclpt.render(scene(-0.5), spp=4, max_depth=2, progress=False)  # height falls towards +x
-    away = pyclpt.render(scene(0.5), spp=4, max_depth=2, progress=False)
-    c = (slice(3, 5), slice(3, 5))
-    assert toward[c].mean() > 1.1 * flat[c].mean() > 1.1 * 1.1 * away[c].mean() > 0
+
+    c = (slice(2, 6), slice(2, 6))
+    results = {}
+    for slope in (0.0, -0.5, 0.5):  # -0.5: the height falls towards +x, the lamp's side
+        sc = scene(slope)
+        (lamp,) = [m for m in sc.meshes if m.emission is not None]
+        corners = lamp.positions.astype(np.float64)
+        centre = corners.mean(0)
+        polygon = corners[np.argsort(np.arctan2(corners[:, 2] - centre[2], corners[:, 1] - centre[1]))]
+        # the ramp's texel centres (i + 1/2) / 64 hold slope * i / 63, so dh/du = slope * 64 / 63
+        normal = np.array([-2.0 * slope * 64 / 63, 0.0, 4.0])
+        normal /= np.linalg.norm(normal)
+        origin, dirs = camera_rays(sc, 8, 8, (np.arange(8) + 0.5) / 8)
+        points = origin + (-origin[2] / dirs[..., 2])[..., None] * dirs  # on the quad, z = 0
+        f = form_factor(points[c].reshape(-1, 3), normal, polygon)
+        expected = 0.5 * 5.0 * f.mean()
+        img = pyclpt.render(sc, spp=2048, max_depth=2, seed=1, progress=False)
+        results[slope] = img[c].mean(), expected
+        assert img[c].mean() == pytest.approx(expected, rel=0.03), (slope, results[slope])
+    (flat, _), (toward, _), (away, _) = results[0.0], results[-0.5], results[0.5]
+    assert toward > 1.5 * flat > 3 * away > 0  # expected 0.039, 0.023, 0.0058

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from closed_forms import emitter_pixels
 
 import pyclpt
 from pyclpt.integrators.path_state import FIELDS, bytes_per_path, opencl_header, record_words
 from pyclpt.integrators.wavefront import STAGES
+from scenes import interior_furnace, sensor
 
 
 def render(scene, **kw):
@@ -24,6 +26,9 @@ def assert_same_image(a, b):
 
 @pytest.mark.parametrize("max_depth", [1, 3, -1])
 def test_wavefront_equals_megakernel_cornell_box(cornell_box, max_depth):
+    """Same estimator (path.h), same random numbers: the same image. Equality cannot see a bug the two
+    share; the independent checks of both integrators are tests/test_analytic.py (closed forms) and,
+    here, the depth-1 image, which ray casting in numpy predicts exactly away from the light's edges."""
     kw = dict(spp=16, max_depth=max_depth, width=32, height=32, seed=9)
     mega, _ = render(cornell_box, integrator="megakernel", **dict(kw))
     soa, _ = render(cornell_box, integrator="wavefront", layout="soa", **dict(kw))
@@ -33,6 +38,12 @@ def test_wavefront_equals_megakernel_cornell_box(cornell_box, max_depth):
     assert_same_image(aos, mega)
     # on the same device and compiler they are in fact bit-identical
     assert np.array_equal(soa, mega) and np.array_equal(aos, mega)
+    if max_depth == 1:
+        expected, certain = emitter_pixels(cornell_box, 32, 32)
+        assert certain.sum() > 32 * 32 - 16
+        np.testing.assert_allclose(soa[certain], expected[certain], rtol=1e-6)
+        le = expected.reshape(-1, 3).max(0)  # at the light's edges: a mix of the light and black
+        assert np.all(soa[~certain] <= le * (1 + 1e-6)) and soa[~certain].max() > 0
 
 
 def test_wavefront_equals_megakernel_cornell_bunny(shared_scenes):
@@ -87,6 +98,9 @@ def test_queue_conservation(cornell_box, schedule):
 
 
 def test_every_pixel_is_committed_once_per_sample(cornell_box):
+    """Every path writes its pixel: a frame filled with NaN comes back finite. And exactly once: in a
+    scene where every sample overflows to inf, each commit counts one dropped sample, so the dropped
+    count equals pixels x spp (a path committed twice or never would change it), in waves too."""
     r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=-1, width=16, height=16)
     r.film.clear()
     import pyopencl as cl
@@ -95,6 +109,30 @@ def test_every_pixel_is_committed_once_per_sample(cornell_box):
     r.integrator.render_frame(0, 0)
     frame = r.film.read_frame()
     assert np.isfinite(frame).all()
+
+    # camera inside an emissive sphere of radiance 3e38: emission seen directly plus one light sample
+    # already exceeds FLT_MAX, so every path's radiance is inf (or NaN) when it ends, whatever its length
+    scene = interior_furnace(0.9, radiance=3.0e38)
+    for integrator, wave_size in (("wavefront", None), ("wavefront", 100), ("megakernel", None)):
+        kw = {} if wave_size is None else {"wave_size": wave_size}
+        r = pyclpt.Renderer(scene, integrator=integrator, max_depth=-1, width=12, height=10, **kw)
+        img = r.render(3, seed=1, progress=False)
+        assert r.stats.dropped_samples == 12 * 10 * 3, (integrator, wave_size)
+        assert np.all(img == 0.0)
+
+
+def test_no_path_ends_by_roulette_before_rr_depth():
+    """Inside a closed diffuse sphere every ray hits and every BSDF sample is valid, so until Russian
+    roulette starts (on rays of bounce RR_DEPTH = 3, docs/architecture.md) every path is alive; from
+    there on paths end (throughput 0.5^3, so most of them at once)."""
+    rr_depth = 3
+    r = pyclpt.Renderer(interior_furnace(0.5), integrator="wavefront", max_depth=-1, width=16, height=16)
+    r.render(4, seed=3, progress=False)
+    rows = r.stats.bounces
+    paths = 16 * 16 * 4
+    for b in range(rr_depth):
+        assert rows[b]["rays"] == rows[b]["hits"] == paths, (b, rows[b])
+    assert rows[rr_depth]["rays"] < 0.3 * paths, rows[rr_depth]
 
 
 def test_launch_sequence_per_bounce(cornell_box):
@@ -105,8 +143,19 @@ def test_launch_sequence_per_bounce(cornell_box):
     assert seq == ["path_init"] + per_bounce * 3
     table = {row["kernel"]: row for row in r.stats.kernels}
     assert set(table) == set(STAGES)
-    assert table["intersect"]["launches"] == 3
-    assert sum(row["share"] for row in table.values()) == pytest.approx(1.0)
+    for name, row in table.items():  # the table counts what was launched, and shares the time it measured
+        assert row["launches"] == seq.count(name) == (1 if name == "path_init" else 3)
+        assert row["mean_ms"] == pytest.approx(row["total_ms"] / row["launches"])
+        assert row["share"] == pytest.approx(row["total_ms"] / sum(x["total_ms"] for x in table.values()))
+    # the readback schedule stops when no path is left: under a sky, with the only shape behind the
+    # camera, every camera ray misses, so there is one bounce of launches whatever max_depth allows
+    sky = pyclpt.load_dict({"type": "scene", "sensor": sensor([{"look_at": {
+        "origin": [0, 0, 0], "target": [0, 0, -1], "up": [0, 1, 0]}}], size=8),
+        "sky": {"type": "constant", "radiance": 1.0},
+        "behind": {"type": "rectangle", "to_world": [{"translate": [0, 0, 5]}]}})
+    r = pyclpt.Renderer(sky, integrator="wavefront", max_depth=5, width=8, height=8)
+    assert np.all(r.render(2, progress=False) == 1.0)
+    assert r.integrator.profile.sequence == (["path_init"] + per_bounce) * 2
 
 
 def test_path_state_is_declared_once():

@@ -92,7 +92,6 @@ from __future__ import annotations
 import ctypes
 import itertools
 import logging
-import os
 import sys
 import threading
 import time
@@ -101,7 +100,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.accel import embree
-from pyclpt.common.cache import cache_dir, content_key, save_npz
+from pyclpt.common import env
+from pyclpt.common.cache import cache_path, content_key, save_npz
 
 log = logging.getLogger("pyclpt.accel.bvh")
 
@@ -227,7 +227,7 @@ def _set_bounds_callback():
     a Python no-op instead.
     """
     native = None
-    if ctypes.sizeof(ctypes.c_void_p) == 8 and not os.environ.get("PYCLPT_BVH_PY_BOUNDS"):
+    if ctypes.sizeof(ctypes.c_void_p) == 8 and not env.flag("PYCLPT_BVH_PY_BOUNDS"):
         try:
             native = ctypes.cast(ctypes.pythonapi.Py_IsInitialized, ctypes.c_void_p).value
         except (AttributeError, OSError):
@@ -556,7 +556,9 @@ def build_bvh(positions: np.ndarray, indices: np.ndarray, *, use_cache: bool = T
     if not use_cache:
         return _build(pos32, idx, settings)
     key = content_key(pos32, idx, repr(settings), LAYOUT_VERSION)
-    path = cache_dir("bvh") / f"{key}.npz"
+    path = cache_path("bvh", key)
+    if path is None:  # the cache folder cannot be used (warned once): build uncached
+        return _build(pos32, idx, settings)
     if path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:

@@ -51,6 +51,8 @@ from ctypes import (
 )
 from pathlib import Path
 
+from pyclpt.common import env
+
 __all__ = [
     "EmbreeError",
     "RTCBounds",
@@ -238,11 +240,12 @@ def _candidate_paths() -> list[Path]:
 
 def library_path() -> str:
     """Path (or bare name, for the system loader) of the Embree 4 library to load."""
-    env = os.environ.get("PYCLPT_EMBREE_LIB")
-    if env:
-        if not Path(env).exists():
-            raise EmbreeError(f"PYCLPT_EMBREE_LIB={env!r} does not exist")
-        return env
+    lib_env = env.get("PYCLPT_EMBREE_LIB")
+    if lib_env:
+        if not Path(lib_env).exists():
+            raise EmbreeError(f"PYCLPT_EMBREE_LIB={lib_env!r} does not exist: set it to the path of "
+                              f"libembree4.so / libembree4.dylib / embree4.dll, or unset it")
+        return lib_env
     cands = _candidate_paths()
     if cands:
         return str(cands[0])
@@ -294,7 +297,8 @@ def lib() -> ctypes.CDLL:
                 try:
                     handle = ctypes.CDLL(path)
                 except OSError as exc:
-                    raise EmbreeError(f"could not load Embree library {path!r}: {exc}") from exc
+                    named = " (PYCLPT_EMBREE_LIB)" if env.get("PYCLPT_EMBREE_LIB") else ""
+                    raise EmbreeError(f"could not load Embree library {path!r}{named}: {exc}") from exc
                 try:
                     _bind(handle)
                 except AttributeError as exc:
@@ -330,12 +334,13 @@ def device() -> int:
         L = lib()
         with _lib_lock:
             if _device is None:
-                config = os.environ.get("PYCLPT_EMBREE_CONFIG", "threads=1").encode()
-                dev = L.rtcNewDevice(config)
+                config = env.get("PYCLPT_EMBREE_CONFIG")
+                dev = L.rtcNewDevice((config or "threads=1").encode())
                 if not dev:
                     code = L.rtcGetDeviceError(None)
+                    named = f" (PYCLPT_EMBREE_CONFIG={config!r}: fix or unset it)" if config else ""
                     raise EmbreeError(
-                        f"rtcNewDevice failed with {_ERROR_NAMES.get(code, code)}"
+                        f"rtcNewDevice failed with {_ERROR_NAMES.get(code, code)}{named}"
                     )
                 _device = dev
     return _device

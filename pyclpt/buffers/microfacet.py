@@ -19,7 +19,7 @@ Mitsuba keeps t in a 64-entry table; a material record has room for 5 floats, so
 pyclpt keeps RP_KNOTS = 10 half-precision knots of t at cos = (k / 9)^2
 (uniform in sqrt(cos), denser at grazing angles where t bends), interpolated
 linearly in sqrt(cos) on the device (``roughplastic_transmittance`` in
-cl/scene/bsdf.h). Against the exact curve the interpolation is off by at most ~0.04 at
+cl/scene/bsdfs/roughplastic.h). Against the exact curve the interpolation is off by at most ~0.04 at
 grazing angles for near-smooth coatings and by ~0.002 on cosine-weighted average.
 """
 from __future__ import annotations

@@ -62,6 +62,7 @@ class SceneArrays:
 
 
 def pack_scene(scene: Scene) -> SceneArrays:
+    scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
     mats = pack_materials(scene.materials)
     positions, indices, normals, uvs, info, emission = [], [], [], [], [], []
     offset = 0

@@ -6,14 +6,30 @@ another one: ``"pocl"``, ``"gpu"``, ``"cpu"``, a platform/device index pair
 ``"1:0"``, or any substring of a platform or device name (``"NVIDIA"``).
 
 The only global state in pyclpt is the lazily created default device.
+
+Memory: every buffer is checked against CL_DEVICE_MAX_MEM_ALLOC_SIZE before it is made
+(:func:`check_alloc`, :class:`BufferTooLarge`), and all the buffers of a render together against
+the device's global memory and, on a CPU device, what this process may still allocate
+(:func:`check_memory`, :class:`DeviceMemoryError`), so that an allocation the driver cannot honour
+is refused with a message instead of crashing inside the driver.
 """
 from __future__ import annotations
 
-import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import pyopencl as cl
+
+from pyclpt.common import env
+
+try:
+    import resource
+except ImportError:  # Windows: no RLIMIT_AS
+    resource = None  # type: ignore[assignment]
+
+DEVICE_ENV = "PYCLPT_DEVICE"
 
 
 class DeviceError(RuntimeError):
@@ -52,6 +68,16 @@ class Device:
     @property
     def max_alloc(self) -> int:
         return int(self.device.max_mem_alloc_size)
+
+    @property
+    def global_mem(self) -> int:
+        """CL_DEVICE_GLOBAL_MEM_SIZE: all the buffers of a render together must fit in it."""
+        return int(self.device.global_mem_size)
+
+    @property
+    def is_cpu(self) -> bool:
+        """A CPU device: its buffers live in this process's memory (RLIMIT_AS and RAM apply)."""
+        return bool(self.device.type & cl.device_type.CPU)
 
     @property
     def has_fp64(self) -> bool:
@@ -129,9 +155,14 @@ def _names(devices: list[tuple[int, int, cl.Device]]) -> str:
 
 def open_device(spec: str | None = None) -> Device:
     """A new Device for ``spec`` (see module docstring); ``None`` reads ``PYCLPT_DEVICE``."""
-    if spec is None:
-        spec = os.environ.get("PYCLPT_DEVICE", "")
-    dev = _select(spec)
+    if spec is None and env.get(DEVICE_ENV) is not None:
+        try:
+            dev = _select(env.get(DEVICE_ENV) or "")
+        except DeviceError as exc:
+            raise DeviceError(f"{env.describe(DEVICE_ENV)} (the default device): {exc}; set {DEVICE_ENV} "
+                              f"to one of them or unset it") from None
+    else:
+        dev = _select(spec or "")
     ctx = cl.Context([dev])
     queue = cl.CommandQueue(ctx, dev, properties=cl.command_queue_properties.PROFILING_ENABLE)
     return Device(device=dev, context=ctx, queue=queue)
@@ -155,6 +186,9 @@ def get_device(device: Device | str | None = None) -> Device:
         return device
     if device is None:
         return default_device()
+    if not isinstance(device, str):
+        raise TypeError(f"device must be a pyclpt.Device, a selector string (pocl, gpu, cpu, P:D or a "
+                        f"platform/device name substring) or None, got {type(device).__name__} {device!r}")
     if device not in _opened:
         _opened[device] = open_device(device)
     return _opened[device]
@@ -164,11 +198,74 @@ class BufferTooLarge(MemoryError):
     """A buffer larger than the device's CL_DEVICE_MAX_MEM_ALLOC_SIZE."""
 
 
-def check_alloc(device: Device, nbytes: int, what: str) -> None:
+def check_alloc(device: Device, nbytes: int, what: str, hint: str = "") -> None:
+    """Raise BufferTooLarge unless one buffer of ``nbytes`` is allowed; ``hint`` says what to lower."""
     if nbytes > device.max_alloc:
         raise BufferTooLarge(
             f"{what} needs {nbytes / 2**20:.1f} MiB, more than the {device.max_alloc / 2**20:.0f} MiB "
-            f"that {device.name} allows in one buffer (CL_DEVICE_MAX_MEM_ALLOC_SIZE)")
+            f"that {device.name} allows in one buffer (CL_DEVICE_MAX_MEM_ALLOC_SIZE){'; ' + hint if hint else ''}")
+
+
+class DeviceMemoryError(MemoryError):
+    """The buffers of a render fit the per-buffer limit one by one but not the memory there is for
+    all of them together: the device's global memory or, on a CPU device, this process's."""
+
+
+# Left free on a CPU device for what the process allocates besides the render's buffers (the OpenCL
+# compiler, Python, the driver's own structures).
+CPU_RESERVE = 256 * 2**20
+
+
+def _mib(n: float) -> str:
+    return f"{n / 2**20:,.0f} MiB"
+
+
+def _proc_kib(path: str, key: str) -> int | None:
+    """A ``key: N kB`` line of a /proc file, in bytes; None where there is no such file (not Linux)."""
+    try:
+        for line in Path(path).read_text().splitlines():
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def host_memory_limits() -> list[tuple[int, str]]:
+    """What this process may still allocate: (bytes, what) for the address space left under
+    ``ulimit -v`` (RLIMIT_AS minus what the process maps now) and the RAM available."""
+    limits = []
+    soft = resource.getrlimit(resource.RLIMIT_AS)[0] if resource is not None else -1
+    if resource is not None and soft != resource.RLIM_INFINITY:
+        used = _proc_kib("/proc/self/status", "VmSize") or 0
+        limits.append((max(soft - used, 0), f"address space left to this process (ulimit -v: "
+                                            f"{_mib(soft)}, {_mib(used)} in use)"))
+    available = _proc_kib("/proc/meminfo", "MemAvailable")
+    if available is not None:
+        limits.append((available, "RAM available (MemAvailable in /proc/meminfo)"))
+    return limits
+
+
+def check_memory(device: Device, needs: Mapping[str, int], *, host: Mapping[str, int] | None = None,
+                 hint: str = "") -> None:
+    """Raise DeviceMemoryError unless the device buffers ``needs`` ({what: bytes}) fit together in
+    the device's global memory and, on a CPU device (whose buffers are this process's memory), with
+    the host arrays ``host`` in what the process may still allocate, CPU_RESERVE kept free. On
+    other devices only ``host`` is checked against the process. ``hint`` says what to lower."""
+    checks = [(dict(needs), device.global_mem, f"the global memory of {device.name} (CL_DEVICE_GLOBAL_MEM_SIZE)")]
+    host_needs = {**needs, **(host or {})} if device.is_cpu else dict(host or {})
+    reserve = CPU_RESERVE if device.is_cpu else 0
+    for available, what in host_memory_limits():
+        kept = f", less {_mib(reserve)} kept free" if reserve else ""
+        checks.append((host_needs, available - reserve, f"the {what}{kept}"))
+    for parts, available, what in checks:
+        total = sum(int(n) for n in parts.values())
+        if total > available:
+            big = sorted(((n, name) for name, n in parts.items() if n >= 2**20), reverse=True)
+            detail = ", ".join(f"{name} {_mib(n)}" for n, name in big)
+            raise DeviceMemoryError(f"this render needs {_mib(total)} ({detail}), more than the "
+                                    f"{_mib(max(available, 0))} available: {what}"
+                                    f"{'; ' + hint if hint else ''}")
 
 
 def upload(device: Device, array, what: str) -> cl.Buffer:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import os
 import re
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -23,9 +22,12 @@ from pathlib import Path
 
 import pyopencl as cl
 
+from pyclpt.common import env
 from pyclpt.device.context import Device
 
 log = logging.getLogger("pyclpt.device.program")
+
+DUMP_ENV = "PYCLPT_DUMP_KERNELS"
 
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
 
@@ -140,13 +142,14 @@ def build_program(
     if prog is not None:
         return prog
     label = name or (files[0] if files else "<source>")
-    dump = os.environ.get("PYCLPT_DUMP_KERNELS")
-    if dump:
+    out = env.writable_folder(DUMP_ENV)
+    if out is not None:
         digest = hashlib.sha1(repr(key).encode()).hexdigest()[:10]
-        out = Path(dump)
-        out.mkdir(parents=True, exist_ok=True)
         stem = re.sub(r"[^A-Za-z0-9_.-]", "_", Path(label).stem)
-        (out / f"{stem}-{digest}.cl").write_text(f"// options: {' '.join(opts)}\n{text}")
+        try:
+            (out / f"{stem}-{digest}.cl").write_text(f"// options: {' '.join(opts)}\n{text}")
+        except OSError as exc:
+            raise env.error(DUMP_ENV, f"cannot write {stem}-{digest}.cl there ({exc.strerror or exc})") from None
     start = time.perf_counter()
     try:
         prog = cl.Program(device.context, text).build(options=opts)

@@ -27,12 +27,13 @@ frames stacked in one buffer, one launch) run the same kernel, so they give iden
 from __future__ import annotations
 
 import logging
-import os
 from typing import Any
 
 import numpy as np
 import pyopencl as cl
 
+from pyclpt.common import env
+from pyclpt.common.checks import check_bool, check_choice, check_int
 from pyclpt.device.context import Device, alloc, check_alloc, get_device
 from pyclpt.device.program import build_program
 
@@ -78,20 +79,13 @@ class AccumulatorError(ValueError):
 def check_options(*, precision: str = "single", overflow: str = "stop", max_frame_count: int = 0,
                   input_type: str = "float", channels: int = 3, enabled: bool = True) -> dict[str, Any]:
     """The normalised options, or AccumulatorError naming the bad value and why it is refused."""
-    if precision not in PRECISIONS:
-        raise AccumulatorError(f"unknown accumulation precision {precision!r} (choose from {', '.join(PRECISIONS)})")
-    if overflow not in OVERFLOW_MODES:
-        raise AccumulatorError(f"unknown overflow mode {overflow!r} (choose from {', '.join(OVERFLOW_MODES)})")
-    if input_type not in INPUT_TYPES:
-        raise AccumulatorError(f"unknown input type {input_type!r} (choose from {', '.join(INPUT_TYPES)})")
-    if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or not 1 <= channels <= 4:
-        raise AccumulatorError(f"channels must be an integer in 1..4, got {channels!r}")
-    if (isinstance(max_frame_count, bool) or not isinstance(max_frame_count, (int, np.integer))
-            or not 0 <= max_frame_count <= _COUNTER_LIMIT):
-        raise AccumulatorError(f"max_frame_count must be an integer in [0, 2**32) (0 = unlimited), "
-                               f"got {max_frame_count!r}")
-    if not isinstance(enabled, (bool, np.bool_)):
-        raise AccumulatorError(f"enabled must be True or False, got {enabled!r}")
+    check_choice(precision, "accumulation precision", PRECISIONS, error=AccumulatorError)
+    check_choice(overflow, "overflow mode", OVERFLOW_MODES, error=AccumulatorError)
+    check_choice(input_type, "input type", INPUT_TYPES, error=AccumulatorError)
+    channels = check_int(channels, "channels", lo=1, hi=4, error=AccumulatorError)
+    max_frame_count = check_int(max_frame_count, "max_frame_count", lo=0, hi=_COUNTER_LIMIT,
+                                error=AccumulatorError, note=" (0 = unlimited)")
+    enabled = check_bool(enabled, "enabled")
     if overflow != "stop" and max_frame_count == 0:
         raise AccumulatorError(
             f"overflow={overflow!r} acts when max_frame_count frames have been accumulated, but "
@@ -105,10 +99,6 @@ def check_options(*, precision: str = "single", overflow: str = "stop", max_fram
             "input_type": input_type, "channels": int(channels), "enabled": bool(enabled)}
 
 
-def _env_flag(name: str) -> bool:
-    return os.environ.get(name, "").strip().lower() not in ("", "0", "false", "no", "off")
-
-
 class Accumulator:
     """A running per-pixel sum of frames on one device, and its average."""
 
@@ -116,18 +106,21 @@ class Accumulator:
                  precision: str = "single", input_type: str = "float", max_frame_count: int = 0,
                  overflow: str = "stop", enabled: bool = True, force_emulated_double: bool | None = None,
                  local_size: tuple[int, int] | None = None) -> None:
+        width = check_int(width, "accumulator width", lo=1, hi=65536, error=AccumulatorError)
+        height = check_int(height, "accumulator height", lo=1, hi=65536, error=AccumulatorError)
+        if local_size is not None and (not isinstance(local_size, (tuple, list)) or len(local_size) != 2):
+            raise TypeError(f"local_size must be a pair of integers (x, y) or None, got {local_size!r}")
+        force_emulated_double = (None if force_emulated_double is None
+                                 else check_bool(force_emulated_double, "force_emulated_double"))
         self.device = get_device(device)
-        if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))
-                and 0 < width <= 65536 and 0 < height <= 65536):
-            raise AccumulatorError(f"accumulator size must be 1..65536 pixels a side, got {width}x{height}")
-        lx, ly = (int(v) for v in (local_size or default_local_size(self.device)))
+        lx, ly = (check_int(v, "local_size", lo=0) for v in (local_size or default_local_size(self.device)))
         if lx < 1 or ly < 1 or lx * ly > self.device.device.max_work_group_size:
             raise AccumulatorError(f"work-group size {lx}x{ly} is not possible on {self.device.name} "
                                    f"(at most {self.device.device.max_work_group_size} work-items)")
         self.width, self.height = int(width), int(height)
         self.pixels = self.width * self.height
         self.local_size = (lx, ly)
-        self.force_emulated_double = (_env_flag(EMULATE_FP64_ENV) if force_emulated_double is None
+        self.force_emulated_double = (env.flag(EMULATE_FP64_ENV) if force_emulated_double is None
                                       else bool(force_emulated_double))
         self._opts = check_options(precision=precision, overflow=overflow, max_frame_count=max_frame_count,
                                    input_type=input_type, channels=channels, enabled=enabled)

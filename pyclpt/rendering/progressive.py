@@ -36,13 +36,14 @@ from collections.abc import Hashable, Sequence
 from typing import Any
 
 import numpy as np
-from tqdm.auto import tqdm
 
+from pyclpt.common.checks import check_bool, check_int, check_optional_bool, check_optional_int, is_int
 from pyclpt.device.context import Device
 from pyclpt.film.accumulator import Accumulator, check_options
 from pyclpt.film.film import DEFAULT_PRECISION
-from pyclpt.rendering.renderer import Renderer, RenderStats
-from pyclpt.scene.model import Camera, Mesh, Scene, rgb
+from pyclpt.rendering.frame_loop import progress_bar
+from pyclpt.rendering.renderer import MAX_RESOLUTION, Renderer, RenderStats
+from pyclpt.scene.model import Camera, Mesh, Scene, check_material, rgb
 
 log = logging.getLogger("pyclpt.rendering.progressive")
 
@@ -109,10 +110,12 @@ class ProgressiveRenderer:
                  max_frame_count: int = 0, overflow: str = "stop", enabled: bool = True,
                  auto_reset: bool = True, wave_size: int | None = None, local_size: int | None = None,
                  schedule: str | None = None) -> None:
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) < 2**32:
-            raise ValueError(f"seed must be an integer in [0, 2**32), got {seed!r}")
+        seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
+        width = check_optional_int(width, "width", lo=1, hi=MAX_RESOLUTION, note=" (None: the scene's)")
+        height = check_optional_int(height, "height", lo=1, hi=MAX_RESOLUTION, note=" (None: the scene's)")
         if (width is None) != (height is None):
             raise ValueError(f"give both width and height or neither, got width={width}, height={height}")
+        auto_reset = check_bool(auto_reset, "auto_reset")
         check_options(precision=precision, overflow=overflow, max_frame_count=max_frame_count, enabled=enabled)
         self.scene = scene
         self.seed = int(seed)
@@ -171,6 +174,7 @@ class ProgressiveRenderer:
         t = time.perf_counter()
         old = self.renderer
         if changed == ["camera"]:  # only the per-resolution constants depend on the camera
+            self.scene.camera.validate()  # (a rebuild validates the whole scene)
             self.renderer.scene_buffers.refresh_camera()
         else:
             self.renderer = self._make_renderer()  # scene buffers, integrator (its specialisation), film
@@ -204,8 +208,9 @@ class ProgressiveRenderer:
 
     def set_material(self, index: int, material: Any) -> None:
         n = len(self.scene.materials)
-        if not isinstance(index, (int, np.integer)) or not -n <= index < n:
+        if not is_int(index) or not -n <= index < n:
             raise IndexError(f"material index {index!r} out of range: the scene has {n} materials")
+        check_material(material, f"material {int(index) % n}")
         self.scene.materials[index] = material
         self.sync()
 
@@ -216,6 +221,8 @@ class ProgressiveRenderer:
                 if m.name == mesh:
                     return m
             raise KeyError(f"no mesh named {mesh!r} (meshes: {', '.join(m.name for m in meshes)})")
+        if not is_int(mesh):
+            raise TypeError(f"mesh must be a mesh index or name, got {type(mesh).__name__} {mesh!r}")
         if not -len(meshes) <= mesh < len(meshes):
             raise IndexError(f"mesh index {mesh} out of range: the scene has {len(meshes)} meshes")
         return meshes[mesh]
@@ -247,10 +254,9 @@ class ProgressiveRenderer:
         self.sync()
 
     def set_resolution(self, width: int, height: int) -> None:
-        for name, v in (("width", width), ("height", height)):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 < v <= 65536:
-                raise ValueError(f"resolution {name} must be an integer in 1..65536, got {v!r}")
-        self._size = (int(width), int(height))
+        width = check_int(width, "width", lo=1, hi=MAX_RESOLUTION)
+        height = check_int(height, "height", lo=1, hi=MAX_RESOLUTION)
+        self._size = (width, height)
         self.sync()
 
     # -- rendering -------------------------------------------------------------------------------
@@ -258,12 +264,12 @@ class ProgressiveRenderer:
         """Render ``frames`` frames (fewer once overflow='stop' has reached max_frame_count).
         The scene is checked for changes once, before the first: nothing can change it between
         the frames of one call. Returns the number of frames rendered."""
-        if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 0:
-            raise ValueError(f"frames must be an integer >= 0, got {frames!r}")
+        frames = check_int(frames, "frames", lo=0)
         self.sync()
         done = 0
         while done < int(frames) and self._frame():
             done += 1
+            self.renderer.pacer.frame(self.device.queue)
         if done < int(frames):
             self.accumulator.ignored_frames += int(frames) - done
         return done
@@ -284,10 +290,12 @@ class ProgressiveRenderer:
         return self.renderer.film.image()
 
     def run(self, frames: int, progress: bool | None = None) -> np.ndarray:
-        """Render ``frames`` frames with a progress bar and return the image; ``stats`` describes the run.
-        ``progress``: True shows a bar, False never, None on runs longer than a few seconds."""
-        if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1:
-            raise ValueError(f"frames must be an integer >= 1, got {frames!r}")
+        """Render ``frames`` frames and return the image; ``stats`` describes the run.
+        ``progress``: True shows a bar once the run has lasted a couple of seconds; None or False show
+        none. Ctrl-C raises KeyboardInterrupt within about a second and returns no image (the
+        accumulation then holds part of the run; :meth:`reset` starts over)."""
+        frames = check_int(frames, "frames", lo=1)
+        progress = check_optional_bool(progress, "progress")
         self.sync()  # once: the scene cannot change during the run
         r = self.renderer
         r.integrator.profile.clear()
@@ -295,17 +303,13 @@ class ProgressiveRenderer:
             r.integrator.reset_stats()
         start = time.perf_counter()
         done = 0
-        bar = tqdm(total=int(frames), desc=f"{self.scene.name} {r.integrator.name}", unit="frame",
-                   disable=(progress is False), delay=0 if progress else 3.0, leave=False)
-        with bar:
+        with progress_bar(frames, f"{self.scene.name} {r.integrator.name}", "frame", progress) as bar:
             for _ in range(int(frames)):
                 if not self._frame():
                     self.accumulator.ignored_frames += int(frames) - done
                     break
                 done += 1
-                if progress is not False:
-                    self.device.queue.finish()
-                    bar.update(1)
+                bar.update(r.pacer.frame(self.device.queue))
         image = self.image()
         self.stats = self.renderer.collect_stats(self.frame_count, time.perf_counter() - start)
         return image

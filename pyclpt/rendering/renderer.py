@@ -14,16 +14,20 @@ image to image.
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from pyclpt.buffers.scene import SceneBuffers
+from pyclpt.common.checks import check_choice, check_int, check_optional_bool, check_optional_int
 from pyclpt.device.context import Device, get_device
+from pyclpt.film.accumulator import check_options
 from pyclpt.film.film import DEFAULT_PRECISION, Film
 from pyclpt.integrators.megakernel import Megakernel
+from pyclpt.rendering.frame_loop import FramePacer, progress_bar
+from pyclpt.rendering.memory import check_render_memory
 from pyclpt.scene.model import Scene
 
 log = logging.getLogger("pyclpt")
@@ -32,6 +36,7 @@ INTEGRATORS = ("megakernel", "wavefront")
 # max_depth -1 (unlimited: paths end by Russian roulette) runs as this many bounces at most.
 UNLIMITED_DEPTH = 1024
 LAYOUTS = ("soa", "aos")
+MAX_RESOLUTION = 65536  # pixels a side
 
 
 @dataclass
@@ -47,6 +52,16 @@ class RenderStats:
     accumulation: dict = field(default_factory=dict)  # Accumulator.stats(): precision, frames, counters
 
 
+def check_scene(scene: object) -> Scene:
+    """``scene`` itself, after the checks of its values (:meth:`Scene.validate`); TypeError for
+    anything but a Scene."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pyclpt.Scene (pyclpt.load() and pyclpt.load_dict() make one), "
+                        f"got {type(scene).__name__} {scene!r:.60}")
+    scene.validate()
+    return scene
+
+
 class Renderer:
     """A scene prepared on a device for one integrator and resolution."""
 
@@ -55,20 +70,28 @@ class Renderer:
                  device: Device | str | None = None, wave_size: int | None = None,
                  local_size: int | None = None, schedule: str | None = None,
                  precision: str = DEFAULT_PRECISION) -> None:
-        if integrator not in INTEGRATORS:
-            raise ValueError(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
-        if layout not in LAYOUTS:
-            raise ValueError(f"unknown layout {layout!r} (choose from {', '.join(LAYOUTS)})")
+        check_scene(scene)
+        check_choice(integrator, "integrator", INTEGRATORS)
+        check_choice(layout, "layout", LAYOUTS)
+        max_depth = check_optional_int(max_depth, "max_depth", lo=-1, note=" (-1 = unlimited)")
+        width = check_optional_int(width, "width", lo=1, hi=MAX_RESOLUTION, note=" (None: the scene's)")
+        height = check_optional_int(height, "height", lo=1, hi=MAX_RESOLUTION, note=" (None: the scene's)")
+        wave_size = check_optional_int(wave_size, "wave_size", lo=1)
+        local_size = check_optional_int(local_size, "local_size", lo=1)
+        check_options(precision=precision)
         self.scene = scene
         self.device = get_device(device)
-        self.max_depth = scene.max_depth if max_depth is None else int(max_depth)
+        self.max_depth = scene.max_depth if max_depth is None else max_depth
         if self.max_depth < -1:
             raise ValueError(f"max_depth must be -1 (unlimited) or >= 0, got {self.max_depth}")
-        self.width = int(width or scene.film.width)
-        self.height = int(height or scene.film.height)
+        self.width = int(scene.film.width if width is None else width)
+        self.height = int(scene.film.height if height is None else height)
         if not (0 < self.width <= 65536 and 0 < self.height <= 65536):
             raise ValueError(f"resolution must be 1..65536 pixels a side, got {self.width}x{self.height}")
         self.depth_limit = UNLIMITED_DEPTH if self.max_depth == -1 else self.max_depth
+        # all the buffers below together, before any is made (alloc() checks each on its own)
+        check_render_memory(self.device, scene, self.width, self.height, precision=precision,
+                            integrator=integrator, wave_size=wave_size, max_depth=self.depth_limit)
         self.stats = RenderStats()
         t0 = time.perf_counter()
         self.scene_buffers = SceneBuffers(scene, self.device)
@@ -93,27 +116,27 @@ class Renderer:
         # compile: program builds plus the driver's lazy compilation on the first launches
         self.stats.setup_seconds = t1 - t0
         self.stats.compile_seconds = time.perf_counter() - t1
+        self.pacer = FramePacer()  # the frame loop waits for the device often enough for Ctrl-C to stop it
 
     def render(self, spp: int, seed: int = 0, progress: bool | None = None, first_sample: int = 0) -> np.ndarray:
-        """Average of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float32."""
-        if int(spp) < 1:
-            raise ValueError(f"spp must be >= 1, got {spp}")
-        if not 0 <= int(seed) < 2**32:
-            raise ValueError(f"seed must be in [0, 2**32), got {seed}")
+        """Average of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float32.
+        ``progress``: True shows a bar once the render has run a couple of seconds; None or False
+        show none. Ctrl-C raises KeyboardInterrupt within about a second, and no image is returned."""
+        spp = check_int(spp, "spp", lo=1, hi=2**32)
+        seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
+        progress = check_optional_bool(progress, "progress")
+        first_sample = check_int(first_sample, "first_sample", lo=0, hi=2**32 - spp,
+                                 note=" (sample indices are 32-bit)")
         self.film.clear()
         self.integrator.profile.clear()
         if hasattr(self.integrator, "reset_stats"):
             self.integrator.reset_stats()
         start = time.perf_counter()
-        bar = tqdm(total=spp, desc=f"{self.scene.name} {self.integrator.name}", unit="spp",
-                   disable=(progress is False), delay=0 if progress else 3.0, leave=False)
-        with bar:
+        with progress_bar(spp, f"{self.scene.name} {self.integrator.name}", "spp", progress) as bar:
             for s in range(first_sample, first_sample + spp):
                 self.integrator.render_frame(int(seed), s)
                 self.film.add_frame()
-                if progress is not False:
-                    self.device.queue.finish()
-                    bar.update(1)
+                bar.update(self.pacer.frame(self.device.queue))
         image = self.film.image()
         self.collect_stats(spp, time.perf_counter() - start)
         return image
@@ -142,14 +165,19 @@ def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = N
     """Render ``scene`` (a Scene or a built-in scene name / file) to a (H, W, 3) float32 linear image.
 
     ``spp`` and ``max_depth`` default to the scene's; ``width``/``height`` override its film.
-    ``progress``: True shows a bar, False never, None shows one on renders longer than a few seconds.
+    ``progress``: True shows a bar (on stderr, once the render has run a couple of seconds); None or
+    False show none. Ctrl-C stops the render within about a second (KeyboardInterrupt; no image).
     ``precision``: how the frames are summed (``single``, ``compensated``, ``double``; see
     :mod:`pyclpt.film.accumulator`).
     """
-    if isinstance(scene, str):
+    spp = check_optional_int(spp, "spp", lo=1, hi=2**32, note=" (None: the scene's)")
+    check_int(seed, "seed", lo=0, hi=2**32 - 1)
+    check_optional_bool(progress, "progress")
+    if isinstance(scene, (str, os.PathLike)):
         from pyclpt.scene.library import load
 
         scene = load(scene)
+    check_scene(scene)
     r = Renderer(scene, integrator=integrator, layout=layout, max_depth=max_depth, width=width,
                  height=height, device=device, wave_size=wave_size, precision=precision)
     return r.render(scene.spp if spp is None else spp, seed=seed, progress=progress)

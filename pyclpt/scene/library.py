@@ -5,12 +5,18 @@ part of the package, e.g. the Stanford bunny).
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 from pathlib import Path
 
+from pyclpt.common import env
 from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
 from pyclpt.scene.model import Scene
+
+log = logging.getLogger(__name__)
+SCENES_ENV = "PYCLPT_SCENES"
+_warned_roots: set[Path] = set()  # PYCLPT_SCENES values already warned about
 
 
 def builtin_dir() -> Path:
@@ -31,10 +37,17 @@ def builtin_scenes() -> dict[str, str]:
 
 def scenes_root() -> Path | None:
     """The shared scene folder: ``$PYCLPT_SCENES``, else ``../shared/scenes`` beside the
-    working directory or beside pyclpt's source tree; None if none exists."""
-    env = os.environ.get("PYCLPT_SCENES")
-    if env:
-        return Path(env).expanduser()
+    working directory or beside pyclpt's source tree; None if none exists. A ``PYCLPT_SCENES``
+    that is not a folder is returned as it is (loading what needs it then fails, naming it),
+    with one warning naming the variable."""
+    root = env.path(SCENES_ENV)
+    if root is not None:
+        if not root.is_dir() and root not in _warned_roots:
+            _warned_roots.add(root)
+            log.warning("%s: %s, so the scenes and meshes of the shared scene folder cannot be found: set it to "
+                        "the folder holding meshes/ and the real scenes, or unset it", env.describe(SCENES_ENV),
+                        "a file, not a folder" if root.exists() else "no such folder")
+        return root
     checkout = Path(__file__).resolve().parents[2]
     for candidate in (Path.cwd().parent / "shared" / "scenes", checkout.parent / "shared" / "scenes"):
         if candidate.is_dir():
@@ -81,6 +94,12 @@ def load(name_or_path: str | os.PathLike, /, **params: object) -> Scene:
         d = json.loads(path.read_text())
     except json.JSONDecodeError as exc:
         raise SceneDictError(f"{path}:{exc.lineno}: invalid JSON: {exc.msg}") from None
+    except UnicodeDecodeError as exc:
+        raise SceneDictError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+    if not isinstance(d, dict):
+        kind = {list: "an array", str: "a string", bool: "a boolean", int: "a number", float: "a number"}
+        raise SceneDictError(f"{path}: a JSON scene is an object ({{\"type\": \"scene\", ...}}) at the top level, "
+                             f"not {kind.get(type(d), 'null')}")
     d.pop("description", None)
     text_d = json.dumps(d)
     if "${PYCLPT_SCENES}" in text_d:

@@ -25,7 +25,7 @@ module:
 * validates the result (indices in range, finite values, at least one
   triangle) and turns every library failure into :class:`MeshLoadError`
   naming the file;
-* caches parsed meshes as ``.npz`` under ``cache_dir("mesh")``, keyed by the
+* caches parsed meshes as ``.npz`` files (``cache_path("mesh", key)``), keyed by the
   file's bytes, the format and the loader/trimesh versions.
 """
 from __future__ import annotations
@@ -35,6 +35,7 @@ import functools
 import gzip
 import importlib.metadata
 import io
+import logging
 import os
 import re
 import warnings
@@ -44,9 +45,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pyclpt.common.cache import cache_dir, content_key, save_npz
+from pyclpt.common.cache import cache_path, content_key, save_npz
 
 __all__ = ["LOADER_VERSION", "MeshData", "MeshLoadError", "load_mesh"]
+
+log = logging.getLogger(__name__)
 
 #: Bump whenever parsing or validation changes: it is part of the cache key.
 LOADER_VERSION = "mesh_io-1"
@@ -186,8 +189,8 @@ def _parse(data: bytes, fmt: str, name: str) -> MeshData:
 
 def _cache_read(key: str, name: str) -> MeshData | None:
     try:
-        path = cache_dir("mesh") / f"{key}.npz"
-        if not path.exists():
+        path = cache_path("mesh", key)
+        if path is None or not path.exists():
             return None
         with np.load(path, allow_pickle=False) as f:
             return MeshData(
@@ -199,7 +202,7 @@ def _cache_read(key: str, name: str) -> MeshData | None:
                 material_names=tuple(str(s) for s in f["material_names"]),
             )
     except Exception as exc:  # a damaged or foreign cache entry is only a miss
-        warnings.warn(f"ignoring unreadable mesh cache entry for {name}: {exc}", stacklevel=3)
+        log.warning("ignoring unreadable mesh cache entry for %s: %s", name, " ".join(str(exc).split()))
         return None
 
 
@@ -215,9 +218,11 @@ def _cache_write(key: str, mesh: MeshData) -> None:
     if mesh.uvs is not None:
         arrays["uvs"] = mesh.uvs
     try:
-        save_npz(cache_dir("mesh") / f"{key}.npz", **arrays)
+        path = cache_path("mesh", key)
+        if path is not None:  # None: the cache folder cannot be used (warned once)
+            save_npz(path, **arrays)
     except OSError as exc:  # read-only or full disk: loading still works, just uncached
-        warnings.warn(f"could not write mesh cache: {exc}", stacklevel=3)
+        log.warning("could not write mesh cache: %s", " ".join(str(exc).split()))
 
 
 # --------------------------------------------------------------------------- validation
@@ -487,10 +492,7 @@ def _parse_obj(data: bytes, name: str) -> dict:
                                    (normals is None, _RE_VN_REF, "normals (vn)")):
         if missing and pattern.search(face_text):
             _diagnose_obj(text, name)
-            warnings.warn(
-                f"{name}: some faces have {what} and others do not; loading the mesh without them",
-                stacklevel=4,
-            )
+            log.warning("%s: some faces have %s and others do not; loading the mesh without them", name, what)
 
     if faces.ndim == 2 and faces.shape[1] > 3:
         faces = _fan(faces)
@@ -660,8 +662,7 @@ def _ply_via_trimesh(data: bytes, name: str) -> tuple[dict[str, np.ndarray], np.
         except Exception:
             texcoord = None
         if texcoord is None or texcoord.dtype == object or texcoord.shape != (nf, 6) or len(faces) != nf:
-            warnings.warn(f"{name}: per-face texcoords are only supported on triangle meshes; UVs ignored",
-                          stacklevel=2)
+            log.warning("%s: per-face texcoords are only supported on triangle meshes; UVs ignored", name)
             texcoord = None
     return columns, faces, texcoord
 

@@ -5,20 +5,34 @@ Conventions follow Mitsuba 3 so that a scene means the same in both: BSDFs are
 one-sided unless ``twosided``; area emitters emit on the front side of their
 triangles (counter-clockwise winding); the camera looks along +z of its
 ``to_world`` frame with +x pointing left on the image.
+
+Values are checked when an element is made and again whenever one of its fields is assigned
+(``scene.materials[0].reflectance = (-3, 0, 0)`` raises at once, naming the value, and leaves the
+old one). Radiance and reflectance-like values (colours, emission, environment, colour textures)
+must be finite and >= 0, texels finite. Changes that no assignment sees (numpy arrays edited in
+place, an element of a list replaced) are caught by :meth:`Scene.validate`, which checks every
+element of the scene, naming it (material index, mesh name, texture or environment map name);
+it runs before a scene is put on a device, so no negative or NaN value reaches the kernels.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, get_args
 
 import numpy as np
+
+from pyclpt.common.checks import check_bool, check_float, check_int
 
 RGB = tuple[float, float, float]
 
 
 def rgb(value: object, what: str = "color") -> RGB:
     """A float or 3 floats as an RGB triple; raises ValueError naming ``what``."""
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected a number or 3 finite numbers, got {value!r}") from None
     if arr.size == 1:
         arr = np.repeat(arr, 3)
     if arr.size != 3 or not np.all(np.isfinite(arr)):
@@ -26,13 +40,29 @@ def rgb(value: object, what: str = "color") -> RGB:
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
+def radiance(value: object, what: str) -> RGB:
+    """An RGB triple of finite values >= 0 (a colour, a radiance); ValueError naming ``what``."""
+    problem = f"{what}: expected a number or 3 finite numbers >= 0, got {value!r}"
+    try:
+        out = rgb(value, what)
+    except ValueError:
+        raise ValueError(problem) from None
+    if min(out) < 0:
+        raise ValueError(problem)
+    return out
+
+
 WRAP_MODES = ("repeat", "mirror", "clamp", "black")
 FILTERS = ("nearest", "bilinear")
 DISTRIBUTIONS = ("ggx", "beckmann")
+FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 
 
 def _uv(value: object, what: str) -> tuple[float, float]:
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected a number or 2 finite numbers, got {value!r}") from None
     if arr.size == 1:
         arr = np.repeat(arr, 2)
     if arr.size != 2 or not np.all(np.isfinite(arr)):
@@ -40,15 +70,70 @@ def _uv(value: object, what: str) -> tuple[float, float]:
     return (float(arr[0]), float(arr[1]))
 
 
+def bad_texel(pixels: np.ndarray, *, negative: bool) -> str | None:
+    """None when every texel is finite (and >= 0 unless ``negative``), else where the first bad one is."""
+    ok = np.isfinite(pixels) if negative else (np.isfinite(pixels) & (pixels >= 0))
+    if ok.all():
+        return None
+    bad = np.argwhere(~ok)
+    r, c, ch = (int(i) for i in bad[0])
+    count = f" ({len(bad)} bad values)" if len(bad) > 1 else ""
+    return f"texel (row {r}, column {c}, channel {ch}) is {float(pixels[r, c, ch])!r}{count}"
+
+
+# Elements whose _check() is running: its own assignments (normalised values) are not checked again.
+# Kept out of the elements themselves so that their __dict__ holds their fields and nothing else.
+_CHECKING: set[int] = set()
+
+
+class Checked:
+    """Base of the model's dataclasses: ``_check()`` checks and normalises the fields (ValueError or
+    TypeError naming the element and the value); it runs when the element is made and again when a
+    field is assigned later, and a refused assignment leaves the old value."""
+
+    def __post_init__(self) -> None:
+        self._run_check()
+
+    def _check(self) -> None:
+        raise NotImplementedError
+
+    def validate(self) -> None:
+        """Check every field again (after numpy arrays were changed in place, say)."""
+        self._run_check()
+
+    def _run_check(self) -> None:
+        key = id(self)
+        _CHECKING.add(key)
+        try:
+            self._check()
+        finally:
+            _CHECKING.discard(key)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        state = self.__dict__
+        # The generated __init__ sets each field once (a first assignment); __post_init__ checks them.
+        if name not in state or id(self) in _CHECKING or name not in self.__dataclass_fields__:  # type: ignore[attr-defined]
+            object.__setattr__(self, name, value)
+            return
+        old = state[name]
+        object.__setattr__(self, name, value)
+        try:
+            self._run_check()
+        except BaseException:
+            object.__setattr__(self, name, old)
+            raise
+
+
 @dataclass(eq=False)
-class Bitmap:
+class Bitmap(Checked):
     """An image texture (Mitsuba ``bitmap``), looked up at the surface's uv.
 
     ``pixels`` (H, W, C) float32 holds the decoded values: linear radiance-like
     values for ``raw`` or HDR files, sRGB-encoded values in [0, 1] otherwise
     (decoded to linear on the device, before filtering). ``scale`` multiplies
     the value (Mitsuba's ``scale`` texture). Row 0 of ``pixels`` is the top of
-    the image, which is v = 1 as in Mitsuba.
+    the image, which is v = 1 as in Mitsuba. Texels must be finite; used as a
+    colour (a reflectance, an opacity) they must also be >= 0 (a bump map's heights may not be).
     """
 
     pixels: np.ndarray
@@ -60,15 +145,17 @@ class Bitmap:
     uv_offset: tuple[float, float] = (0.0, 0.0)
     scale: RGB = (1.0, 1.0, 1.0)
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         px = np.asarray(self.pixels, dtype=np.float32)
         if px.ndim == 2:
             px = px[:, :, None]
         if px.ndim != 3 or px.shape[2] not in (1, 2, 3, 4) or px.shape[0] < 1 or px.shape[1] < 1:
             raise ValueError(f"texture {self.name!r}: expected an (H, W, C) image, got shape {px.shape}")
-        if not np.all(np.isfinite(px)):
-            raise ValueError(f"texture {self.name!r}: the image holds NaN or infinite values")
+        bad = bad_texel(px, negative=True)
+        if bad:
+            raise ValueError(f"texture {self.name!r}: {bad}; texels must be finite (no NaN or infinite values)")
         self.pixels = np.ascontiguousarray(px)
+        self.srgb = check_bool(self.srgb, f"texture {self.name!r} srgb")
         if self.filter not in FILTERS:
             raise ValueError(f"texture {self.name!r}: filter must be one of {FILTERS}, got {self.filter!r}")
         if self.wrap_mode not in WRAP_MODES:
@@ -77,6 +164,15 @@ class Bitmap:
         self.uv_scale = _uv(self.uv_scale, f"texture {self.name!r} uv_scale")
         self.uv_offset = _uv(self.uv_offset, f"texture {self.name!r} uv_offset")
         self.scale = rgb(self.scale, f"texture {self.name!r} scale")
+
+    def check_colour(self, what: str) -> None:
+        """ValueError naming ``what`` unless the texture's values are >= 0 (it is used as a colour)."""
+        if min(self.scale) < 0:
+            raise ValueError(f"{what}: texture {self.name!r} has a negative scale {self.scale}; a colour "
+                             f"must be >= 0")
+        if self.pixels.min() < 0:
+            raise ValueError(f"{what}: texture {self.name!r}: {bad_texel(self.pixels, negative=False)}; "
+                             f"a colour must be >= 0")
 
     @property
     def width(self) -> int:
@@ -101,7 +197,7 @@ class Bitmap:
 
 
 @dataclass(eq=False)
-class Checkerboard:
+class Checkerboard(Checked):
     """Mitsuba's ``checkerboard``: ``color0`` where the fractional parts of u and v are both below
     or both above one half, ``color1`` elsewhere (after the uv transform); ``scale`` multiplies both."""
 
@@ -112,12 +208,19 @@ class Checkerboard:
     scale: RGB = (1.0, 1.0, 1.0)
     name: str = "checkerboard"
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         self.color0 = rgb(self.color0, f"texture {self.name!r} color0")
         self.color1 = rgb(self.color1, f"texture {self.name!r} color1")
         self.uv_scale = _uv(self.uv_scale, f"texture {self.name!r} uv_scale")
         self.uv_offset = _uv(self.uv_offset, f"texture {self.name!r} uv_offset")
         self.scale = rgb(self.scale, f"texture {self.name!r} scale")
+
+    def check_colour(self, what: str) -> None:
+        """ValueError naming ``what`` unless both colours times the scale are >= 0."""
+        for name in ("color0", "color1", "scale"):
+            if min(getattr(self, name)) < 0:
+                raise ValueError(f"{what}: texture {self.name!r} {name} {getattr(self, name)} is negative; "
+                                 f"a colour must be >= 0")
 
 
 Texture = Bitmap | Checkerboard
@@ -126,17 +229,15 @@ Color = RGB | Bitmap | Checkerboard
 
 
 def color(value: object, what: str) -> Color:
-    """A texture as is, or an RGB triple (see :func:`rgb`)."""
+    """A texture as is, or an RGB triple (see :func:`rgb`); either way its values must be >= 0."""
     if isinstance(value, (Bitmap, Checkerboard)):
+        value.check_colour(what)
         return value
-    return rgb(value, what)
+    return radiance(value, what)
 
 
 def _alpha(value: float, what: str) -> float:
-    v = float(value)
-    if not 0.0 <= v <= 4.0 or not np.isfinite(v):
-        raise ValueError(f"{what}: roughness alpha must be in [0, 4], got {value!r}")
-    return v
+    return check_float(value, f"{what}: roughness alpha", lo=0.0, hi=4.0)
 
 
 def _distribution(value: str, what: str) -> str:
@@ -146,25 +247,26 @@ def _distribution(value: str, what: str) -> str:
 
 
 def _ior(value: float, what: str) -> float:
-    v = float(value)
-    if not (v > 0.0 and np.isfinite(v)):
+    v = check_float(value, what)
+    if not v > 0.0:
         raise ValueError(f"{what}: an index of refraction must be positive and finite, got {value!r}")
     return v
 
 
 @dataclass
-class Diffuse:
+class Diffuse(Checked):
     """Lambertian reflection (Mitsuba ``diffuse``)."""
 
     reflectance: Color = (0.5, 0.5, 0.5)
     twosided: bool = False
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         self.reflectance = color(self.reflectance, "diffuse reflectance")
+        self.twosided = check_bool(self.twosided, "diffuse twosided")
 
 
 @dataclass
-class Conductor:
+class Conductor(Checked):
     """Metal with complex IOR ``eta + i k``; smooth when ``alpha == 0``, else rough
     (``distribution`` GGX or Beckmann; Mitsuba ``conductor`` / ``roughconductor``)."""
 
@@ -175,16 +277,17 @@ class Conductor:
     twosided: bool = False
     distribution: str = "ggx"
 
-    def __post_init__(self) -> None:
-        self.eta = rgb(self.eta, "conductor eta")
-        self.k = rgb(self.k, "conductor k")
+    def _check(self) -> None:
+        self.eta = radiance(self.eta, "conductor eta")
+        self.k = radiance(self.k, "conductor k")
         self.alpha = _alpha(self.alpha, "conductor")
         self.specular_reflectance = color(self.specular_reflectance, "conductor specular_reflectance")
+        self.twosided = check_bool(self.twosided, "conductor twosided")
         self.distribution = _distribution(self.distribution, "conductor")
 
 
 @dataclass
-class Dielectric:
+class Dielectric(Checked):
     """Glass-like interface between ``int_ior`` (inside) and ``ext_ior``; smooth when
     ``alpha == 0``, else rough (Mitsuba ``dielectric`` / ``roughdielectric``)."""
 
@@ -195,7 +298,7 @@ class Dielectric:
     alpha: float = 0.0
     distribution: str = "ggx"
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         self.int_ior = _ior(self.int_ior, "dielectric int_ior")
         self.ext_ior = _ior(self.ext_ior, "dielectric ext_ior")
         self.specular_reflectance = color(self.specular_reflectance, "dielectric specular_reflectance")
@@ -205,7 +308,7 @@ class Dielectric:
 
 
 @dataclass
-class ThinDielectric:
+class ThinDielectric(Checked):
     """A thin sheet of glass (Mitsuba ``thindielectric``): reflection with the
     summed internal reflections, transmission without refraction."""
 
@@ -214,7 +317,7 @@ class ThinDielectric:
     specular_reflectance: Color = (1.0, 1.0, 1.0)
     specular_transmittance: Color = (1.0, 1.0, 1.0)
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         self.int_ior = _ior(self.int_ior, "thindielectric int_ior")
         self.ext_ior = _ior(self.ext_ior, "thindielectric ext_ior")
         self.specular_reflectance = color(self.specular_reflectance, "thindielectric specular_reflectance")
@@ -223,7 +326,7 @@ class ThinDielectric:
 
 
 @dataclass
-class Plastic:
+class Plastic(Checked):
     """A diffuse base under a dielectric coating (Mitsuba ``plastic`` / ``roughplastic``);
     smooth coating when ``alpha == 0``."""
 
@@ -236,50 +339,87 @@ class Plastic:
     nonlinear: bool = False
     twosided: bool = False
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         self.diffuse_reflectance = color(self.diffuse_reflectance, "plastic diffuse_reflectance")
         self.specular_reflectance = color(self.specular_reflectance, "plastic specular_reflectance")
         self.int_ior = _ior(self.int_ior, "plastic int_ior")
         self.ext_ior = _ior(self.ext_ior, "plastic ext_ior")
         self.alpha = _alpha(self.alpha, "plastic")
         self.distribution = _distribution(self.distribution, "plastic")
+        self.nonlinear = check_bool(self.nonlinear, "plastic nonlinear")
+        self.twosided = check_bool(self.twosided, "plastic twosided")
 
 
 BaseMaterial = Diffuse | Conductor | Dielectric | ThinDielectric | Plastic
 
 
 @dataclass
-class Mask:
+class Mask(Checked):
     """Mitsuba ``mask``: the nested material with probability ``opacity``, else the
     ray passes through (honoured by closest-hit and shadow queries alike)."""
 
     opacity: Color
     material: Material
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         self.opacity = color(self.opacity, "mask opacity")
+        _check_material_type(self.material, "mask material")
 
 
 @dataclass
-class BumpMap:
+class BumpMap(Checked):
     """Mitsuba ``bumpmap``: the shading normal perturbed by the gradient of a height texture."""
 
     height: Texture
     material: Material
     scale: float = 1.0
 
+    def _check(self) -> None:
+        if not isinstance(self.height, (Bitmap, Checkerboard)):
+            raise TypeError(f"bumpmap height: expected a texture (Bitmap, Checkerboard), "
+                            f"got {type(self.height).__name__}")
+        _check_material_type(self.material, "bumpmap material")
+        self.scale = check_float(self.scale, "bumpmap scale")
+
 
 Material = Diffuse | Conductor | Dielectric | ThinDielectric | Plastic | Mask | BumpMap
+MATERIALS = get_args(Material)  # the classes, for isinstance
+
+
+def _check_material_type(mat: object, what: str) -> None:
+    if not isinstance(mat, MATERIALS):
+        names = ", ".join(t.__name__ for t in MATERIALS)
+        raise TypeError(f"{what}: expected a pyclpt material ({names}), got {type(mat).__name__} {mat!r:.60}")
+
+
+def check_material(mat: object, what: str) -> None:
+    """Check a material and everything in it (nested materials, textures) again, with errors
+    prefixed by ``what`` (e.g. ``"material 2 (used by 'floor')"``)."""
+    _check_material_type(mat, what)
+    order: list[Checked] = []  # the material and what it holds, depth first
+    stack: list[Checked] = [mat]  # type: ignore[list-item]
+    while stack:
+        obj = stack.pop()
+        if any(obj is seen for seen in order):
+            continue
+        order.append(obj)
+        stack.extend(v for v in (getattr(obj, f) for f in obj.__dataclass_fields__)  # type: ignore[attr-defined]
+                     if isinstance(v, Checked))
+    try:
+        for obj in reversed(order):  # textures and nested materials before what holds them
+            obj.validate()
+    except (ValueError, TypeError) as exc:
+        raise type(exc)(f"{what}: {exc}") from None
 
 
 @dataclass
-class PointLight:
+class PointLight(Checked):
     """An isotropic point emitter of ``intensity`` (W/sr, rgb) at ``position``."""
 
     position: tuple[float, float, float]
     intensity: RGB = (1.0, 1.0, 1.0)
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         p = np.asarray(self.position, np.float64).reshape(-1)
         if p.size != 3 or not np.all(np.isfinite(p)):
             raise ValueError(f"point light position: expected 3 finite numbers, got {self.position!r}")
@@ -290,7 +430,7 @@ class PointLight:
 
 
 @dataclass(eq=False)
-class Envmap:
+class Envmap(Checked):
     """A lat-long environment map (Mitsuba ``envmap``): ``pixels`` (H, W, 3) linear radiance,
     row 0 at the top (+y in the map's frame), ``to_world`` rotating the map into the scene.
     ``sunsky`` emitters are baked into one of these (pyclpt.scene.sunsky)."""
@@ -300,19 +440,24 @@ class Envmap:
     scale: float = 1.0
     name: str = "envmap"
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
         px = np.asarray(self.pixels, np.float32)
         if px.ndim == 2:
             px = np.repeat(px[:, :, None], 3, axis=2)
         if px.ndim != 3 or px.shape[2] < 3 or px.shape[0] < 2 or px.shape[1] < 2:
             raise ValueError(f"environment map {self.name!r}: expected an (H, W, 3) image, got {px.shape}")
         px = px[:, :, :3]
-        if not np.all(np.isfinite(px)) or px.min() < 0:
-            raise ValueError(f"environment map {self.name!r}: values must be finite and >= 0")
+        bad = bad_texel(px, negative=False)
+        if bad:
+            raise ValueError(f"environment map {self.name!r}: {bad}; values must be finite and >= 0")
         self.pixels = np.ascontiguousarray(px)
-        self.to_world = np.asarray(self.to_world, np.float64).reshape(4, 4)
-        if not (np.isfinite(self.scale) and self.scale >= 0):
+        m = np.asarray(self.to_world, np.float64).reshape(4, 4)
+        if not np.all(np.isfinite(m)):
+            raise ValueError(f"environment map {self.name!r}: to_world holds NaN or infinite values")
+        self.to_world = m
+        if isinstance(self.scale, (bool, np.bool_)) or not (np.isfinite(self.scale) and self.scale >= 0):
             raise ValueError(f"environment map {self.name!r}: scale must be >= 0, got {self.scale}")
+        self.scale = float(self.scale)
 
 
 def base_material(mat: Material) -> BaseMaterial:
@@ -323,7 +468,7 @@ def base_material(mat: Material) -> BaseMaterial:
 
 
 @dataclass(eq=False)
-class Mesh:
+class Mesh(Checked):
     """A triangle mesh in world space with one material and an optional area emitter."""
 
     name: str
@@ -334,22 +479,20 @@ class Mesh:
     uvs: np.ndarray | None = None  # (V, 2) float32
     emission: RGB | None = None  # radiance of an area emitter on the front side
 
-    def __post_init__(self) -> None:
+    @property
+    def triangle_count(self) -> int:
+        return int(self.indices.shape[0])
+
+    def _check(self) -> None:
+        where = f"mesh {self.name!r}"
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
         self.indices = np.ascontiguousarray(self.indices, dtype=np.int32).reshape(-1, 3)
         if self.normals is not None:
             self.normals = np.ascontiguousarray(self.normals, dtype=np.float32).reshape(-1, 3)
         if self.uvs is not None:
             self.uvs = np.ascontiguousarray(self.uvs, dtype=np.float32).reshape(-1, 2)
-        self.validate()
-
-    @property
-    def triangle_count(self) -> int:
-        return int(self.indices.shape[0])
-
-    def validate(self) -> None:
+        self.material = check_int(self.material, f"{where} material", lo=0)
         nv = self.positions.shape[0]
-        where = f"mesh {self.name!r}"
         if self.indices.size == 0:
             raise ValueError(f"{where} has no triangles")
         if not np.all(np.isfinite(self.positions)):
@@ -366,6 +509,9 @@ class Mesh:
             arr = getattr(self, attr)
             if arr is not None and arr.shape != (nv, width):
                 raise ValueError(f"{where}: {attr} has shape {arr.shape}, expected ({nv}, {width})")
+            if arr is not None and not np.all(np.isfinite(arr)):
+                bad = int(np.argwhere(~np.isfinite(arr))[0, 0])
+                raise ValueError(f"{where}: vertex {bad} has NaN or infinite {attr} {arr[bad].tolist()}")
         if self.emission is not None:
             self.emission = rgb(self.emission, f"{where} emission")
             if min(self.emission) < 0:
@@ -373,18 +519,23 @@ class Mesh:
 
 
 @dataclass
-class Camera:
+class Camera(Checked):
     """Perspective pinhole camera; ``to_world`` maps camera space (looking along +z) to world."""
 
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
     fov: float = 45.0  # degrees, along fov_axis
     fov_axis: str = "x"  # x | y | diagonal | smaller | larger
 
-    def __post_init__(self) -> None:
-        self.to_world = np.asarray(self.to_world, dtype=np.float64).reshape(4, 4)
-        if not 0.0 < self.fov < 180.0:
+    def _check(self) -> None:
+        m = np.asarray(self.to_world, dtype=np.float64).reshape(4, 4)
+        if not np.all(np.isfinite(m)):
+            raise ValueError(f"camera to_world holds NaN or infinite values: {m.tolist()}")
+        self.to_world = m
+        fov = check_float(self.fov, "camera fov")
+        if not 0.0 < fov < 180.0:
             raise ValueError(f"camera fov must be in (0, 180) degrees, got {self.fov}")
-        if self.fov_axis not in ("x", "y", "diagonal", "smaller", "larger"):
+        self.fov = fov
+        if self.fov_axis not in FOV_AXES:
             raise ValueError(f"camera fov_axis must be x, y, diagonal, smaller or larger, got {self.fov_axis!r}")
 
     @staticmethod
@@ -417,20 +568,21 @@ class Camera:
 
 
 @dataclass
-class Film:
+class Film(Checked):
     width: int = 256
     height: int = 256
 
-    def __post_init__(self) -> None:
-        for name in ("width", "height"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or not 0 < int(v) <= 65536:
-                raise ValueError(f"film {name} must be an integer in 1..65536, got {v!r}")
+    def _check(self) -> None:
+        self.width = check_int(self.width, "film width", lo=1, hi=65536)
+        self.height = check_int(self.height, "film height", lo=1, hi=65536)
 
 
 @dataclass(eq=False)
-class Scene:
-    """Everything a render needs. ``spp`` and ``max_depth`` are the scene's defaults."""
+class Scene(Checked):
+    """Everything a render needs. ``spp`` and ``max_depth`` are the scene's defaults.
+
+    Assigning a field checks the scene's own values (element types, material indices, the
+    environment, spp, max_depth); :meth:`validate` checks every element too."""
 
     meshes: list[Mesh]
     materials: list[Material]
@@ -443,7 +595,17 @@ class Scene:
     source: Path | None = None
     lights: list[PointLight] = field(default_factory=list)  # emitters that are not shapes
 
-    def __post_init__(self) -> None:
+    def _check(self) -> None:
+        where = f"scene {self.name!r}"
+        for attr, kind in (("meshes", Mesh), ("materials", MATERIALS), ("lights", PointLight)):
+            items = getattr(self, attr)
+            if not isinstance(items, list):
+                raise TypeError(f"{where} {attr}: expected a list, got {type(items).__name__}")
+            for i, item in enumerate(items):
+                if not isinstance(item, kind):
+                    names = ", ".join(t.__name__ for t in (kind if isinstance(kind, tuple) else (kind,)))
+                    raise TypeError(f"{where} {attr}[{i}]: expected {names}, got {type(item).__name__} "
+                                    f"{item!r:.60}")
         if not self.meshes:
             raise ValueError(f"scene {self.name!r} has no shapes")
         for mesh in self.meshes:
@@ -451,7 +613,34 @@ class Scene:
                 raise ValueError(f"mesh {mesh.name!r} has material {mesh.material}, "
                                  f"but the scene has {len(self.materials)} materials")
         if self.environment is not None and not isinstance(self.environment, Envmap):
-            self.environment = rgb(self.environment, "environment radiance")
+            self.environment = radiance(self.environment, f"{where} environment radiance")
+        if not isinstance(self.camera, Camera):
+            raise TypeError(f"{where} camera: expected a pyclpt.Camera, got {type(self.camera).__name__}")
+        if not isinstance(self.film, Film):
+            raise TypeError(f"{where} film: expected a pyclpt.Film, got {type(self.film).__name__}")
+        self.spp = check_int(self.spp, f"{where} spp", lo=1)
+        self.max_depth = check_int(self.max_depth, f"{where} max_depth", lo=-1, note=" (-1 = unlimited)")
+
+    def material_label(self, index: int) -> str:
+        """``material 3 (Diffuse, used by 'floor', 'wall')``, for messages."""
+        mat = self.materials[index]
+        users = [m.name for m in self.meshes if m.material == index]
+        shown = ", ".join(repr(n) for n in users[:3]) + (f" and {len(users) - 3} more" if len(users) > 3 else "")
+        return f"material {index} ({type(mat).__name__}, {'used by ' + shown if users else 'unused'})"
+
+    def validate(self) -> None:
+        """Check every value of the scene again, element by element: the scene's own fields, then
+        every material (with its textures), mesh, light, the environment, camera and film. Catches
+        what assignments do not see (arrays changed in place, list items replaced); errors name the
+        element (material index and the meshes using it, mesh name, texture or environment map
+        name) and the value. Run before a scene is packed for a device."""
+        self._run_check()
+        for i in range(len(self.materials)):
+            check_material(self.materials[i], f"scene {self.name!r} {self.material_label(i)}")
+        for element in (*self.meshes, *self.lights, self.camera, self.film):
+            element.validate()
+        if isinstance(self.environment, Envmap):
+            self.environment.validate()
 
     @property
     def triangle_count(self) -> int:

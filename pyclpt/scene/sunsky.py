@@ -61,11 +61,13 @@ What is approximated
 """
 from __future__ import annotations
 
-import warnings
+import logging
 
 import numpy as np
 
 from pyclpt.scene.model import Envmap
+
+log = logging.getLogger(__name__)
 
 SUN_RADIUS_DEG = 0.5358 * 0.5  # Mitsuba 0.5's SUN_APP_RADIUS is the apparent diameter
 CIE_Y_INTEGRAL = 106.856895  # nm: integral of the CIE 1931 y-bar function (Mitsuba's normalisation)
@@ -278,8 +280,8 @@ def sunsky_envmap(sun_direction, turbidity: float = 3.0, sky_scale: float = 1.0,
         raise ValueError(f"sunsky: resolution must be an integer, got {resolution!r}")
     width, height = int(res), int(res) // 2
     if sun_radius_scale == 0.0:
-        warnings.warn("sunsky: sun_radius_scale = 0 (a directional sun) is not supported; "
-                      "the sun keeps its real angular radius", stacklevel=2)
+        log.warning("sunsky: sun_radius_scale = 0 (a directional sun) is not supported; "
+                    "the sun keeps its real angular radius")
         sun_radius_scale = 1.0
     radius = np.radians(SUN_RADIUS_DEG) * sun_radius_scale
     if radius > 0.5 * np.pi:

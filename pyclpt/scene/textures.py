@@ -35,8 +35,7 @@ def read_texture_image(path: str | os.PathLike) -> tuple[np.ndarray, bool]:
         px = px[:, :, None]
     if px.shape[2] > 4:
         px = px[:, :, :4]
-    if not np.all(np.isfinite(px)):
-        px = np.nan_to_num(px, nan=0.0, posinf=0.0, neginf=0.0)
+    # NaN or infinite texels are kept: Bitmap and Envmap refuse them, naming the file and the texel
     return px, ldr
 
 

@@ -1,0 +1,61 @@
+/* roughplastic.h: Mitsuba 3's `roughplastic` (MAT_ROUGHPLASTIC, src/bsdfs/roughplastic.cpp): a rough
+ * coating F D G / (4 cos_i) over the plastic's diffuse base weighted by the coating's transmittance
+ * t(cos) (RP_KNOTS half floats the host computed, pyclpt/buffers/microfacet.py) and its internal
+ * reflectance (b->fdr_int). One-sided: scene/bsdf.h, which includes this file, calls it with
+ * wi.z > 0 (and wo.z > 0 for eval). */
+#ifndef PYCLPT_BSDF_H
+#error "roughplastic.h is part of scene/bsdf.h: include that instead"
+#endif
+#ifndef PYCLPT_BSDFS_ROUGHPLASTIC_H
+#define PYCLPT_BSDFS_ROUGHPLASTIC_H
+
+#include "core/sampling.h"
+#include "scene/bsdfs/fresnel.h"
+#include "scene/bsdfs/microfacet.h"
+#include "scene/bsdfs/plastic.h"
+
+/* The coating's transmittance t(cos) of a rough plastic, linear in sqrt(cos) between the knots
+ * pyclpt/buffers/microfacet.py computed on the host (Mitsuba keeps a 64-entry table linear in cos). */
+static inline float roughplastic_transmittance(const Bsdf* b, float cos_theta) {
+    __global const half* knots = (__global const half*)(b->mat + MAT_RP_TRANS);
+    float x = sqrt(clamp(cos_theta, 0.0f, 1.0f)) * (float)(RP_KNOTS - 1);
+    int i = min((int)x, RP_KNOTS - 2);
+    float f = x - (float)i;
+    float v0 = vload_half(i, knots), v1 = vload_half(i + 1, knots);
+    return v0 + f * (v1 - v0);
+}
+
+/* Coating F D G / (4 cos_i) + base t_i t_o cos_o, and the pdf of both lobes together. */
+static inline float3 roughplastic_eval(const Bsdf* b, float3 wi, float3 wo, float* pdf) {
+    Microfacet d = microfacet_of(b);
+    float t_i = roughplastic_transmittance(b, wi.z), t_o = roughplastic_transmittance(b, wo.z);
+    float ps = plastic_prob_specular(b, t_i);
+    float3 h = normalize(wi + wo);
+    float dh = mf_d(d, h);
+    float g1_i = mf_g1(d, wi, h);
+    float spec_pdf = dh * g1_i / (4.0f * wi.z);
+    *pdf = ps * spec_pdf + (1.0f - ps) * cosine_hemisphere_pdf(wo);
+    float f = fresnel_dielectric_f(dot(wi, h), b->ior);
+    float3 value = b->spec * (f * dh * g1_i * mf_g1(d, wo, h) / (4.0f * wi.z));
+    return value + plastic_base(b) * (t_i * t_o * wo.z);
+}
+
+/* The coating (a visible normal) or the base (cosine-weighted), chosen by plastic_prob_specular;
+ * the weight of both lobes together, as Mitsuba: eval / pdf. */
+static inline bool roughplastic_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+    float ps = plastic_prob_specular(b, roughplastic_transmittance(b, wi.z));
+    if (u_lobe < ps) {
+        float3 h = mf_sample_visible(microfacet_of(b), wi, u);
+        s->wo = 2.0f * dot(wi, h) * h - wi;
+    } else {
+        s->wo = square_to_cosine_hemisphere(u);
+    }
+    if (s->wo.z <= 0.0f) return false;
+    /* the weight of both lobes together, as Mitsuba: eval / pdf */
+    float3 value = roughplastic_eval(b, wi, s->wo, &s->pdf);
+    if (!(s->pdf > 0.0f)) return false;
+    s->weight = value / s->pdf;
+    return true;
+}
+
+#endif

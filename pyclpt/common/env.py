@@ -1,0 +1,103 @@
+"""Every environment variable pyclpt reads, in one place.
+
+===========================  ==================================================================
+``PYCLPT_DEVICE``            the default OpenCL device (a selector: ``pocl``, ``gpu``, ``1:0``, a name)
+``PYCLPT_SCENES``            the shared scene folder (real scenes and meshes outside the package)
+``PYCLPT_CACHE_DIR``         the cache folder for parsed meshes and BVHs (default ``~/.cache/pyclpt``)
+``PYCLPT_DUMP_KERNELS``      a folder where every OpenCL program built is written, for inspection
+``PYCLPT_EMULATE_FP64``      a flag: the ``double`` accumulation uses the emulated double-float sum
+``PYCLPT_EMBREE_LIB``        the path of the Embree 4 library to load
+``PYCLPT_EMBREE_CONFIG``     Embree's device configuration string (default ``threads=1``)
+``PYCLPT_BVH_PY_BOUNDS``     a flag: the BVH builder's bounds callback is a Python function
+===========================  ==================================================================
+
+Readers here refuse a bad value with :class:`EnvironmentVariableError`, whose message names the
+variable, its value and what to do; an empty value counts as unset.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+VARIABLES: dict[str, str] = {
+    "PYCLPT_DEVICE": "the default OpenCL device (pocl, gpu, cpu, P:D or a platform/device name substring)",
+    "PYCLPT_SCENES": "the shared scene folder (holding meshes/ and the real scenes)",
+    "PYCLPT_CACHE_DIR": "the cache folder for parsed meshes and BVHs (default ~/.cache/pyclpt)",
+    "PYCLPT_DUMP_KERNELS": "a folder that receives the source of every OpenCL program built",
+    "PYCLPT_EMULATE_FP64": "1 makes precision 'double' use the emulated double-float sum",
+    "PYCLPT_EMBREE_LIB": "the path of the Embree 4 library (libembree4.so, .dylib or embree4.dll)",
+    "PYCLPT_EMBREE_CONFIG": "Embree's device configuration string (default threads=1)",
+    "PYCLPT_BVH_PY_BOUNDS": "1 makes the BVH builder's bounds callback a Python function",
+}
+
+TRUE_WORDS = ("1", "true", "yes", "on")
+FALSE_WORDS = ("0", "false", "no", "off")
+
+
+class EnvironmentVariableError(ValueError):
+    """An environment variable of pyclpt holds a value that cannot be used (the message names it)."""
+
+
+def _known(name: str) -> None:
+    if name not in VARIABLES:
+        raise KeyError(f"{name} is not one of pyclpt's environment variables ({', '.join(VARIABLES)})")
+
+
+def get(name: str) -> str | None:
+    """The value of ``name`` without surrounding blanks; None when unset or empty."""
+    _known(name)
+    value = os.environ.get(name, "").strip()
+    return value or None
+
+
+def describe(name: str) -> str:
+    """``NAME='value'`` as shown in error messages."""
+    return f"{name}={os.environ.get(name, '')!r}"
+
+
+def error(name: str, problem: str) -> EnvironmentVariableError:
+    """An error for ``name``: its value, the problem, what the variable is for and to unset it."""
+    return EnvironmentVariableError(f"{describe(name)}: {problem}; it should name {VARIABLES[name]} "
+                                    f"(or unset it)")
+
+
+def flag(name: str) -> bool:
+    """A yes/no variable: 1/true/yes/on or 0/false/no/off (any case); unset or empty is False."""
+    value = get(name)
+    if value is None:
+        return False
+    if value.lower() in TRUE_WORDS:
+        return True
+    if value.lower() in FALSE_WORDS:
+        return False
+    raise EnvironmentVariableError(f"{describe(name)}: expected one of {', '.join(TRUE_WORDS + FALSE_WORDS)} "
+                                   f"({VARIABLES[name]})")
+
+
+def path(name: str) -> Path | None:
+    """The variable as a path (``~`` expanded); None when unset."""
+    value = get(name)
+    return None if value is None else Path(value).expanduser()
+
+
+def existing_folder(name: str) -> Path | None:
+    """The variable as a folder that must exist; None when unset."""
+    folder = path(name)
+    if folder is not None and not folder.is_dir():
+        problem = "is a file, not a folder" if folder.exists() else "no such folder"
+        raise error(name, problem)
+    return folder
+
+
+def writable_folder(name: str) -> Path | None:
+    """The variable as a folder, created if needed, that this process can write to; None when unset."""
+    folder = path(name)
+    if folder is None:
+        return None
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise error(name, f"cannot create the folder ({exc.strerror or exc})") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise error(name, "the folder is not writable")
+    return folder

@@ -1,0 +1,99 @@
+"""The memory a render needs, estimated before anything is allocated.
+
+Every device buffer is checked on its own against CL_DEVICE_MAX_MEM_ALLOC_SIZE when it is made
+(:func:`pyclpt.device.context.check_alloc`), but buffers that each pass that limit can together
+exceed the device's memory, and a CPU driver (PoCL) then crashes the process or a render of many
+minutes fails when its image is read back. :func:`check_render_memory` adds up what a
+:class:`~pyclpt.rendering.renderer.Renderer` will allocate and checks the total first
+(:func:`pyclpt.device.context.check_memory`).
+
+Film, accumulation and path state are counted exactly (they grow with the resolution and the wave
+size); the scene buffers are estimated from the scene model (triangles, vertices, textures),
+without building the BVH.
+"""
+from __future__ import annotations
+
+from dataclasses import fields, is_dataclass
+
+from pyclpt.device.context import Device, check_alloc, check_memory
+from pyclpt.scene.model import Bitmap, Checkerboard, Envmap, Scene
+
+# Bytes of one value of the accumulation sum (pyclpt.film.accumulator): a float, or two words.
+SUM_VALUE_BYTES = {"single": 4, "compensated": 8, "double": 8}
+# Scene buffers per triangle: BVH triangle (36), info (8), vertex indices (12), BVH nodes (about
+# one 64-byte node per 4 triangles, counted twice for safety) and an emitter record (32).
+BYTES_PER_TRIANGLE = 36 + 8 + 12 + 32 + 32
+BYTES_PER_VERTEX = 12 + 8  # shading normal, uv
+BYTES_PER_MATERIAL = 4 * 32
+# The parts of render_memory() that are one buffer each (the others add up several).
+FILM_BUFFERS = ("frame buffer", "accumulation sum", "accumulated image")
+
+
+def _texture_bytes(tex: object) -> int:
+    if isinstance(tex, Bitmap):
+        return tex.width * tex.height * (4 if tex.srgb else 16)  # 8-bit RGBA, or float RGBA
+    return 0
+
+
+def scene_bytes(scene: Scene) -> int:
+    """An estimate (from above) of the scene's device buffers."""
+    total = BYTES_PER_TRIANGLE * scene.triangle_count
+    total += BYTES_PER_VERTEX * sum(int(m.positions.shape[0]) for m in scene.meshes)
+    total += BYTES_PER_MATERIAL * len(scene.materials) + 64 * (len(scene.lights) + 1)
+    seen: set[int] = set()
+    stack: list[object] = list(scene.materials)
+    while stack:  # textures reachable from the materials (through masks and bump maps), each once
+        obj = stack.pop()
+        if id(obj) in seen or not is_dataclass(obj):
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, (Bitmap, Checkerboard)):
+            total += _texture_bytes(obj) + 80
+            continue
+        stack.extend(getattr(obj, f.name) for f in fields(obj))
+    env = scene.environment
+    if isinstance(env, Envmap):
+        h, w = env.pixels.shape[:2]
+        total += 24 * h * w + 16 * (h + 16)  # float RGBA texels, the sampling CDFs and cell solid angles
+    return total
+
+
+def render_memory(scene: Scene, width: int, height: int, *, precision: str, integrator: str,
+                  wave_size: int | None = None, max_depth: int = 0) -> dict[str, int]:
+    """{what: bytes} of the device buffers of a render (see the module docstring)."""
+    pixels = width * height
+    parts = {
+        f"frame buffer {width}x{height}": 12 * pixels,
+        f"accumulation sum ({precision})": SUM_VALUE_BYTES.get(precision, 8) * 3 * pixels,
+        "accumulated image": 12 * pixels,
+        "scene buffers (estimate)": scene_bytes(scene),
+    }
+    if integrator == "wavefront":
+        from pyclpt.integrators.path_state import bytes_per_path
+        from pyclpt.integrators.wavefront import DEFAULT_WAVE_SIZE, Q_COUNT
+
+        capacity = min(wave_size or DEFAULT_WAVE_SIZE, pixels)
+        parts[f"path state and queues ({capacity} paths)"] = (capacity * (bytes_per_path() + 6 * 4)
+                                                              + 4 * Q_COUNT * (max_depth + 2))
+    return parts
+
+
+def check_render_memory(device: Device, scene: Scene, width: int, height: int, *, precision: str,
+                        integrator: str, wave_size: int | None = None, max_depth: int = 0) -> dict[str, int]:
+    """Raise :class:`~pyclpt.device.context.DeviceMemoryError` (a MemoryError) naming what is needed,
+    what is available and what to lower, unless the render fits; returns the parts counted."""
+    parts = render_memory(scene, width, height, precision=precision, integrator=integrator,
+                          wave_size=wave_size, max_depth=max_depth)
+    host = {f"image read back {width}x{height}": 12 * width * height,
+            "scene arrays on the host (estimate)": parts["scene buffers (estimate)"]}
+    lower = ["lower the resolution (width, height)"]
+    if precision != "single":
+        lower.append("sum in single precision (precision='single', --precision single)")
+    if integrator == "wavefront":
+        lower.append("use a smaller wave_size")
+    hint = "to fit, " + " or ".join(lower)
+    for what in FILM_BUFFERS:  # single buffers: refused before anything is allocated, as later by alloc()
+        name = next(k for k in parts if k.startswith(what))
+        check_alloc(device, parts[name], name, hint)
+    check_memory(device, parts, host=host, hint=hint)
+    return parts

@@ -1,0 +1,144 @@
+"""Mitsuba emitter plug-ins: point lights, and the environment (``constant``, ``envmap``, ``sunsky``,
+``sky``, ``sun``); ``area`` emitters attach to shapes (:func:`area_radiance`).
+
+:data:`EMITTERS` maps a top-level emitter plug-in to its loader, which adds a point light to the scene or
+returns its environment (a scene has at most one; a second is reported and ignored). :data:`UNSUPPORTED`
+names the Mitsuba emitters pyclpt ignores with a note.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from pyclpt.scene.mitsuba_dict.context import LoadContext, SceneDictError
+from pyclpt.scene.mitsuba_dict.textures import color
+from pyclpt.scene.model import RGB, Envmap, PointLight
+
+Environment = RGB | Envmap
+#: A loader adds to the scene (point lights) and returns None, or returns the scene's environment.
+EmitterLoader = Callable[[LoadContext, Mapping[str, Any], str], Environment | None]
+
+#: Mitsuba emitters pyclpt does not have: reported, and ignored.
+UNSUPPORTED = frozenset({"spot", "directional", "projector", "collimated", "directionalarea"})
+
+
+def area_radiance(ctx: LoadContext, em: Mapping[str, Any], where: str) -> RGB:
+    """The radiance of an emitter nested in a shape (which must be ``area``)."""
+    if em.get("type") != "area":
+        raise ctx.fail(where, f"only 'area' emitters attach to shapes, got {em.get('type')!r}", em)
+    ctx.note_unused(where, em, {"radiance"})
+    return color(ctx, em.get("radiance", 1.0), f"{where}.radiance", em)
+
+
+def load_point(ctx: LoadContext, d: Mapping[str, Any], where: str) -> None:
+    """``point``: at ``position`` (or the origin of ``to_world``), with ``intensity``."""
+    ctx.note_unused(where, d, {"position", "intensity", "to_world"})
+    pos = np.zeros(3)
+    if "to_world" in d:
+        pos = ctx.transform(d, "to_world", where)[:3, 3]
+    if "position" in d:
+        pos = ctx.vector(d, "position", where)
+    ctx.lights.append(PointLight(tuple(pos), color(ctx, d.get("intensity", 1.0), f"{where}.intensity", d)))
+    return None
+
+
+def load_constant(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environment:
+    ctx.note_unused(where, d, {"radiance"})
+    return color(ctx, d.get("radiance", 1.0), f"{where}.radiance", d)
+
+
+def load_envmap(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environment:
+    """``envmap``: an equirectangular image (8-bit files decoded from sRGB), ``to_world`` and ``scale``."""
+    from pyclpt.scene.textures import read_texture_image
+
+    ctx.note_unused(where, d, {"filename", "to_world", "scale"})
+    if "filename" not in d:
+        raise ctx.fail(where, "an envmap needs a filename", d)
+    path = ctx.path(d["filename"], f"{where}.filename", d)
+    try:
+        pixels, ldr = read_texture_image(path)
+        if ldr:
+            from pyclpt.common.image_io import srgb_to_linear
+
+            pixels = srgb_to_linear(pixels)
+            ctx.note(d, where, "an 8-bit environment map, decoded from sRGB")
+        if pixels.shape[2] < 3:
+            pixels = np.repeat(pixels[:, :, :1], 3, axis=2)
+        return Envmap(pixels[:, :, :3], ctx.transform(d, "to_world", where), ctx.number(d, "scale", 1.0, where),
+                      path.name)
+    except (OSError, ValueError) as exc:
+        if isinstance(exc, SceneDictError):
+            raise
+        raise ctx.fail(where, str(exc), d) from None
+
+
+def load_sunsky(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environment:
+    """``sunsky``, ``sky`` and ``sun``, baked into an environment map (see :mod:`pyclpt.scene.sunsky`)."""
+    from pyclpt.scene.sunsky import sunsky_envmap
+
+    kind = d.get("type")
+    used = {"turbidity", "sun_direction", "sky_scale", "sun_scale", "sun_radius_scale", "resolution",
+            "albedo", "to_world", "scale"}
+    ctx.note_unused(where, d, used)
+    if "sun_direction" not in d:
+        raise ctx.fail(where, f"{kind} needs sun_direction (latitude/longitude/time are not supported)", d)
+    direction = ctx.vector(d, "sun_direction", where)
+    scale = ctx.number(d, "scale", 1.0, where)
+    sky_scale = ctx.number(d, "sky_scale", scale, where) if kind != "sun" else 0.0
+    sun_scale = ctx.number(d, "sun_scale", scale, where) if kind != "sky" else 0.0
+    albedo = color(ctx, d.get("albedo", 0.15), f"{where}.albedo", d)
+    try:
+        return sunsky_envmap(direction, turbidity=ctx.number(d, "turbidity", 3.0, where),
+                             sky_scale=sky_scale, sun_scale=sun_scale,
+                             sun_radius_scale=ctx.number(d, "sun_radius_scale", 1.0, where),
+                             resolution=int(ctx.number(d, "resolution", 512, where)),
+                             albedo=float(np.mean(albedo)),
+                             to_world=ctx.transform(d, "to_world", where) if "to_world" in d else None)
+    except ValueError as exc:
+        if isinstance(exc, SceneDictError):
+            raise
+        raise ctx.fail(where, str(exc), d) from None
+
+
+#: Mitsuba emitter plug-ins pyclpt loads at the top level of a scene, by name.
+EMITTERS: dict[str, EmitterLoader] = {
+    "point": load_point,
+    "constant": load_constant,
+    "envmap": load_envmap,
+    "sunsky": load_sunsky,
+    "sky": load_sunsky,
+    "sun": load_sunsky,
+}
+#: The emitters that are the scene's environment (one per scene).
+ENVIRONMENTS = frozenset({"constant", "envmap", "sunsky", "sky", "sun"})
+#: Every emitter name pyclpt knows: loaded, attached to shapes, or reported.
+KNOWN = frozenset(EMITTERS) | {"area"} | UNSUPPORTED
+
+
+def load_emitter(ctx: LoadContext, name: str, d: Mapping[str, Any]) -> None:
+    """Add the top-level emitter ``d`` (keyed ``name``) to the scene: a point light, or its environment."""
+    kind = d.get("type")
+    where = name
+    if kind == "area":
+        ctx.note(d, where, "an area emitter outside a shape emits nothing, ignored")
+        return
+    if kind in UNSUPPORTED:
+        ctx.note(d, where, f"emitter type {kind!r} not supported, ignored")
+        return
+    loader = EMITTERS.get(kind)
+    if loader is None:
+        raise ctx.fail(where, f"unsupported emitter type {kind!r} "
+                              f"(supported: {', '.join(sorted(EMITTERS.keys() | {'area'}))})", d)
+    if kind in ENVIRONMENTS and ctx.environment is not None:
+        ctx.note(d, where, "a second environment emitter is not supported, ignored")
+        return
+    try:
+        environment = loader(ctx, d, where)
+    except SceneDictError:
+        raise
+    except ValueError as exc:  # the model's own checks
+        raise ctx.fail(where, str(exc), d) from None
+    if environment is not None:
+        ctx.environment = environment

@@ -1,0 +1,168 @@
+"""Mitsuba shape plug-ins: analytic shapes, mesh files and inline meshes, as model meshes.
+
+:data:`SHAPES` maps a plug-in name to a loader that reads the shape's own parameters and returns its
+:class:`Geometry` in object space; :func:`load_shape` does what every shape shares (``to_world``,
+``flip_normals``, ``face_normals``, the nested or referenced BSDF and area emitter) and adds the
+:class:`~pyclpt.scene.model.Mesh` to the scene. :data:`UNSUPPORTED` names the Mitsuba shapes pyclpt
+skips with a note.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pyclpt.scene import shapes as shape_lib
+from pyclpt.scene import transform as tf
+from pyclpt.scene.mitsuba_dict import bsdfs, emitters
+from pyclpt.scene.mitsuba_dict.context import META_KEYS, LoadContext, is_dict
+from pyclpt.scene.model import Mesh
+
+
+@dataclass
+class Geometry:
+    """A shape's triangles before ``to_world``: arrays as given (any array-likes), the final object-to-world
+    matrix, whether to flip v of the uvs (pyclpt's v is up, the image's top at v = 1; Mitsuba reads rows at
+    v) and the parameters the shape used."""
+
+    positions: Any
+    indices: Any
+    normals: Any
+    uvs: Any
+    to_world: np.ndarray
+    flip_v: bool = True
+    used: set[str] = field(default_factory=set)
+
+
+ShapeLoader = Callable[[LoadContext, Mapping[str, Any], str, np.ndarray], Geometry]
+
+#: Mitsuba shapes pyclpt does not have: reported, and skipped.
+UNSUPPORTED = frozenset({"cylinder", "hair", "heightfield", "shapegroup", "instance", "bsplinecurve",
+                         "linearcurve", "sdfgrid", "ellipsoids", "ellipsoidsmesh"})
+
+
+def load_analytic(ctx: LoadContext, d: Mapping[str, Any], where: str, to_world: np.ndarray) -> Geometry:
+    """``rectangle``, ``cube``, ``disk``, ``sphere`` (``center``, ``radius``) as meshes (see
+    :mod:`pyclpt.scene.shapes`)."""
+    kind = d.get("type")
+    base = shape_lib.SHAPES[kind]()
+    used: set[str] = set()
+    if kind == "sphere":
+        used |= {"center", "radius"}
+        r = ctx.number(d, "radius", 1.0, where)
+        try:
+            to_world = to_world @ tf.translate(d.get("center", (0.0, 0.0, 0.0))) @ tf.scale(r)
+        except (ValueError, TypeError) as exc:
+            raise ctx.fail(f"{where}.center", str(exc), d) from None
+    return Geometry(base.positions, base.indices, base.normals, base.uvs, to_world, used=used)
+
+
+def load_mesh_file(ctx: LoadContext, d: Mapping[str, Any], where: str, to_world: np.ndarray) -> Geometry:
+    """``obj``, ``ply`` (see :mod:`pyclpt.scene.mesh_io`) and ``serialized`` (:mod:`pyclpt.scene.serialized`)."""
+    kind = d.get("type")
+    used = {"filename", "flip_tex_coords", "shape_index", "max_smooth_angle"}
+    if "filename" not in d:
+        raise ctx.fail(where, f"{kind} shape needs a filename", d)
+    mesh_path = ctx.path(d["filename"], f"{where}.filename", d)
+    try:
+        if kind == "serialized":
+            from pyclpt.scene.serialized import read_serialized
+
+            data = read_serialized(mesh_path, int(ctx.number(d, "shape_index", 0, where)))
+        else:
+            from pyclpt.scene.mesh_io import load_mesh
+
+            data = load_mesh(mesh_path)
+    except (OSError, ValueError) as exc:
+        raise ctx.fail(where, str(exc), d) from None
+    flip_v = True
+    if kind == "obj":
+        # Mitsuba flips OBJ texture coordinates by default (flip_tex_coords), which
+        # already is pyclpt's convention.
+        flip_v = not ctx.flag(d, "flip_tex_coords", True, where)
+    if "max_smooth_angle" in d:
+        ctx.note(d, where, "max_smooth_angle ignored: the file's normals (or face normals) used")
+    return Geometry(data.positions, data.indices, data.normals, data.uvs, to_world, flip_v, used)
+
+
+def load_inline_mesh(ctx: LoadContext, d: Mapping[str, Any], where: str, to_world: np.ndarray) -> Geometry:
+    """``mesh``: ``positions`` and ``indices`` (and optional ``normals``, ``uvs``) given in the dictionary."""
+    if "positions" not in d or "indices" not in d:
+        raise ctx.fail(where, "a mesh shape needs positions and indices", d)
+    return Geometry(d["positions"], d["indices"], d.get("normals"), d.get("uvs"), to_world,
+                    used={"positions", "indices", "normals", "uvs"})
+
+
+#: Mitsuba shape plug-ins pyclpt loads, by name.
+SHAPES: dict[str, ShapeLoader] = {
+    **{name: load_analytic for name in shape_lib.SHAPES},
+    "obj": load_mesh_file,
+    "ply": load_mesh_file,
+    "serialized": load_mesh_file,
+    "mesh": load_inline_mesh,
+}
+
+
+def load_shape(ctx: LoadContext, name: str, d: Mapping[str, Any]) -> None:
+    """Add shape ``d`` (keyed ``name`` in the scene) to ``ctx.meshes``, with its material and emission."""
+    kind = d.get("type")
+    where = name
+    if kind in UNSUPPORTED:
+        ctx.note(d, where, f"shape type {kind!r} not supported, shape skipped")
+        return
+    to_world = ctx.transform(d, "to_world", where)
+    loader = SHAPES.get(kind)
+    if loader is None:
+        raise ctx.fail(where, f"unsupported shape type {kind!r} (supported: {', '.join(sorted(SHAPES))})", d)
+    geo = loader(ctx, d, where, to_world)
+    used = {"to_world", "flip_normals", "face_normals"} | geo.used
+    for k, v in d.items():
+        if k.split("_")[0] in ("bsdf", "emitter") and not is_dict(v):
+            raise ctx.fail(f"{where}.{k}", f"expected a {k.split('_')[0]} dict or ref, got {v!r}", d)
+    # nested objects keyed bsdf*/emitter* are that (an unknown type is then an error)
+    materials = [(k, v) for k, v in d.items() if is_dict(v) and k not in META_KEYS and (
+        k.startswith("bsdf") or ctx.deref(v, f"{where}.{k}").get("type") in bsdfs.BSDFS.keys() | bsdfs.UNSUPPORTED)]
+    lights = [(k, v) for k, v in d.items() if is_dict(v) and k not in META_KEYS and (
+        k.startswith("emitter") or ctx.deref(v, f"{where}.{k}").get("type") in emitters.KNOWN)]
+    others = [k for k, v in d.items() if k not in META_KEYS and is_dict(v)
+              and k not in {b for b, _ in materials} | {e for e, _ in lights} and k not in used]
+    for k in others:
+        ctx.note(d[k] if is_dict(d[k]) else d, f"{where}.{k}",
+                 f"{d[k].get('type')!r} inside a shape not supported, ignored")
+    ctx.note_unused(where, {k: v for k, v in d.items() if k not in others}, used | {b for b, _ in materials}
+                    | {e for e, _ in lights})
+    m = geo.to_world
+    normals, uvs = geo.normals, geo.uvs
+    try:
+        positions = tf.apply_points(m, np.asarray(geo.positions, np.float64).reshape(-1, 3))
+        face_normals = ctx.flag(d, "face_normals", False, where)
+        if normals is not None and not face_normals:
+            normals = tf.apply_normals(m, np.asarray(normals, np.float64).reshape(-1, 3))
+        else:
+            normals = None
+        indices = np.asarray(geo.indices, np.int32).reshape(-1, 3)
+        if uvs is not None:
+            uvs = np.array(uvs, np.float32).reshape(-1, 2)
+            if geo.flip_v:
+                uvs[:, 1] = 1.0 - uvs[:, 1]
+    except (ValueError, TypeError) as exc:
+        raise ctx.fail(where, f"bad mesh data: {exc}", d) from None
+    if np.linalg.det(m[:3, :3]) < 0:
+        indices = indices[:, ::-1].copy()  # a mirroring transform keeps the outward side
+    if ctx.flag(d, "flip_normals", False, where):
+        indices = indices[:, ::-1].copy()
+        if normals is not None:
+            normals = -normals
+    if len(materials) > 1:
+        ctx.note(d, where, f"{len(materials)} BSDFs given, the first used")
+    material = bsdfs.material_index(ctx, materials[0][1] if materials else None,
+                                    f"{where}.{materials[0][0]}" if materials else where)
+    emission = None
+    for key, em in lights:
+        emission = emitters.area_radiance(ctx, ctx.deref(em, f"{where}.{key}"), f"{where}.{key}")
+    try:
+        ctx.meshes.append(Mesh(name, positions, indices, material, normals, uvs, emission))
+    except ValueError as exc:
+        raise ctx.fail(where, str(exc), d) from None

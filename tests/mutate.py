@@ -1,0 +1,411 @@
+"""Mutation check of the kernel library: plant one plausible bug at a time and see the tests fail.
+
+Each mutant is one line of cl/ (or of the host code that builds the kernels' tables, pyclpt/),
+found by its text rather than by file and line number, so that the list survives files being
+split or moved: ``original`` must occur on exactly one line of the tree (or, with ``after``, on
+the first line after the one unique line holding ``after``, in the same file). The line gets
+``original`` replaced by ``mutated``; then the pytest selection named with the mutant runs, and
+the mutant is *killed* when it fails.
+
+Everything happens in a copy of the source tree in a temporary folder (without .git and .venv):
+the tree this script lives in is never written to. The copy's tests run with the copy's pyclpt
+first on sys.path (checked: ``pyclpt.__file__`` and ``cl_dir()`` must point into the copy), with
+a private PoCL kernel cache seeded from the user's, so that mutated kernels never land in it.
+
+    python tests/mutate.py                 # every mutant; a table, the kill rate, exit 1 if any survived
+    python tests/mutate.py --list          # the mutants and where their lines are now
+    python tests/mutate.py --only mis roulette   # mutants whose name contains any of these
+    python tests/mutate.py --only eta --tests tests/test_render.py   # other tests against some mutants
+    python tests/mutate.py --json out.json --markdown out.md   # also write the results
+
+Not named test_*.py: pytest does not collect it. See docs/testing.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+ROOTS = {"cl": ("cl", (".h", ".cl")), "host": ("pyclpt", (".py",))}
+IGNORE = shutil.ignore_patterns(".git", ".venv", "venv", "__pycache__", "*.egg-info", ".pytest_cache", "build",
+                                ".ruff_cache", "*.pyc")
+
+
+@dataclass(frozen=True)
+class Mutant:
+    name: str
+    original: str  # text on the line to mutate (a substring of it)
+    mutated: str  # what replaces ``original`` on that line
+    tests: tuple[str, ...]  # pytest node ids (files or file::test) that should kill it
+    why: str  # the bug it plants
+    root: str = "cl"  # "cl" (kernels) or "host" (pyclpt/)
+    after: str | None = None  # disambiguation: the first line holding ``original`` after this unique line
+    issue: bool = False  # one of the mutants of issue 16 (must be killed)
+
+
+T_ANALYTIC_QUAD = "tests/test_analytic.py::test_direct_light_from_a_quad_matches_the_form_factor"
+T_ANALYTIC_SKY = "tests/test_analytic.py::test_quad_light_and_sky_share_the_floor"
+T_FRONT_ONLY = "tests/test_analytic.py::test_area_lights_emit_from_their_front_only"
+T_BACK_BLACK = "tests/test_analytic.py::test_camera_behind_an_area_light_sees_its_back_black"
+T_GLASS_INSIDE = "tests/test_analytic.py::test_camera_inside_glass_sphere_sees_eta_squared"
+T_FURNACE = "tests/test_render.py::test_interior_furnace"
+T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
+
+MUTANTS: list[Mutant] = [
+    # ---- the mutants of issue 16: each must be killed -------------------------------------------
+    Mutant("balance-heuristic", "float a2 = pdf_a * pdf_a, b2 = pdf_b * pdf_b;", "float a2 = pdf_a, b2 = pdf_b;",
+           ("tests/test_sampling.py::test_power_heuristic",),
+           "the balance heuristic in place of the power heuristic (unbiased: only the unit test sees it)",
+           issue=True),
+    Mutant("mis-swapped-light-sample", "power_heuristic(ls.pdf, bsdf_pdf)", "power_heuristic(bsdf_pdf, ls.pdf)",
+           (T_ANALYTIC_QUAD,), "the power heuristic's arguments swapped for the light sample", issue=True),
+    Mutant("mis-swapped-emission-hit", "w = power_heuristic(ps->prev_pdf, light_pdf);",
+           "w = power_heuristic(light_pdf, ps->prev_pdf);", (T_ANALYTIC_QUAD,),
+           "the power heuristic's arguments swapped for emission found by a BSDF sample", issue=True,
+           after="static inline void path_hit_emission("),
+    Mutant("triangle-accepts-t-zero", "if (!(t > 0.0f && adet > 0.0f && t < tmax * adet)) return false;",
+           "if (!(t >= 0.0f && adet > 0.0f && t < tmax * adet)) return false;",
+           ("tests/test_bvh.py::test_ray_starting_on_a_triangle_ignores_it",),
+           "the triangle test accepts t == 0 (a ray hits the surface it starts on)", issue=True),
+    Mutant("roulette-from-bounce-1", "if (ps->depth >= RR_DEPTH) {", "if (ps->depth >= 1) {",
+           ("tests/test_wavefront.py::test_no_path_ends_by_roulette_before_rr_depth",),
+           "Russian roulette from bounce 1 instead of RR_DEPTH (unbiased: only the queue counts see it)",
+           issue=True),
+    Mutant("philox-9-rounds", "for (int r = 0; r < 10; ++r) {", "for (int r = 0; r < 9; ++r) {",
+           ("tests/test_sampling.py::test_philox_known_answers",), "Philox4x32 with 9 rounds instead of 10",
+           issue=True),
+    Mutant("triangle-sampling-no-sqrt", "float su = sqrt(u.x);", "float su = u.x;",
+           ("tests/test_sampling.py::test_triangle_chi2", T_ANALYTIC_QUAD),
+           "uniform triangle sampling without its square root (points crowd a vertex)", issue=True),
+    Mutant("area-light-emits-both-sides", "if (light < 0 || dot(ng, dir) >= 0.0f) return (float3)(0.0f);",
+           "if (light < 0) return (float3)(0.0f);", (T_FRONT_ONLY, T_BACK_BLACK),
+           "area lights emit from their back too (emission found by rays)", issue=True),
+    Mutant("area-light-sampled-both-sides", "if (cos_l <= 0.0f) return 0.0f;", "cos_l = fabs(cos_l);",
+           (T_FRONT_ONLY,), "light sampling accepts points seen from the back of an area light", issue=True),
+    Mutant("fresnel-eta-inverted", "float eta_it = outside ? eta : 1.0f / eta;",
+           "float eta_it = outside ? 1.0f / eta : eta;", (T_GLASS_INSIDE,),
+           "the dielectric Fresnel term with the relative IOR inverted", issue=True),
+    Mutant("eta2-scaling-dropped", "s->weight = b->trans * (eta_ti * eta_ti);", "s->weight = b->trans;",
+           (T_GLASS_INSIDE,), "refraction through smooth glass without the eta^2 radiance scaling", issue=True,
+           after="static inline bool dielectric_sample("),
+    Mutant("envmap-cell-omega-no-sin-theta",
+           "cell_omega = (2.0 * np.pi / w) * 2.0 * np.sin(mid) * np.sin(half)",
+           "cell_omega = (2.0 * np.pi / w) * 2.0 * np.sin(half)",
+           ("tests/test_lights.py::test_envmap_sampling_chi2",),
+           "the envmap's cell solid angle without sin(theta) (host tables)", root="host", issue=True),
+    # ---- more plausible single-line bugs across cl/ ------------------------------------------------
+    Mutant("mis-swapped-environment", "if (mis) w = power_heuristic(ps->prev_pdf, light_pdf);",
+           "if (mis) w = power_heuristic(light_pdf, ps->prev_pdf);", (T_ANALYTIC_SKY,),
+           "the power heuristic's arguments swapped for the environment found by a BSDF sample"),
+    Mutant("cosine-pdf-halved", "return v.z > 0.0f ? v.z * INV_PI_F : 0.0f;",
+           "return v.z > 0.0f ? v.z * INV_2PI_F : 0.0f;",
+           ("tests/test_sampling.py::test_cosine_hemisphere_chi2", T_ANALYTIC_QUAD),
+           "the cosine-hemisphere pdf off by a factor 2"),
+    Mutant("uniform-sphere-half", "float z = 1.0f - 2.0f * u.x;", "float z = 1.0f - u.x;",
+           ("tests/test_sampling.py::test_uniform_sphere_chi2",), "uniform sphere sampling covers one hemisphere"),
+    Mutant("uniform-sphere-pdf", "#define UNIFORM_SPHERE_PDF (0.25f * INV_PI_F)",
+           "#define UNIFORM_SPHERE_PDF (0.5f * INV_PI_F)", (T_SKY_CUBE,),
+           "the uniform-sphere pdf of a hemisphere (constant environment light samples)"),
+    Mutant("concentric-disk-angle", "theta = (PI_F / 4.0f) * (o.y / o.x);", "theta = (PI_F / 2.0f) * (o.y / o.x);",
+           ("tests/test_sampling.py::test_cosine_hemisphere_chi2",), "the concentric disk mapping's angle doubled"),
+    Mutant("ray-origin-not-offset", "float_scale = 1.0f / 65536.0f, int_scale = 256.0f;",
+           "float_scale = 0.0f, int_scale = 0.0f;", (T_FURNACE,),
+           "new rays start exactly at the hit point (self-intersection)"),
+    Mutant("light-pdf-distance-not-squared", "return l[LIGHT_PMF] * dist * dist / (l[LIGHT_AREA] * cos_l);",
+           "return l[LIGHT_PMF] * dist / (l[LIGHT_AREA] * cos_l);", (T_ANALYTIC_QUAD,),
+           "the area-to-solid-angle conversion of the light pdf with dist instead of dist^2"),
+    Mutant("light-sample-cosine-sign", "float cos_l = -dot(ls->wi, ng);", "float cos_l = dot(ls->wi, ng);",
+           (T_ANALYTIC_QUAD,), "the emitter's cosine taken on the wrong side"),
+    Mutant("point-light-inverse-distance", "l[LIGHT_RADIANCE + 2]) / dist2;", "l[LIGHT_RADIANCE + 2]) / ls->dist;",
+           ("tests/test_lights.py::test_point_light_analytic",), "a point light falling off as 1/d, not 1/d^2"),
+    Mutant("environment-pdf-without-choice", "if (want_pdf) *pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;",
+           "if (want_pdf) *pdf = UNIFORM_SPHERE_PDF;", (T_ANALYTIC_SKY,),
+           "the constant environment's MIS pdf without the probability of choosing it"),
+    Mutant("envmap-sample-phi-shift", "float phi = (2.0f * PI_F) * (((float)c + 0.5f + uc) / (float)w);",
+           "float phi = (2.0f * PI_F) * (((float)c + uc) / (float)w);",
+           ("tests/test_lights.py::test_envmap_sampling_chi2",), "envmap samples shifted by half a cell in phi"),
+    Mutant("envmap-pdf-times-omega", "return cdf_pmf(marginal, r) * cdf_pmf(conditional + r * w, c) / omega;",
+           "return cdf_pmf(marginal, r) * cdf_pmf(conditional + r * w, c) * omega;",
+           ("tests/test_lights.py::test_envmap_pdf_integrates_to_one",),
+           "the envmap pdf multiplied by the cell's solid angle"),
+    Mutant("bvh-barycentric-bound", "if (!(v >= 0.0f && u + v <= adet)) return false;",
+           "if (!(v >= 0.0f && v <= adet)) return false;",
+           ("tests/test_bvh.py::test_single_triangle_and_tiny_meshes",), "the triangle test accepts u + v > 1"),
+    Mutant("bvh-far-plane-unscaled", "bvh_min(tf.z, tmax)) * BVH_TFAR_SCALE;", "bvh_min(tf.z, tmax));",
+           ("tests/test_bvh.py::test_traversal_matches_embree", "tests/test_bvh.py::test_tmax_limits_hits"),
+           "the slab test without its rounding margin (may cull boxes the triangle test would hit)"),
+    Mutant("bvh-pop-order", "while (sp > 0 && !(stack_t[sp - 1] < best)) --sp;",
+           "while (sp > 0 && (stack_t[sp - 1] < best)) --sp;",
+           ("tests/test_bvh.py::test_single_triangle_and_tiny_meshes",),
+           "closest-hit traversal pops the wrong subtrees"),
+    Mutant("rng-2d-same-word", "(float)(r.y >> 8) * 0x1.0p-24f);", "(float)(r.x >> 8) * 0x1.0p-24f);",
+           ("tests/test_sampling.py::test_rng_uncorrelated",), "both coordinates of rng_2d from the same word"),
+    Mutant("depth-limit-off-by-one", "return max_depth < 0 || depth < max_depth;",
+           "return max_depth < 0 || depth <= max_depth;", (T_FURNACE,), "max_depth allows one bounce too many"),
+    Mutant("miss-always-mis", "bool mis = !(ps->flags & PATH_PREV_DELTA);", "bool mis = true;", (T_SKY_CUBE,),
+           "the environment seen by camera rays and delta bounces weighted as if light sampling could find it"),
+    Mutant("light-sample-times-pdf", "float3 contrib = ps->beta * f * ls.radiance * (w / ls.pdf);",
+           "float3 contrib = ps->beta * f * ls.radiance * (w * ls.pdf);", (T_ANALYTIC_QUAD,),
+           "a light sample multiplied by its pdf instead of divided"),
+    Mutant("shadow-ray-reaches-light", "ls.dist * (1.0f - 1e-4f)", "ls.dist * (1.0f + 1e-4f)", (T_ANALYTIC_QUAD,),
+           "shadow rays long enough to hit the light they test"),
+    Mutant("bsdf-pdf-not-kept", "ps->prev_pdf = bs.pdf;", "ps->prev_pdf = 1.0f;", (T_ANALYTIC_QUAD,),
+           "MIS weights of emission hits computed with a wrong BSDF pdf"),
+    Mutant("wavefront-miss-not-committed", "film_commit(frame, dropped, path_get_pixel(&P, slot), ps.L);",
+           "(void)frame;", ("tests/test_wavefront.py::test_every_pixel_is_committed_once_per_sample",),
+           "the wavefront's miss stage ends paths without writing their pixel"),
+    Mutant("wavefront-committed-twice", "path_store_ray(&P, slot, &ps);",
+           "path_store_ray(&P, slot, &ps); "
+           "film_commit(frame, dropped, path_get_pixel(&P, slot), path_get_L(&P, slot));",
+           ("tests/test_wavefront.py::test_every_pixel_is_committed_once_per_sample",),
+           "the wavefront commits surviving paths too (the final commit overwrites it: the image is unchanged)",
+           after="__kernel void sample_bsdf("),
+    Mutant("roulette-not-compensated", "ps->beta /= q;", "ps->beta /= 1.0f;", (T_FURNACE,),
+           "surviving paths not divided by the survival probability"),
+    Mutant("image-upside-down", "float sy = 1.0f - 2.0f * (((float)py + j.y) / (float)height);",
+           "float sy = 2.0f * (((float)py + j.y) / (float)height) - 1.0f;",
+           ("tests/test_render.py::test_depth_one_shows_only_emitters",), "the camera's image rows reversed"),
+    Mutant("diffuse-without-1-over-pi", "return b->color * (INV_PI_F * wo.z);", "return b->color * wo.z;",
+           (T_ANALYTIC_QUAD,), "the Lambertian BRDF without its 1/pi (next-event estimation only)"),
+    Mutant("fresnel-p-polarisation", "float a_p = (eta_it * ci - ct) / (eta_it * ci + ct);",
+           "float a_p = (ci - eta_it * ct) / (ci + eta_it * ct);",
+           ("tests/test_sampling.py::test_fresnel_dielectric_reference",), "the p-polarised Fresnel amplitude wrong"),
+    Mutant("bump-gradient-halved", "float3 pu = dpdu - ns * dot(ns, dpdu) + ns * dhdu;",
+           "float3 pu = dpdu - ns * dot(ns, dpdu) + ns * (0.5f * dhdu);",
+           ("tests/test_textures.py::test_bump_map_tilts_the_shading_normal",), "the bump map's u slope halved"),
+    Mutant("spawn-on-front-side", "return offset_ray_origin(s->p, dot(d, s->ng) >= 0.0f ? s->ng : -s->ng);",
+           "return offset_ray_origin(s->p, s->ng);", (T_GLASS_INSIDE,),
+           "rays leaving through the back of a surface offset to its front"),
+    Mutant("texture-rows-not-flipped", "float y = (1.0f - uv.y) * h - 0.5f;", "float y = uv.y * h - 0.5f;",
+           ("tests/test_textures.py",), "bitmaps read with v upwards instead of Mitsuba's rows from the top"),
+    Mutant("kahan-correction-lost", "return fpair_make(t, d - y);", "return fpair_make(t, 0.0f);",
+           ("tests/test_accumulation.py",), "the compensated accumulator forgets its correction"),
+    Mutant("ggx-g1-halved", "return 2.0f / (1.0f + sqrt(1.0f + tan2));", "return 1.0f / (1.0f + sqrt(1.0f + tan2));",
+           ("tests/test_sampling.py::test_roughconductor_furnace",), "GGX's Smith G1 off by a factor 2"),
+]
+
+
+# --------------------------------------------------------------------------------------------
+# finding and applying
+
+
+class MutantError(RuntimeError):
+    pass
+
+
+def source_files(tree: Path, root: str) -> list[Path]:
+    folder, suffixes = ROOTS[root]
+    return sorted(p for p in (tree / folder).rglob("*") if p.is_file() and p.suffix in suffixes)
+
+
+def locate(tree: Path, m: Mutant) -> tuple[Path, int]:
+    """(file, 0-based line index) of the line the mutant changes, in ``tree``."""
+    if m.after is None:
+        hits = [(p, i) for p in source_files(tree, m.root)
+                for i, line in enumerate(p.read_text().splitlines()) if m.original in line]
+        if len(hits) != 1:
+            where = ", ".join(f"{p.relative_to(tree)}:{i + 1}" for p, i in hits) or "nowhere"
+            raise MutantError(f"{m.name}: {m.original!r} must be on exactly one line, found {where}")
+        return hits[0]
+    anchors = [(p, i) for p in source_files(tree, m.root)
+               for i, line in enumerate(p.read_text().splitlines()) if m.after in line]
+    if len(anchors) != 1:
+        raise MutantError(f"{m.name}: the anchor {m.after!r} must be on exactly one line, found {len(anchors)}")
+    path, start = anchors[0]
+    lines = path.read_text().splitlines()
+    for i in range(start, len(lines)):
+        if m.original in lines[i]:
+            return path, i
+    raise MutantError(f"{m.name}: {m.original!r} is not after {m.after!r} in {path.relative_to(tree)}")
+
+
+def apply(tree: Path, m: Mutant, source: Path) -> tuple[Path, str]:
+    """Plant the mutant in ``tree`` (a copy: refuses to write inside this repository or the tree it was
+    copied from); returns the file and its original text, for :func:`restore`."""
+    path, i = locate(tree, m)
+    resolved = path.resolve()
+    if resolved.is_relative_to(REPO) or resolved.is_relative_to(source) or not resolved.is_relative_to(tree.resolve()):
+        raise MutantError(f"refusing to write {resolved}: mutants go into the copy only")
+    text = path.read_text()
+    lines = text.splitlines(keepends=True)
+    lines[i] = lines[i].replace(m.original, m.mutated, 1)
+    path.write_text("".join(lines))
+    return path, text
+
+
+def restore(path: Path, text: str) -> None:
+    path.write_text(text)
+
+
+# --------------------------------------------------------------------------------------------
+# running
+
+
+def copy_tree(source: Path, dest: Path) -> Path:
+    tree = dest / "tree"
+    shutil.copytree(source, tree, ignore=IGNORE)
+    return tree
+
+
+def child_env(tree: Path, tmp: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [env.get("PYTHONPATH")])])
+    env["PYCLPT_CACHE_DIR"] = str(tmp / "pyclpt-cache")  # BVH and mesh caches, shared by the runs
+    pocl = tmp / "pocl-cache"
+    if not pocl.exists():
+        user = Path(env.get("POCL_CACHE_DIR") or Path(env.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "pocl")
+        if user.is_dir():
+            shutil.copytree(user, pocl, symlinks=True, ignore_dangling_symlinks=True)
+        pocl.mkdir(exist_ok=True)
+    env["POCL_CACHE_DIR"] = str(pocl)
+    env["PYOPENCL_NO_CACHE"] = "1"
+    env.pop("PYTEST_ADDOPTS", None)
+    return env
+
+
+def check_copy_is_used(tree: Path, env: dict[str, str]) -> None:
+    code = "import pyclpt; from pyclpt.device.program import cl_dir; print(pyclpt.__file__); print(cl_dir())"
+    out = subprocess.run([sys.executable, "-c", code], cwd=tree, env=env, capture_output=True, text=True, check=True)
+    paths = [Path(line).resolve() for line in out.stdout.split()]
+    if len(paths) != 2 or not all(p.is_relative_to(tree.resolve()) for p in paths):
+        raise MutantError(f"the copy's pyclpt is not the one imported: {out.stdout.strip()!r}")
+
+
+def run_pytest(tree: Path, env: dict[str, str], tests: tuple[str, ...], timeout: float) -> tuple[str, str, float]:
+    """('passed' | 'failed' | 'error' | 'timeout', first failing test or a hint, seconds)."""
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-p", "no:randomly",
+           "--no-header", "-rfE", *tests]
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return "timeout", f"over {timeout:.0f} s", time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
+    out = proc.stdout + proc.stderr
+    failed = [line.split(" ", 1)[1].split(" - ")[0] for line in out.splitlines()
+              if line.startswith(("FAILED ", "ERROR "))]
+    if "KernelBuildError" in out:
+        return "error", "the mutant does not compile", seconds
+    if proc.returncode == 0:
+        return "passed", "", seconds
+    if proc.returncode == 1:
+        return "failed", failed[0] if failed else "", seconds
+    return "error", f"pytest exit {proc.returncode}: " + (failed[0] if failed else out.strip()[-300:]), seconds
+
+
+def markdown(results: list[dict], seconds: float) -> str:
+    killed = sum(r["verdict"] == "killed" for r in results)
+    lines = [f"Killed {killed} of {len(results)} mutants ({100 * killed / max(len(results), 1):.0f} %) in "
+             f"{seconds / 60:.1f} min.", "",
+             "| mutant | bug | file | result | first failing test |", "|---|---|---|---|---|"]
+    for r in results:
+        name = f"**{r['name']}**" if r["issue"] else r["name"]
+        test = r["detail"].replace("tests/", "").replace("|", "\\|")
+        lines.append(f"| {name} | {r['why']} | `{r.get('file', '?')}` | {r['verdict']} | {test} |")
+    return "\n".join(lines) + "\n"
+
+
+def select(names: list[str] | None) -> list[Mutant]:
+    if not names:
+        return list(MUTANTS)
+    chosen = [m for m in MUTANTS if any(n in m.name for n in names)]
+    if not chosen:
+        raise SystemExit(f"no mutant matches {names}")
+    return chosen
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--list", action="store_true", help="list the mutants and where their lines are")
+    ap.add_argument("--only", nargs="+", metavar="NAME", help="mutants whose name contains one of these")
+    ap.add_argument("--no-baseline", action="store_true",
+                    help="skip the first run of every selection on the unmutated copy")
+    ap.add_argument("--timeout", type=float, default=600.0, help="seconds per mutant (default 600)")
+    ap.add_argument("--json", type=Path, help="write the results here")
+    ap.add_argument("--markdown", type=Path, help="write the results here as a Markdown table")
+    ap.add_argument("--keep", action="store_true", help="keep the temporary copy")
+    ap.add_argument("--source", type=Path, default=REPO, help="the tree to copy (default: this repository)")
+    ap.add_argument("--tests", nargs="+", metavar="NODE", help="run these pytest node ids instead of each mutant's")
+    args = ap.parse_args(argv)
+    source = args.source.resolve()
+    mutants = select(args.only)
+    names = [m.name for m in MUTANTS]
+    if len(set(names)) != len(names):
+        raise SystemExit("mutant names must be unique")
+
+    if args.list:
+        for m in mutants:
+            try:
+                path, i = locate(source, m)
+                where = f"{path.relative_to(source)}:{i + 1}"
+            except MutantError as exc:
+                where = f"NOT FOUND ({exc})"
+            print(f"{m.name:34s} {where:40s} {m.why}")
+        return 0
+
+    tmp = Path(tempfile.mkdtemp(prefix="pyclpt-mutate-"))
+    results = []
+    t_start = time.perf_counter()
+    try:
+        tree = copy_tree(source, tmp)
+        env = child_env(tree, tmp)
+        check_copy_is_used(tree, env)
+        print(f"copy of {source} in {tree}")
+        if not args.no_baseline:
+            tests = tuple(args.tests or dict.fromkeys(t for m in mutants for t in m.tests))
+            verdict, detail, seconds = run_pytest(tree, env, tests, args.timeout * 4)
+            print(f"baseline (unmutated): {verdict} in {seconds:.0f} s {detail}", flush=True)
+            if verdict != "passed":
+                print("the unmutated selections do not pass: fix that first")
+                return 2
+        for k, m in enumerate(mutants, 1):
+            try:
+                path, original = apply(tree, m, source)
+            except MutantError as exc:
+                results.append({**asdict(m), "verdict": "not found", "detail": str(exc), "seconds": 0.0})
+                print(f"[{k}/{len(mutants)}] {m.name}: NOT FOUND: {exc}")
+                continue
+            try:
+                verdict, detail, seconds = run_pytest(tree, env, tuple(args.tests or m.tests), args.timeout)
+            finally:
+                restore(path, original)
+            state = {"failed": "killed", "passed": "SURVIVED"}.get(verdict, verdict)
+            where = path.relative_to(tree).as_posix()
+            results.append({**asdict(m), "file": where, "verdict": state, "detail": detail, "seconds": seconds})
+            print(f"[{k}/{len(mutants)}] {m.name:34s} {state:9s} {seconds:6.1f} s  {where}  {detail}", flush=True)
+    finally:
+        if args.keep:
+            print(f"kept {tmp}")
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+    killed = [r for r in results if r["verdict"] == "killed"]
+    survived = [r for r in results if r["verdict"] == "SURVIVED"]
+    other = [r for r in results if r["verdict"] not in ("killed", "SURVIVED")]
+    total = time.perf_counter() - t_start
+    print(f"\nkilled {len(killed)} of {len(results)} mutants ({100 * len(killed) / max(len(results), 1):.0f} %) "
+          f"in {total / 60:.1f} min")
+    for r in survived:
+        print(f"  survived: {r['name']} ({r['why']})")
+    for r in other:
+        print(f"  {r['verdict']}: {r['name']}: {r['detail']}")
+    issue_left = [r["name"] for r in results if r["issue"] and r["verdict"] != "killed"]
+    if issue_left:
+        print(f"  NOT KILLED among issue 16's mutants: {', '.join(issue_left)}")
+    if args.json:
+        args.json.write_text(json.dumps({"total_seconds": total, "results": results}, indent=1))
+    if args.markdown:
+        args.markdown.write_text(markdown(results, total))
+    return 0 if not survived and not other else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
