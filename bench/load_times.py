@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from pyclpt.common.env import child_environment
 
 CHILD = r"""
 import json, logging, sys, time
@@ -59,7 +60,7 @@ print(json.dumps({"parse": t1 - t0, "meshes": (t2 - t1) - spent["textures"], "te
 
 
 def run(path: Path, cache: str) -> dict:
-    env = {**os.environ, "PYCLPT_CACHE_DIR": cache}
+    env = child_environment(PYCLPT_CACHE_DIR=cache)
     out = subprocess.run([sys.executable, "-c", CHILD, str(path)], env=env, capture_output=True, text=True,
                          check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])

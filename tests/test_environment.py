@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import pyclpt
+import pyclpt.bench
 from pyclpt.accel.bvh import build_bvh
 from pyclpt.cli import main
 from pyclpt.common import env
@@ -24,6 +25,8 @@ from pyclpt.scene.library import scenes_root
 from pyclpt.scene.mesh_io import load_mesh
 
 PACKAGE = Path(pyclpt.__file__).resolve().parent
+# bench/ is installed as pyclpt.bench; in an editable install it stays at the repository root
+SOURCES = sorted({*PACKAGE.rglob("*.py"), *Path(pyclpt.bench.__file__).resolve().parent.rglob("*.py")})
 
 
 def _warnings(caplog, needle: str) -> list[str]:
@@ -33,14 +36,14 @@ def _warnings(caplog, needle: str) -> list[str]:
 def test_every_variable_is_read_through_env():
     """One module reads the environment, so that every variable is listed and checked in one place."""
     offenders = []
-    for path in PACKAGE.rglob("*.py"):
+    for path in SOURCES:
         if path.name == "env.py" and path.parent.name == "common":
             continue
         for lineno, line in enumerate(path.read_text().splitlines(), 1):
             if re.search(r"os\.environ|os\.getenv|getenv\(", line):
-                offenders.append(f"{path.relative_to(PACKAGE)}:{lineno}: {line.strip()}")
+                offenders.append(f"{path.parent.name}/{path.name}:{lineno}: {line.strip()}")
     assert not offenders, "read environment variables through pyclpt.common.env:\n" + "\n".join(offenders)
-    names = set(re.findall(r'"(PYCLPT_[A-Z0-9_]+)"', "\n".join(p.read_text() for p in PACKAGE.rglob("*.py"))))
+    names = set(re.findall(r'"(PYCLPT_[A-Z0-9_]+)"', "\n".join(p.read_text() for p in SOURCES)))
     assert names <= set(env.VARIABLES), names - set(env.VARIABLES)
     with pytest.raises(KeyError, match="PYCLPT_NOPE is not one of pyclpt's environment variables"):
         env.get("PYCLPT_NOPE")

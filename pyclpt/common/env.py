@@ -50,6 +50,13 @@ def get(name: str) -> str | None:
     return value or None
 
 
+def child_environment(**values: str) -> dict[str, str]:
+    """This process's environment with pyclpt variables set to ``values``, for a child process."""
+    for name in values:
+        _known(name)
+    return {**os.environ, **values}
+
+
 def describe(name: str) -> str:
     """``NAME='value'`` as shown in error messages."""
     return f"{name}={os.environ.get(name, '')!r}"
