@@ -43,6 +43,7 @@ def run(device, request):
     defines = {"STANDARD_MATH": request.param == "standard"}
     prog = build_program(device, source=SOURCE, name="test_math", defines=defines)
     ctx, q = device.context, device.queue
+    kernels: dict[str, cl.Kernel] = {}
 
     def call(name: str, *args: np.ndarray, out_per_item: int = 1) -> np.ndarray:
         arrs = [np.ascontiguousarray(a, dtype=np.float32) for a in args]
@@ -50,7 +51,8 @@ def run(device, request):
         bufs = [cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=a) for a in arrs]
         out = np.empty(n * out_per_item, np.float32)
         ob = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-        getattr(prog, f"k_{name}")(q, (n,), None, *bufs, ob)
+        kernel = kernels.setdefault(name, cl.Kernel(prog, f"k_{name}"))
+        kernel(q, (n,), None, *bufs, ob)
         cl.enqueue_copy(q, out, ob)
         return out
     return call
