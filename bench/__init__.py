@@ -11,7 +11,7 @@
 - :mod:`.document`: a report as blocks, written as Markdown and self-contained HTML;
 - :mod:`.report`: the ``pyclpt bench`` command (runs everything, writes the report folder).
 
-The scripts ``frame_time.py``, ``variants.py`` and ``bvh_build.py`` run from a checkout
+The scripts ``frame_time.py``, ``variants.py``, ``bvh_build.py`` and ``inline_math.py`` run from a checkout
 (``python bench/frame_time.py``).
 
 The top layer beside the CLI: may import every layer of pyclpt; nothing in pyclpt imports it.

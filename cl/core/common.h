@@ -8,6 +8,8 @@
 
 #pragma OPENCL FP_CONTRACT OFF
 
+#include "core/math.h"
+
 #define PI_F 3.14159265358979323846f
 #define INV_PI_F 0.31830988618379067154f
 #define INV_2PI_F 0.15915494309189533577f
@@ -26,14 +28,14 @@ static inline void store3(__global float* p, int i, float3 v) {
     p[3 * i + 2] = v.z;
 }
 
-static inline float max3(float3 v) { return fmax(v.x, fmax(v.y, v.z)); }
+static inline float max3(float3 v) { return m_max(v.x, m_max(v.y, v.z)); }
 
 static inline float luminance(float3 c) {
     return 0.212671f * c.x + 0.715160f * c.y + 0.072169f * c.z;
 }
 
 static inline bool all_finite3(float3 v) {
-    return isfinite(v.x) && isfinite(v.y) && isfinite(v.z);
+    return m_isfinite(v.x) && m_isfinite(v.y) && m_isfinite(v.z);
 }
 
 #endif

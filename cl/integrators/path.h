@@ -55,7 +55,7 @@ static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState
     float3 right = (float3)(c[CONST_CAM_RIGHT], c[CONST_CAM_RIGHT + 1], c[CONST_CAM_RIGHT + 2]);
     float3 up = (float3)(c[CONST_CAM_UP], c[CONST_CAM_UP + 1], c[CONST_CAM_UP + 2]);
     ps->org = (float3)(c[CONST_CAM_ORIGIN], c[CONST_CAM_ORIGIN + 1], c[CONST_CAM_ORIGIN + 2]);
-    ps->dir = normalize(forward + sx * right + sy * up);
+    ps->dir = m_normalize(forward + sx * right + sy * up);
     ps->beta = (float3)(1.0f);
     ps->L = (float3)(0.0f);
     ps->prev_pdf = 0.0f;
@@ -81,7 +81,7 @@ static inline void path_hit_emission(const Scene* sc, const Surface* s, float t,
     if (le.x == 0.0f && le.y == 0.0f && le.z == 0.0f) return;
     float w = 1.0f;
     if (!(ps->flags & PATH_PREV_DELTA)) {
-        float light_pdf = light_pdf_area(sc, s->light, t, -dot(s->ng, ps->dir));
+        float light_pdf = light_pdf_area(sc, s->light, t, -m_dot(s->ng, ps->dir));
         w = power_heuristic(ps->prev_pdf, light_pdf);
     }
     ps->L += ps->beta * le * w;
@@ -101,14 +101,14 @@ static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface*
     float bsdf_pdf;
     float3 f = bsdf_eval(b, wi, wo, &bsdf_pdf);
     /* the geometric normal must agree with the shading frame about the side */
-    if (dot(ls.wi, s->ng) * wo.z <= 0.0f) return false;
+    if (m_dot(ls.wi, s->ng) * wo.z <= 0.0f) return false;
     /* a delta light (point) cannot be hit by BSDF sampling: its sample takes the whole weight */
     float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf);
     float3 contrib = ps->beta * f * ls.radiance * (w / ls.pdf);
     if (!(max3(contrib) > 0.0f)) return false;
     sr->org = spawn_origin(s, ls.wi);
     sr->dir = ls.wi;
-    sr->tmax = isinf(ls.dist) ? INF_F : ls.dist * (1.0f - 1e-4f) - length(sr->org - s->p);
+    sr->tmax = m_isinf(ls.dist) ? INF_F : ls.dist * (1.0f - 1e-4f) - m_length(sr->org - s->p);
     sr->contrib = contrib;
     return sr->tmax > 0.0f;
 }
@@ -124,7 +124,7 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     if (!bsdf_sample(b, wi, u_lobe, u, &bs)) return false;
     float3 dir = to_world(s->sh, bs.wo);
     /* reject samples whose side disagrees between shading and geometric normals */
-    if (dot(dir, s->ng) * bs.wo.z <= 0.0f) return false;
+    if (m_dot(dir, s->ng) * bs.wo.z <= 0.0f) return false;
     ps->beta *= bs.weight;
     ps->eta_scale *= bs.eta;
     ps->prev_pdf = bs.pdf;
@@ -135,7 +135,7 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     float beta_max = max3(ps->beta);
     if (!(beta_max > 0.0f)) return false;
     if (ps->depth >= RR_DEPTH) {
-        float q = fmin(beta_max * ps->eta_scale * ps->eta_scale, 0.95f);
+        float q = m_min(beta_max * ps->eta_scale * ps->eta_scale, 0.95f);
         if (rng_1d(key, ps->depth - 1, DIM_ROULETTE) >= q) return false;
         ps->beta /= q;
     }

@@ -132,12 +132,12 @@ static inline Bsdf bsdf_from(Material m) {
 static inline bool bsdf_twosided(const Bsdf* b) { return (b->flags & MAT_FLAG_TWOSIDED) != 0; }
 
 /* A rough dielectric between equal indices: nothing but straight-through transmission. */
-static inline bool bsdf_index_matched(const Bsdf* b) { return fabs(b->ior - 1.0f) < BSDF_INDEX_MATCHED_EPS; }
+static inline bool bsdf_index_matched(const Bsdf* b) { return m_abs(b->ior - 1.0f) < BSDF_INDEX_MATCHED_EPS; }
 
 /* The microfacet distribution of a rough material (bsdfs/microfacet.h). */
 static inline Microfacet microfacet_of(const Bsdf* b) {
     Microfacet d;
-    d.alpha = fmax(b->alpha, BSDF_MIN_ALPHA);
+    d.alpha = m_max(b->alpha, BSDF_MIN_ALPHA);
     d.beckmann = (b->flags & MAT_FLAG_BECKMANN) != 0;
     return d;
 }

@@ -114,12 +114,12 @@ static inline float3 env_to_world(__global const float* e, float3 v) {
 /* Continuous texel coordinates (x in [0, W), y in [0, H - 1]) of a unit direction in the map's frame. */
 static inline float2 env_texel_coords(__global const float* e, float3 d) {
     float w = e[ENV_WIDTH], h = e[ENV_HEIGHT];
-    float u = atan2(d.x, -d.z) * INV_2PI_F;
-    float v = acos(clamp(d.y, -1.0f, 1.0f)) * INV_PI_F;
+    float u = m_atan2(d.x, -d.z) * INV_2PI_F;
+    float v = m_acos(m_clamp(d.y, -1.0f, 1.0f)) * INV_PI_F;
     float x = u * w - 0.5f;
-    x -= w * floor(x / w);
+    x -= w * m_floor(x / w);
     if (!(x >= 0.0f && x < w)) x = 0.0f; /* rounding onto w, or NaN */
-    float y = clamp(v * (h - 1.0f), 0.0f, h - 1.0f);
+    float y = m_clamp(v * (h - 1.0f), 0.0f, h - 1.0f);
     if (!(y >= 0.0f)) y = 0.0f;
     return (float2)(x, y);
 }
@@ -127,7 +127,7 @@ static inline float2 env_texel_coords(__global const float* e, float3 d) {
 /* The map's radiance (scale applied) at texel coordinates xy: bilinear, periodic in x. */
 static inline float3 env_lookup(const Scene* sc, __global const float* e, float2 xy) {
     int w = (int)e[ENV_WIDTH], h = (int)e[ENV_HEIGHT];
-    int i0 = min((int)xy.x, w - 1), j0 = min((int)xy.y, h - 2);
+    int i0 = m_imin((int)xy.x, w - 1), j0 = m_imin((int)xy.y, h - 2);
     float fx = xy.x - (float)i0, fy = xy.y - (float)j0;
     int i1 = i0 + 1 == w ? 0 : i0 + 1;
     __global const float* t = sc->tex.info + TEX_STRIDE * (int)e[ENV_TEXTURE];
@@ -143,7 +143,7 @@ static inline float env_pdf_at(__global const float* e, float2 xy) {
     __global const float* marginal = e + ENV_HEADER;
     __global const float* conditional = marginal + rows;
     __global const float* cell_omega = conditional + rows * w;
-    int c = min((int)xy.x, w - 1), r = min((int)xy.y, rows - 1);
+    int c = m_imin((int)xy.x, w - 1), r = m_imin((int)xy.y, rows - 1);
     float omega = cell_omega[r];
     if (!(omega > 0.0f)) return 0.0f;
     return cdf_pmf(marginal, r) * cdf_pmf(conditional + r * w, c) / omega;
@@ -154,7 +154,7 @@ static inline float cdf_remap(__global const float* cdf, int i, float u) {
     float lo = i > 0 ? cdf[i - 1] : 0.0f;
     float p = cdf[i] - lo;
     float t = p > 0.0f ? (u - lo) / p : 0.5f;
-    return clamp(t, 0.0f, 0x1.fffffep-1f);
+    return m_clamp(t, 0.0f, 0x1.fffffep-1f);
 }
 
 /* Sample a world direction from the map: returns it with its radiance and solid-angle pdf. */
@@ -171,13 +171,14 @@ static inline float3 env_sample(const Scene* sc, __global const float* e, float2
     int c = cdf_search(cond, w, u.y);
     float uc = cdf_remap(cond, c, u.y);
     float cos_t = row_cos[r] + ur * (row_cos[r + 1] - row_cos[r]);
-    float sin_t = sqrt(fmax(0.0f, 1.0f - cos_t * cos_t));
+    float sin_t = m_sqrt(m_max(0.0f, 1.0f - cos_t * cos_t));
     float phi = (2.0f * PI_F) * (((float)c + 0.5f + uc) / (float)w);
-    float3 d = (float3)(sin(phi) * sin_t, cos_t, -cos(phi) * sin_t);
+    float cos_phi, sin_phi = m_sincos(phi, &cos_phi);
+    float3 d = (float3)(sin_phi * sin_t, cos_t, -cos_phi * sin_t);
     float omega = cell_omega[r];
     *pdf = omega > 0.0f ? cdf_pmf(marginal, r) * cdf_pmf(cond, c) / omega : 0.0f;
     *radiance = env_lookup(sc, e, env_texel_coords(e, d));
-    return normalize(env_to_world(e, d));
+    return m_normalize(env_to_world(e, d));
 }
 
 /* Radiance of the environment along the world direction dir (zero without one); with want_pdf,
@@ -224,9 +225,9 @@ static inline bool light_sample(const Scene* sc, float3 p, float u_select, float
     if (type == LIGHT_POINT) {
         __global const float* pos = sc->light_data + as_int(l[LIGHT_PRIM]);
         float3 d = (float3)(pos[0], pos[1], pos[2]) - p;
-        float dist2 = dot(d, d);
+        float dist2 = m_dot(d, d);
         if (!(dist2 > 0.0f)) return false;
-        ls->dist = sqrt(dist2);
+        ls->dist = m_sqrt(dist2);
         ls->wi = d / ls->dist;
         ls->radiance = (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]) / dist2;
         ls->pdf = l[LIGHT_PMF];
@@ -240,13 +241,13 @@ static inline bool light_sample(const Scene* sc, float3 p, float u_select, float
     float3 e2 = (float3)(t[6], t[7], t[8]);
     float2 b = square_to_triangle(u);
     float3 y = v0 + b.x * e1 + b.y * e2;
-    float3 ng = normalize(cross(e1, e2));
+    float3 ng = m_normalize(m_cross(e1, e2));
     float3 d = y - p;
-    float dist2 = dot(d, d);
+    float dist2 = m_dot(d, d);
     if (!(dist2 > 0.0f)) return false;
-    ls->dist = sqrt(dist2);
+    ls->dist = m_sqrt(dist2);
     ls->wi = d / ls->dist;
-    float cos_l = -dot(ls->wi, ng);
+    float cos_l = -m_dot(ls->wi, ng);
     ls->pdf = light_pdf_area(sc, id, ls->dist, cos_l);
     ls->radiance = (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
     return ls->pdf > 0.0f;
@@ -254,7 +255,7 @@ static inline bool light_sample(const Scene* sc, float3 p, float u_select, float
 
 /* Radiance an emissive triangle sends along -dir (one-sided: front faces only). */
 static inline float3 light_emitted(const Scene* sc, int light, float3 ng, float3 dir) {
-    if (light < 0 || dot(ng, dir) >= 0.0f) return (float3)(0.0f);
+    if (light < 0 || m_dot(ng, dir) >= 0.0f) return (float3)(0.0f);
     __global const float* l = sc->lights + LIGHT_STRIDE * light;
     return (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
 }

@@ -50,7 +50,7 @@ static inline float2 tri_uv(__global const int* tri_vidx, __global const float* 
 static inline float material_opacity(const Textures* tx, Material m, float2 uv) {
     int t = (int)m[MAT_OPACITY_TEX];
     float o = t >= 0 ? m[MAT_OPACITY] * tex_opacity(tx, t, uv) : m[MAT_OPACITY];
-    return clamp(o, 0.0f, 1.0f);
+    return m_clamp(o, 0.0f, 1.0f);
 }
 
 /* False when the ray passes through the candidate hit (prim, u, v). */

@@ -101,7 +101,7 @@ static inline float3 bump_normal(const Scene* sc, Material m, int prim, int info
     float2 d1 = (float2)(sc->vuvs[2 * vi[1]], sc->vuvs[2 * vi[1] + 1]) - t0;
     float2 d2 = (float2)(sc->vuvs[2 * vi[2]], sc->vuvs[2 * vi[2] + 1]) - t0;
     float det = d1.x * d2.y - d1.y * d2.x;
-    if (!(fabs(det) > 1e-12f)) return ns;
+    if (!(m_abs(det) > 1e-12f)) return ns;
     float inv = 1.0f / det;
     float3 dpdu = (d2.y * e1 - d1.y * e2) * inv;
     float3 dpdv = (d1.x * e2 - d2.x * e1) * inv;
@@ -114,13 +114,13 @@ static inline float3 bump_normal(const Scene* sc, Material m, int prim, int info
     float dhdu = scale * (tex_eval1(&sc->tex, t, uv + (float2)(du, 0.0f)) - h) / du;
     float dhdv = scale * (tex_eval1(&sc->tex, t, uv + (float2)(0.0f, dv)) - h) / dv;
     /* tangents made orthogonal to the shading normal, then displaced */
-    float3 pu = dpdu - ns * dot(ns, dpdu) + ns * dhdu;
-    float3 pv = dpdv - ns * dot(ns, dpdv) + ns * dhdv;
-    float3 n = cross(pu, pv);
-    float len = length(n);
-    if (!(len > 0.0f) || !isfinite(len)) return ns;
+    float3 pu = dpdu - ns * m_dot(ns, dpdu) + ns * dhdu;
+    float3 pv = dpdv - ns * m_dot(ns, dpdv) + ns * dhdv;
+    float3 n = m_cross(pu, pv);
+    float len = m_length(n);
+    if (!(len > 0.0f) || !m_isfinite(len)) return ns;
     n /= len;
-    return dot(n, ns) < 0.0f ? -n : n;
+    return m_dot(n, ns) < 0.0f ? -n : n;
 }
 
 /* Rebuild the surface from a hit record (leaf-order triangle, barycentrics u, v). */
@@ -131,7 +131,7 @@ static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
     float3 e1 = (float3)(t[3], t[4], t[5]);
     float3 e2 = (float3)(t[6], t[7], t[8]);
     s.p = v0 + u * e1 + v * e2;
-    s.ng = normalize(cross(e1, e2));
+    s.ng = m_normalize(m_cross(e1, e2));
     int info = sc->tri_info[2 * prim];
     s.material = info & TRI_MAT_MASK;
     s.light = sc->tri_info[2 * prim + 1];
@@ -141,8 +141,8 @@ static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
         int i0 = sc->tri_vidx[3 * prim], i1 = sc->tri_vidx[3 * prim + 1], i2 = sc->tri_vidx[3 * prim + 2];
         float3 n = (1.0f - u - v) * load3(sc->vnormals, i0) + u * load3(sc->vnormals, i1) +
                    v * load3(sc->vnormals, i2);
-        float len = length(n);
-        if (len > 0.0f && isfinite(len)) ns = n / len;
+        float len = m_length(n);
+        if (len > 0.0f && m_isfinite(len)) ns = n / len;
     }
 #ifdef SCENE_HAS_BUMPMAPS
     ns = bump_normal(sc, scene_material(sc, s.material), prim, info, s.uv, ns);
@@ -171,7 +171,7 @@ static inline bool scene_occluded(const Scene* sc, RngKey key, int bounce, float
 
 /* Origin for a ray leaving s in direction d: offset to d's side of the surface. */
 static inline float3 spawn_origin(const Surface* s, float3 d) {
-    return offset_ray_origin(s->p, dot(d, s->ng) >= 0.0f ? s->ng : -s->ng);
+    return offset_ray_origin(s->p, m_dot(d, s->ng) >= 0.0f ? s->ng : -s->ng);
 }
 
 #endif

@@ -132,14 +132,14 @@ static inline float4 tex_bitmap(const Textures* tx, __global const float* t, flo
     float w = t[TEX_WIDTH], h = t[TEX_HEIGHT];
     float x = uv.x * w - 0.5f;
     float y = (1.0f - uv.y) * h - 0.5f;
-    if (!(isfinite(x) && isfinite(y))) return (float4)(0.0f);
+    if (!(m_isfinite(x) && m_isfinite(y))) return (float4)(0.0f);
     /* keep far-away coordinates in int range; the wrap modes are periodic or saturating */
-    x = clamp(x, -1.0e7f, 1.0e7f);
-    y = clamp(y, -1.0e7f, 1.0e7f);
-    float fx = floor(x), fy = floor(y);
+    x = m_clamp(x, -1.0e7f, 1.0e7f);
+    y = m_clamp(y, -1.0e7f, 1.0e7f);
+    float fx = m_floor(x), fy = m_floor(y);
     int x0 = (int)fx, y0 = (int)fy;
     if ((int)t[TEX_FILTER] == 0) {
-        return tex_texel(tx, t, (int)floor(x + 0.5f), (int)floor(y + 0.5f));
+        return tex_texel(tx, t, (int)m_floor(x + 0.5f), (int)m_floor(y + 0.5f));
     }
     float ax = x - fx, ay = y - fy;
     float4 c00 = tex_texel(tx, t, x0, y0), c10 = tex_texel(tx, t, x0 + 1, y0);
@@ -154,7 +154,7 @@ static inline float4 tex_eval4(const Textures* tx, int id, float2 uv) {
                          uv.y * t[TEX_UV_SCALE + 1] + t[TEX_UV_OFFSET + 1]);
     float3 scale = (float3)(t[TEX_SCALE], t[TEX_SCALE + 1], t[TEX_SCALE + 2]);
     if ((int)t[TEX_KIND] == TEX_CHECKER) {
-        bool mu = st.x - floor(st.x) > 0.5f, mv = st.y - floor(st.y) > 0.5f;
+        bool mu = st.x - m_floor(st.x) > 0.5f, mv = st.y - m_floor(st.y) > 0.5f;
         if (mu == mv) return (float4)(scale, 1.0f);
         return (float4)(t[TEX_COLOR1], t[TEX_COLOR1 + 1], t[TEX_COLOR1 + 2], 1.0f);
     }

@@ -6,7 +6,8 @@ a ``#line`` directive, so a compiler message names the real file and line
 (``cl/scene/bsdf.h:42``) although the device compiles one self-contained string. That
 string is what PoCL's kernel cache hashes, so an unchanged program is loaded
 from the cache instead of being compiled; ``PYCLPT_DUMP_KERNELS=DIR`` writes it
-to ``DIR`` for inspection. Specialisations are ``-D`` options.
+to ``DIR`` for inspection. Specialisations are ``-D`` options; on PoCL devices ``-DINLINE_MATH`` makes
+cl/core/math.h map its functions to clang builtins that PoCL inlines (:func:`device_options`).
 
 Build times are logged (logger ``pyclpt.device.program``) and kept apart from render
 times: :func:`compile_seconds` reports the total spent building.
@@ -112,6 +113,14 @@ def define_options(defines: Mapping[str, object] | None) -> list[str]:
     return opts
 
 
+INLINE_MATH_DEFINE = "INLINE_MATH"
+
+
+def device_options(device: Device) -> list[str]:
+    """Options chosen by the device: PoCL gets ``-DINLINE_MATH`` (see cl/core/math.h)."""
+    return [f"-D{INLINE_MATH_DEFINE}"] if device.is_pocl else []
+
+
 _compile_seconds = 0.0
 
 
@@ -136,7 +145,7 @@ def build_program(
     """
     global _compile_seconds
     text = assemble(files, source, source_name=name or "<source>", generated=generated)
-    opts = ["-cl-std=CL1.2", *define_options(defines), *options]
+    opts = ["-cl-std=CL1.2", *device_options(device), *define_options(defines), *options]
     key = (text, tuple(opts))
     prog = device.programs.get(key)
     if prog is not None:

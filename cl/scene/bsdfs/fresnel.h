@@ -11,9 +11,9 @@ static inline float3 fresnel_conductor(float cos_i, float3 eta, float3 k) {
     float c2 = cos_i * cos_i, s2 = 1.0f - c2;
     float3 eta2 = eta * eta, k2 = k * k;
     float3 t0 = eta2 - k2 - s2;
-    float3 a2pb2 = sqrt(fmax(t0 * t0 + 4.0f * eta2 * k2, 0.0f));
+    float3 a2pb2 = m_sqrt3(m_max3s(t0 * t0 + 4.0f * eta2 * k2, 0.0f));
     float3 t1 = a2pb2 + c2;
-    float3 a = sqrt(fmax(0.5f * (a2pb2 + t0), 0.0f));
+    float3 a = m_sqrt3(m_max3s(0.5f * (a2pb2 + t0), 0.0f));
     float3 t2 = 2.0f * cos_i * a;
     float3 rs = (t1 - t2) / (t1 + t2);
     float3 t3 = c2 * a2pb2 + s2 * s2;
@@ -29,12 +29,12 @@ static inline float fresnel_dielectric(float cos_i, float eta, float* cos_t, flo
     float eta_it = outside ? eta : 1.0f / eta;
     *eta_ti = 1.0f / eta_it;
     float cos_t_sqr = 1.0f - (1.0f - cos_i * cos_i) * (*eta_ti) * (*eta_ti);
-    float ci = fabs(cos_i);
+    float ci = m_abs(cos_i);
     if (cos_t_sqr <= 0.0f) {
         *cos_t = 0.0f;
         return 1.0f;
     }
-    float ct = sqrt(cos_t_sqr);
+    float ct = m_sqrt(cos_t_sqr);
     float a_s = (ci - eta_it * ct) / (ci + eta_it * ct);
     float a_p = (eta_it * ci - ct) / (eta_it * ci + ct);
     *cos_t = outside ? -ct : ct;

@@ -18,7 +18,7 @@ typedef struct {
 /* Inverse error function, single precision (Giles 2012, "Approximating the erfinv function",
  * GPU Computing Gems Jade ch. 10); |x| < 1. */
 static inline float erfinv_f(float x) {
-    float w = -log(fmax((1.0f - x) * (1.0f + x), 1e-30f));
+    float w = -m_log(m_max((1.0f - x) * (1.0f + x), 1e-30f));
     float p;
     if (w < 5.0f) {
         w = w - 2.5f;
@@ -32,7 +32,7 @@ static inline float erfinv_f(float x) {
         p = 0.246640727f + p * w;
         p = 1.50140941f + p * w;
     } else {
-        w = sqrt(w) - 3.0f;
+        w = m_sqrt(w) - 3.0f;
         p = -0.000200214257f;
         p = 0.000100950558f + p * w;
         p = 0.00134934322f + p * w;
@@ -54,7 +54,7 @@ static inline float mf_d(Microfacet d, float3 m) {
     float xy2 = m.x * m.x + m.y * m.y;
     float r;
     if (d.beckmann) {
-        float e = exp(-xy2 / (a2 * c2));
+        float e = m_exp(-xy2 / (a2 * c2));
         if (e == 0.0f) return 0.0f;
         r = e / (PI_F * a2 * c2 * c2);
     } else {
@@ -62,72 +62,73 @@ static inline float mf_d(Microfacet d, float3 m) {
         r = 1.0f / (PI_F * a2 * t * t);
     }
     /* as Mitsuba: drop values too small to matter (avoids denormals downstream) */
-    return (r * m.z > 1e-20f && isfinite(r)) ? r : 0.0f;
+    return (r * m.z > 1e-20f && m_isfinite(r)) ? r : 0.0f;
 }
 
 /* Smith's masking for one direction, zero where v sees the back of m (or m from behind). */
 static inline float mf_g1(Microfacet d, float3 v, float3 m) {
-    if (dot(v, m) * v.z <= 0.0f) return 0.0f;
+    if (m_dot(v, m) * v.z <= 0.0f) return 0.0f;
     float xy2 = d.alpha * d.alpha * (v.x * v.x + v.y * v.y);
     if (xy2 <= 0.0f) return 1.0f;
     if (d.beckmann) {
         /* a = 1 / (alpha tan theta); Lambda(a) = (exp(-a^2) / (a sqrt(pi)) - erfc(a)) / 2 */
-        float a = fabs(v.z) / sqrt(xy2);
+        float a = m_abs(v.z) / m_sqrt(xy2);
         if (a > 9.0f) return 1.0f;
-        float lambda = 0.5f * (exp(-a * a) * INV_SQRT_PI_F / a - erfc(a));
-        return 1.0f / (1.0f + fmax(lambda, 0.0f));
+        float lambda = 0.5f * (m_exp(-a * a) * INV_SQRT_PI_F / a - erfc(a)); /* exact erfc: see core/math.h */
+        return 1.0f / (1.0f + m_max(lambda, 0.0f));
     }
     float tan2 = xy2 / (v.z * v.z);
-    return 2.0f / (1.0f + sqrt(1.0f + tan2));
+    return 2.0f / (1.0f + m_sqrt(1.0f + tan2));
 }
 
 /* Visible-normal sampling of GGX at alpha = 1 (Heitz 2018, "Sampling the GGX Distribution of
  * Visible Normals"): the stretched direction vh (z > 0) to a normal of the hemisphere. */
 static inline float3 ggx_sample_visible_11(float3 vh, float2 u) {
     float lensq = vh.x * vh.x + vh.y * vh.y;
-    float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
-    float3 t2 = cross(vh, t1);
-    float r = sqrt(u.x);
+    float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * m_rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
+    float3 t2 = m_cross(vh, t1);
+    float r = m_sqrt(u.x);
     float phi = 2.0f * PI_F * u.y;
-    float p1 = r * cos(phi);
-    float p2 = r * sin(phi);
+    float cos_phi, sin_phi = m_sincos(phi, &cos_phi);
+    float p1 = r * cos_phi;
+    float p2 = r * sin_phi;
     float s = 0.5f * (1.0f + vh.z);
-    p2 = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - p1 * p1)) + s * p2;
-    return p1 * t1 + p2 * t2 + sqrt(fmax(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
+    p2 = (1.0f - s) * m_sqrt(m_max(0.0f, 1.0f - p1 * p1)) + s * p2;
+    return p1 * t1 + p2 * t2 + m_sqrt(m_max(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
 }
 
 /* Visible-slope sampling of Beckmann at alpha = 1 for an incident cosine cos_i > 0
  * (Jakob 2014, "An Improved Visible Normal Sampling Routine for the Beckmann Distribution",
  * as in Mitsuba 3's sample_visible_11): the slope CDF inverted by Newton steps in the erf domain. */
 static inline float2 beckmann_sample_visible_11(float cos_i, float2 u) {
-    float tan_i = sqrt(fmax(0.0f, 1.0f - cos_i * cos_i)) / cos_i;
+    float tan_i = m_sqrt(m_max(0.0f, 1.0f - cos_i * cos_i)) / cos_i;
     float cot_i = 1.0f / tan_i; /* inf at normal incidence: erf(inf) = 1, exp(-inf) = 0 */
-    float maxval = erf(cot_i);
-    float gauss = tan_i > 0.0f ? INV_SQRT_PI_F * tan_i * exp(-cot_i * cot_i) : 0.0f;
-    u = clamp(u, 1e-6f, 1.0f - 1e-6f);
+    float maxval = erf(cot_i); /* exact erf (core/math.h) */
+    float gauss = tan_i > 0.0f ? INV_SQRT_PI_F * tan_i * m_exp(-cot_i * cot_i) : 0.0f;
+    u = (float2)(m_clamp(u.x, 1e-6f, 1.0f - 1e-6f), m_clamp(u.y, 1e-6f, 1.0f - 1e-6f));
     /* initial guess: the analytic solution at grazing incidence */
-    float x = maxval - (maxval + 1.0f) * erf(sqrt(-log(u.x)));
+    float x = maxval - (maxval + 1.0f) * erf(m_sqrt(-m_log(u.x)));
     float target = u.x * (1.0f + maxval + gauss);
     const float lo = -1.0f + 1e-6f;
-    float hi = fmax(lo, fmin(maxval, 1.0f - 1e-6f));
-    x = clamp(x, lo, hi);
+    float hi = m_max(lo, m_min(maxval, 1.0f - 1e-6f));
+    x = m_clamp(x, lo, hi);
     for (int i = 0; i < 3; ++i) {
         float slope = erfinv_f(x);
-        float value = 1.0f + x + INV_SQRT_PI_F * tan_i * exp(-slope * slope) - target;
+        float value = 1.0f + x + INV_SQRT_PI_F * tan_i * m_exp(-slope * slope) - target;
         float deriv = 1.0f - slope * tan_i;
         float step = value / deriv;
-        if (isfinite(step)) x = clamp(x - step, lo, hi);
+        if (m_isfinite(step)) x = m_clamp(x - step, lo, hi);
     }
-    return (float2)(erfinv_f(x), erfinv_f(clamp(2.0f * u.y - 1.0f, lo, 1.0f - 1e-6f)));
+    return (float2)(erfinv_f(x), erfinv_f(m_clamp(2.0f * u.y - 1.0f, lo, 1.0f - 1e-6f)));
 }
 
 /* A visible normal for wi (wi.z > 0), distributed as D(m) G1(wi, m) max(0, wi.m) / wi.z. */
 static inline float3 mf_sample_visible(Microfacet d, float3 wi, float2 u) {
-    float3 vh = normalize((float3)(d.alpha * wi.x, d.alpha * wi.y, wi.z));
+    float3 vh = m_normalize((float3)(d.alpha * wi.x, d.alpha * wi.y, wi.z));
     float3 m;
     if (d.beckmann) {
         float lensq = vh.x * vh.x + vh.y * vh.y;
-        float inv = lensq > 0.0f ? rsqrt(lensq) : 0.0f;
+        float inv = lensq > 0.0f ? m_rsqrt(lensq) : 0.0f;
         float cos_phi = lensq > 0.0f ? vh.x * inv : 1.0f, sin_phi = vh.y * inv;
         float2 s = beckmann_sample_visible_11(vh.z, u);
         float sx = (cos_phi * s.x - sin_phi * s.y) * d.alpha;
@@ -135,15 +136,15 @@ static inline float3 mf_sample_visible(Microfacet d, float3 wi, float2 u) {
         m = (float3)(-sx, -sy, 1.0f);
     } else {
         float3 nh = ggx_sample_visible_11(vh, u);
-        m = (float3)(d.alpha * nh.x, d.alpha * nh.y, fmax(1e-6f, nh.z));
+        m = (float3)(d.alpha * nh.x, d.alpha * nh.y, m_max(1e-6f, nh.z));
     }
-    return normalize(m);
+    return m_normalize(m);
 }
 
 /* Density of mf_sample_visible producing m (per unit solid angle of m). */
 static inline float mf_pdf_visible(Microfacet d, float3 wi, float3 m) {
     if (wi.z <= 0.0f) return 0.0f;
-    return mf_d(d, m) * mf_g1(d, wi, m) * fmax(dot(wi, m), 0.0f) / wi.z;
+    return mf_d(d, m) * mf_g1(d, wi, m) * m_max(m_dot(wi, m), 0.0f) / wi.z;
 }
 
 #endif

@@ -28,7 +28,7 @@ static inline float plastic_prob_specular(const Bsdf* b, float t_i) {
 static inline float3 plastic_base(const Bsdf* b) {
     float3 diff = b->color;
     float3 denom = (b->flags & MAT_FLAG_NONLINEAR) ? 1.0f - diff * b->fdr_int : (float3)(1.0f - b->fdr_int);
-    return diff / fmax(denom, 1e-6f) * (INV_PI_F / (b->ior * b->ior));
+    return diff / m_max3s(denom, 1e-6f) * (INV_PI_F / (b->ior * b->ior));
 }
 
 /* The diffuse part (the coating is a delta): base (1 - F_i)(1 - F_o) cos_o. */

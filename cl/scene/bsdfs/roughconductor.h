@@ -13,12 +13,12 @@
 /* F D G / (4 cos_i) and the pdf of roughconductor_sample. */
 static inline float3 roughconductor_eval(const Bsdf* b, float3 wi, float3 wo, float* pdf) {
     Microfacet d = microfacet_of(b);
-    float3 h = normalize(wi + wo);
+    float3 h = m_normalize(wi + wo);
     float dh = mf_d(d, h);
     if (dh == 0.0f) return (float3)(0.0f);
     float g1_i = mf_g1(d, wi, h);
     float g = g1_i * mf_g1(d, wo, h);
-    float3 f = fresnel_conductor(dot(wi, h), b->eta, b->k) * b->spec;
+    float3 f = fresnel_conductor(m_dot(wi, h), b->eta, b->k) * b->spec;
     /* pdf_visible(h) / (4 wo.h) with wi.h = wo.h */
     *pdf = dh * g1_i / (4.0f * wi.z);
     return f * (dh * g / (4.0f * wi.z));
@@ -28,10 +28,10 @@ static inline float3 roughconductor_eval(const Bsdf* b, float3 wi, float3 wo, fl
 static inline bool roughconductor_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
     Microfacet d = microfacet_of(b);
     float3 h = mf_sample_visible(d, wi, u);
-    s->wo = 2.0f * dot(wi, h) * h - wi;
+    s->wo = 2.0f * m_dot(wi, h) * h - wi;
     if (s->wo.z <= 0.0f) return false;
-    s->pdf = mf_pdf_visible(d, wi, h) / (4.0f * dot(s->wo, h));
-    float3 f = fresnel_conductor(dot(wi, h), b->eta, b->k) * b->spec;
+    s->pdf = mf_pdf_visible(d, wi, h) / (4.0f * m_dot(s->wo, h));
+    float3 f = fresnel_conductor(m_dot(wi, h), b->eta, b->k) * b->spec;
     /* with visible-normal sampling, weight = F * G1(wo) */
     s->weight = f * mf_g1(d, s->wo, h);
     return true;

@@ -22,27 +22,27 @@ static inline float3 roughdielectric_eval(const Bsdf* b, float3 wi, float3 wo, f
     bool reflect = cos_i * cos_o > 0.0f;
     float eta = cos_i > 0.0f ? b->ior : 1.0f / b->ior; /* IOR of wo's side over wi's */
     float3 hv = wi + wo * (reflect ? 1.0f : eta);
-    float len = length(hv);
+    float len = m_length(hv);
     if (!(len > 1e-7f)) return (float3)(0.0f);
     float3 m = hv / len;
     if (m.z < 0.0f) m = -m;
     float dm = mf_d(d, m);
     float g1_i = mf_g1(d, wi, m), g1_o = mf_g1(d, wo, m);
     if (dm == 0.0f || g1_i == 0.0f || g1_o == 0.0f) return (float3)(0.0f);
-    float wi_m = dot(wi, m), wo_m = dot(wo, m);
+    float wi_m = m_dot(wi, m), wo_m = m_dot(wo, m);
     float ct, eti;
     float f = fresnel_dielectric(wi_m, b->ior, &ct, &eti);
-    float aci = fabs(cos_i);
+    float aci = m_abs(cos_i);
     /* visible-normal density from wi flipped to the upper side: D G1(wi) |wi.m| / |cos_i| */
-    float prob = dm * g1_i * fabs(wi_m) / aci;
+    float prob = dm * g1_i * m_abs(wi_m) / aci;
     if (reflect) {
-        *pdf = prob * f / (4.0f * fabs(wo_m));
+        *pdf = prob * f / (4.0f * m_abs(wo_m));
         return b->spec * (f * dm * g1_i * g1_o / (4.0f * aci));
     }
     float denom = wi_m + eta * wo_m;
     float denom2 = denom * denom;
-    *pdf = prob * (1.0f - f) * (eta * eta * fabs(wo_m) / denom2);
-    return b->trans * ((1.0f - f) * dm * g1_i * g1_o * fabs(wi_m * wo_m) / (aci * denom2));
+    *pdf = prob * (1.0f - f) * (eta * eta * m_abs(wo_m) / denom2);
+    return b->trans * ((1.0f - f) * dm * g1_i * g1_o * m_abs(wi_m * wo_m) / (aci * denom2));
 }
 
 /* A visible normal of wi's side, then reflection with probability F(wi.m), else refraction
@@ -63,26 +63,26 @@ static inline bool roughdielectric_sample(const Bsdf* b, float3 wi, float u_lobe
     float pdf_m = mf_pdf_visible(d, wi_up, m);
     if (!(pdf_m > 0.0f)) return false;
     float cos_t, eta_ti;
-    float wi_m = dot(wi, m);
+    float wi_m = m_dot(wi, m);
     float f = fresnel_dielectric(wi_m, b->ior, &cos_t, &eta_ti);
     if (u_lobe <= f) {
         s->wo = 2.0f * wi_m * m - wi;
-        float wo_m = dot(s->wo, m);
-        s->pdf = pdf_m * f / (4.0f * fabs(wo_m));
+        float wo_m = m_dot(s->wo, m);
+        s->pdf = pdf_m * f / (4.0f * m_abs(wo_m));
         s->weight = b->spec;
     } else {
         s->wo = m * (wi_m * eta_ti + cos_t) - wi * eta_ti;
         float eta = 1.0f / eta_ti;
-        float wo_m = dot(s->wo, m);
+        float wo_m = m_dot(s->wo, m);
         float denom = wi_m + eta * wo_m;
-        s->pdf = pdf_m * (1.0f - f) * (eta * eta * fabs(wo_m) / (denom * denom));
+        s->pdf = pdf_m * (1.0f - f) * (eta * eta * m_abs(wo_m) / (denom * denom));
         s->eta = eta;
         s->weight = b->trans * (eta_ti * eta_ti);
     }
     float g1_o = mf_g1(d, s->wo, m);
     if (g1_o == 0.0f) return false; /* wo on the wrong side of the macrosurface */
     s->weight *= g1_o;
-    return s->pdf > 0.0f && isfinite(s->pdf);
+    return s->pdf > 0.0f && m_isfinite(s->pdf);
 }
 
 #endif

@@ -17,11 +17,11 @@
 /* The coating's transmittance t(cos) of a rough plastic, linear in sqrt(cos) between the knots
  * pyclpt/buffers/microfacet.py computed on the host (Mitsuba keeps a 64-entry table linear in cos). */
 static inline float roughplastic_transmittance(const Bsdf* b, float cos_theta) {
-    __global const half* knots = (__global const half*)(b->mat + MAT_RP_TRANS);
-    float x = sqrt(clamp(cos_theta, 0.0f, 1.0f)) * (float)(RP_KNOTS - 1);
-    int i = min((int)x, RP_KNOTS - 2);
+    __global const ushort* knots = (__global const ushort*)(b->mat + MAT_RP_TRANS);
+    float x = m_sqrt(m_clamp(cos_theta, 0.0f, 1.0f)) * (float)(RP_KNOTS - 1);
+    int i = m_imin((int)x, RP_KNOTS - 2);
     float f = x - (float)i;
-    float v0 = vload_half(i, knots), v1 = vload_half(i + 1, knots);
+    float v0 = m_half_to_float(knots[i]), v1 = m_half_to_float(knots[i + 1]);
     return v0 + f * (v1 - v0);
 }
 
@@ -30,12 +30,12 @@ static inline float3 roughplastic_eval(const Bsdf* b, float3 wi, float3 wo, floa
     Microfacet d = microfacet_of(b);
     float t_i = roughplastic_transmittance(b, wi.z), t_o = roughplastic_transmittance(b, wo.z);
     float ps = plastic_prob_specular(b, t_i);
-    float3 h = normalize(wi + wo);
+    float3 h = m_normalize(wi + wo);
     float dh = mf_d(d, h);
     float g1_i = mf_g1(d, wi, h);
     float spec_pdf = dh * g1_i / (4.0f * wi.z);
     *pdf = ps * spec_pdf + (1.0f - ps) * cosine_hemisphere_pdf(wo);
-    float f = fresnel_dielectric_f(dot(wi, h), b->ior);
+    float f = fresnel_dielectric_f(m_dot(wi, h), b->ior);
     float3 value = b->spec * (f * dh * g1_i * mf_g1(d, wo, h) / (4.0f * wi.z));
     return value + plastic_base(b) * (t_i * t_o * wo.z);
 }
@@ -46,7 +46,7 @@ static inline bool roughplastic_sample(const Bsdf* b, float3 wi, float u_lobe, f
     float ps = plastic_prob_specular(b, roughplastic_transmittance(b, wi.z));
     if (u_lobe < ps) {
         float3 h = mf_sample_visible(microfacet_of(b), wi, u);
-        s->wo = 2.0f * dot(wi, h) * h - wi;
+        s->wo = 2.0f * m_dot(wi, h) * h - wi;
     } else {
         s->wo = square_to_cosine_hemisphere(u);
     }

@@ -13,7 +13,7 @@
 /* R' = R + T R T / (1 - R^2) = 2R / (1 + R) with R at |cos_i| from outside; reflection with
  * probability R', else straight through. */
 static inline bool thindielectric_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
-    float r = fresnel_dielectric_f(fabs(wi.z), b->ior);
+    float r = fresnel_dielectric_f(m_abs(wi.z), b->ior);
     r = 2.0f * r / (1.0f + r);
     s->delta = true;
     if (u_lobe < r) {

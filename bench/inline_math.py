@@ -1,0 +1,118 @@
+"""What cl/core/math.h changes on PoCL: vectorizer remarks per kernel, per-stage throughput, compile time.
+
+Runs against whichever pyclpt the interpreter imports, so the same script measures two checkouts (each with
+its own virtual environment) for a before/after comparison (docs/wavefront.md, "Inline math on PoCL"):
+
+    python bench/inline_math.py speed        # megakernel Msamples/s and wavefront per-stage Mitems/s, one JSON line
+    python bench/inline_math.py compile      # seconds to build all kernels (POCL_KERNEL_CACHE=0: cold)
+    POCL_VECTORIZER_REMARKS=1 POCL_KERNEL_CACHE=0 python bench/inline_math.py remarks   # vectorizer verdicts
+
+Setting: cornell-box, 256x256, 64 spp, max depth 8 (remarks: 64x64, 1 spp). A stage's items are what it
+processes: path_init the paths, intersect the rays, miss the misses, process_hit and sample_bsdf the hits,
+shadow_test and light_contribution the shadow rays.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import sys
+import time
+from collections import defaultdict
+
+import pyopencl as cl
+
+import pyclpt
+
+SIZE, SPP, DEPTH = 256, 64, 8
+ITEMS = {"path_init": "paths", "intersect": "rays", "miss": "misses", "process_hit": "hits", "sample_bsdf": "hits",
+         "shadow_test": "shadow_rays", "light_contribution": "shadow_rays"}
+
+
+def renderer(integrator: str, size: int = SIZE) -> pyclpt.Renderer:
+    return pyclpt.Renderer(pyclpt.load("cornell-box"), integrator=integrator, max_depth=DEPTH,
+                           width=size, height=size)
+
+
+def speed() -> dict:
+    out: dict = {}
+    r = renderer("megakernel")
+    r.render(SPP, seed=1)
+    out["megakernel_msamples_s"] = SIZE * SIZE * SPP / r.stats.seconds / 1e6
+    w = renderer("wavefront")
+    w.render(SPP, seed=1)
+    totals = {k: sum(b.get(k, 0) for b in w.stats.bounces) for k in ("rays", "hits", "misses", "shadow_rays")}
+    totals["paths"] = SIZE * SIZE * SPP
+    out["wavefront_msamples_s"] = SIZE * SIZE * SPP / w.stats.seconds / 1e6
+    out["stages_mitems_s"] = {k["kernel"]: totals[ITEMS[k["kernel"]]] / (k["total_ms"] * 1e3)
+                              for k in w.stats.kernels if k["kernel"] in ITEMS}
+    return out
+
+
+def compile_seconds() -> dict:
+    """build_s: clBuildProgram; wall_s: everything until both integrators have rendered a 16x16 frame, which
+    includes PoCL's code generation of each kernel at its first launch (and a few ms of scene setup)."""
+    from pyclpt.device.program import compile_seconds as total
+    start = time.perf_counter()
+    renderer("megakernel", 16).render(1)
+    renderer("wavefront", 16).render(1)
+    return {"build_s": total(), "wall_s": time.perf_counter() - start}
+
+
+_Kernel = cl.Kernel
+
+
+class _MarkedKernel(_Kernel):
+    """A kernel whose first launch (when PoCL compiles it) is framed by markers on stdout."""
+
+    def __call__(self, *args, **kwargs):  # type: ignore[override]
+        first = not getattr(self, "_marked", False)
+        if first:
+            os.write(1, f"\n@@KERNEL {self.function_name}\n".encode())
+            self._marked = True
+        ev = _Kernel.__call__(self, *args, **kwargs)
+        if first:
+            args[0].finish()  # PoCL compiles the work-group function when the launch runs
+            os.write(1, b"\n@@KERNEL ?\n")
+        return ev
+
+
+def remarks() -> dict:
+    """Render once with every kernel marked, reading LLVM's remarks (stdout) back through a pipe."""
+    read, write = os.pipe()
+    sys.stdout.flush()
+    saved = os.dup(1)  # PoCL prints LLVM's remarks on stdout
+    os.dup2(write, 1)
+    os.close(write)
+    cl.Kernel = _MarkedKernel  # type: ignore[misc]
+    chunks = []
+    import threading
+
+    def drain() -> None:
+        while data := os.read(read, 1 << 16):
+            chunks.append(data)
+    t = threading.Thread(target=drain)
+    t.start()
+    try:
+        renderer("megakernel", 64).render(1)
+        renderer("wavefront", 64).render(1)
+    finally:
+        os.dup2(saved, 1)
+        t.join()
+    text = b"".join(chunks).decode(errors="replace").replace("<unknown>:0:0: ", "\n")
+    verdicts: dict = defaultdict(lambda: defaultdict(int))
+    kernel = "?"
+    for line in text.splitlines():
+        m = re.match(r"@@KERNEL (\w+)", line)
+        if m:
+            kernel = m.group(1)
+        elif line.startswith("loop not vectorized") or "vectorized loop" in line or "cannot be vectorized" in line:
+            if kernel != "?":
+                verdicts[kernel][line.strip()[:160]] += 1
+    return {k: dict(v) for k, v in verdicts.items()}
+
+
+if __name__ == "__main__":
+    mode = sys.argv[1] if len(sys.argv) > 1 else "speed"
+    run = {"speed": speed, "compile": compile_seconds, "remarks": remarks}[mode]
+    print(json.dumps({"pyclpt": os.path.dirname(pyclpt.__file__), **run()}))
