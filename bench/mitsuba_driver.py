@@ -17,7 +17,8 @@ The scene is set up exactly as pyclpt renders it:
 The integrator is Mitsuba's ``path`` with ``--rr-depth`` (default 3, pyclpt's ``RR_DEPTH``:
 Mitsuba's default is 5) so both sides do the same work per sample.
 
-Protocol (one JSON object per line on stdout): after loading and ``--warmup`` untimed renders
+Protocol (one JSON object per line on stdout; Mitsuba's own log lines may come between them):
+``--probe`` only imports Mitsuba and prints the ready line; after loading and ``--warmup`` untimed renders
 (which include Dr.Jit's kernel compilation) it prints ``{"event": "ready", "mitsuba_version",
 "variant", "load_s", "warmup_s": [...]}``. Without ``--repeats`` it then reads commands from
 stdin: ``render SEED`` answers ``{"event": "render", "seed", "seconds", "mean": [r, g, b]}``
@@ -83,9 +84,29 @@ def load_json(mi, path: Path, a: argparse.Namespace):
     return mi.load_dict(d)
 
 
+# Parameters of Mitsuba 0.5/0.6 plug-ins that Mitsuba 3 no longer has (it refuses unused ones): dropped.
+SUN_APERTURE = 0.5338  # Mitsuba 3's default sun_aperture, degrees
+OBSOLETE = {"conductor": {"extEta", "ext_eta"}, "roughconductor": {"extEta", "ext_eta"}}
+
+
 def edit_xml(text: str, a: argparse.Namespace) -> str:
-    """The scene XML with the integrator, film and sampler replaced (see the module docstring)."""
+    """The scene XML with the integrator, film and sampler replaced (see the module docstring), the
+    parameters of :data:`OBSOLETE` dropped and texture filters Mitsuba 3 lacks made bilinear; a
+    ``sunsky``'s ``sunRadiusScale`` becomes ``sun_aperture``."""
     root = ET.fromstring(text)
+    for bsdf in root.iter("bsdf"):
+        for child in list(bsdf):
+            if child.get("name") in OBSOLETE.get(bsdf.get("type", ""), ()):
+                bsdf.remove(child)
+    for texture in root.iter("texture"):  # trilinear/EWA (0.5/0.6) -> bilinear, as pyclpt filters
+        for child in texture.findall("string"):
+            if child.get("name") in ("filterType", "filter_type") and child.get("value") not in ("nearest", "bilinear"):
+                child.set("value", "bilinear")
+    for emitter in root.iter("emitter"):  # 0.5's sun radius scale -> Mitsuba 3's sun aperture (degrees)
+        for child in emitter.findall("float"):
+            if emitter.get("type") == "sunsky" and child.get("name") in ("sunRadiusScale", "sun_radius_scale"):
+                child.set("name", "sun_aperture")
+                child.set("value", str(SUN_APERTURE * float(child.get("value", "1"))))
     for old in root.findall("integrator"):
         root.remove(old)
     integ = ET.Element("integrator", type="path")
@@ -116,11 +137,12 @@ def load_xml(mi, path: Path, a: argparse.Namespace):
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--scene", required=True)
-    p.add_argument("--spp", type=int, required=True)
-    p.add_argument("--max-depth", type=int, required=True)
-    p.add_argument("--width", type=int, required=True)
-    p.add_argument("--height", type=int, required=True)
+    p.add_argument("--probe", action="store_true", help="only check that mitsuba loads: print the ready line")
+    p.add_argument("--scene", default=None)
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--max-depth", type=int, default=8)
+    p.add_argument("--width", type=int, default=128)
+    p.add_argument("--height", type=int, default=128)
     p.add_argument("--rr-depth", type=int, default=3)
     p.add_argument("--variant", default="llvm_ad_rgb")
     p.add_argument("--warmup", type=int, default=1)
@@ -131,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
         import mitsuba as mi
 
         mi.set_variant(a.variant)
+        if a.probe or not a.scene:
+            _emit({"event": "ready", "mitsuba_version": mi.__version__, "variant": mi.variant()})
+            return 0
         t0 = time.perf_counter()
         path = Path(a.scene)
         scene = load_json(mi, path, a) if path.suffix == ".json" else load_xml(mi, path, a)

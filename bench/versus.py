@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shlex
 import statistics
 import subprocess
@@ -82,6 +83,35 @@ def mitsuba_python(option: str | None) -> str:
     return str(path)
 
 
+def _json_in(line: str) -> object:
+    """The JSON object on a driver's output line (after any colour codes Mitsuba's log left), else None."""
+    text = re.sub(r"\x1b\[[0-9;]*m", "", line)
+    start = text.find("{")
+    try:
+        return json.loads(text[start:]) if start >= 0 else None
+    except json.JSONDecodeError:
+        return None
+
+
+def probe(python: str) -> dict:
+    """Check that ``python`` runs the driver with Mitsuba (its version and variant), else MitsubaError."""
+    cmd = [python, str(DRIVER), "--probe"]
+    try:
+        done = subprocess.run(cmd, input="", capture_output=True, text=True, timeout=300)
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise MitsubaError(f"cannot run the Mitsuba python {python!r} ({exc}); check --mitsuba-python / "
+                           "PYCLPT_MITSUBA_PYTHON") from None
+    for line in done.stdout.splitlines():
+        msg = _json_in(line)
+        if isinstance(msg, dict) and msg.get("event") == "ready":
+            return msg
+        if isinstance(msg, dict) and msg.get("event") == "error":
+            break
+    detail = (done.stdout.strip() + " " + done.stderr.strip()).strip()[-600:] or f"exit status {done.returncode}"
+    raise MitsubaError(f"{shlex.join(cmd)} failed: {detail}; --mitsuba-python / PYCLPT_MITSUBA_PYTHON must be the "
+                       "python of an environment with mitsuba 3 (and DRJIT_LIBLLVM_PATH set for its LLVM backend)")
+
+
 def cases(s: dict) -> list[dict]:
     """(label, file, width, height, spp, depth) of every configuration asked for."""
     from pyclpt.scene.library import builtin_dir, scenes_root
@@ -126,22 +156,26 @@ class MitsubaSide:
         except OSError as exc:
             raise MitsubaError(f"cannot run the Mitsuba python {python!r} ({exc}); check --mitsuba-python / "
                                "PYCLPT_MITSUBA_PYTHON") from None
+        self.log: list[str] = []
         self.ready = self._answer("ready")
 
     def _answer(self, event: str) -> dict:
-        line = self.proc.stdout.readline() if self.proc.stdout else ""
-        try:
-            msg = json.loads(line) if line.strip() else None
-        except json.JSONDecodeError:
-            msg = None
+        msg, line = None, ""
+        while self.proc.stdout:  # Mitsuba logs to stdout too: pass its lines on, up to the next JSON answer
+            line = self.proc.stdout.readline()
+            if not line:
+                break
+            msg = _json_in(line)
+            if isinstance(msg, dict) and "event" in msg:
+                break
+            print(f"mitsuba: {line.rstrip()}", file=sys.stderr)
+            self.log.append(line.rstrip())
         if not isinstance(msg, dict) or msg.get("event") != event:
             self.proc.kill()
             err = self.proc.stderr.read() if self.proc.stderr else ""
             detail = msg.get("message") if isinstance(msg, dict) and msg.get("event") == "error" else \
                 (line.strip() or err.strip()[-600:] or f"exit status {self.proc.wait()}")
-            raise MitsubaError(f"the Mitsuba side failed ({shlex.join(self.cmd)}): {detail}; is --mitsuba-python / "
-                               "PYCLPT_MITSUBA_PYTHON the python of an environment with mitsuba 3 (and "
-                               "DRJIT_LIBLLVM_PATH set)?")
+            raise MitsubaError(f"Mitsuba failed on {self.cmd[3]}: {detail}")
         return msg
 
     def render(self, seed: int) -> dict:
@@ -206,7 +240,10 @@ def measure(case: dict, s: dict, python: str, device) -> dict:
 
 # -- report -----------------------------------------------------------------------------------------
 def _rel(a: float, b: float) -> float | None:
-    return None if b == 0 else (a - b) / abs(b)
+    """(a - b) / |b|; None when b is 0 (and a is not)."""
+    if b == 0:
+        return 0.0 if a == 0 else None
+    return (a - b) / abs(b)
 
 
 def rows(res: dict) -> list[list[str]]:
@@ -223,12 +260,13 @@ def rows(res: dict) -> list[list[str]]:
             if n == "mitsuba":
                 continue
             ratio = m["msamples_per_s"] / ms["msamples_per_s"]
-            rel = max(abs(_rel(m["mean"][k], ms["mean"][k]) or 0.0) for k in range(3))
+            rels = [_rel(m["mean"][k], ms["mean"][k]) for k in range(3)]
+            diff = "Mitsuba's image is black" if None in rels else f"{100 * max(abs(r) for r in rels):.1f}%"
             table.append([c["scene"], str(c["depth"]), f"{c['width']}x{c['height']}, {c['spp']} spp",
                           n + (" (fastest)" if n == best else ""), _n(m["median_s"]), _n(ms["median_s"]),
                           _n(m["msamples_per_s"]), _n(ms["msamples_per_s"]), f"{ratio:.2f}x",
                           f"{' '.join(f'{x:.4f}' for x in m['mean'])} / "
-                          f"{' '.join(f'{x:.4f}' for x in ms['mean'])} ({100 * rel:.1f}%)"])
+                          f"{' '.join(f'{x:.4f}' for x in ms['mean'])} ({diff})"])
     return table
 
 
@@ -276,6 +314,7 @@ def main(argv: Sequence[str]) -> int:
 
         python = mitsuba_python(a.mitsuba_python)
         s = settings_from(a)
+        version = probe(python)
         todo = cases(s)
         out_dir = Path(a.output)
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -284,15 +323,15 @@ def main(argv: Sequence[str]) -> int:
         res = {"settings": s, "meta": {"cpu": machine.cpu_model(), "cores": os.cpu_count(),
                                        "load_average": machine.load_average(),
                                        "device": str(device.describe().get("device", device)),
-                                       "command": "pyclpt bench " + shlex.join(list(argv))},
+                                       "command": "pyclpt bench " + shlex.join(list(argv)),
+                                       "mitsuba_version": version.get("mitsuba_version"),
+                                       "variant": version.get("variant")},
                "cases": []}
         for case in todo:
             print(f"{case['scene']} depth {case['depth']} {case['width']}x{case['height']} {case['spp']} spp ...",
                   file=sys.stderr, flush=True)
             try:
                 c = measure(case, s, python, device)
-            except MitsubaError:
-                raise
             except Exception as exc:  # noqa: BLE001 - a scene one side cannot render is a row, not the end
                 from .scenes import reason
 

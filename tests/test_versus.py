@@ -98,7 +98,9 @@ def test_driver_compiles_and_edits_the_scene(tmp_path):
     xml = """<scene version="0.5.0"><integrator type="sppm"><integer name="maxDepth" value="65"/></integrator>
     <sensor type="perspective"><film type="ldrfilm"><integer name="width" value="1024"/>
     <rfilter type="tent"/></film><sampler type="ldsampler"><integer name="sampleCount" value="8"/></sampler>
-    </sensor></scene>"""
+    </sensor><bsdf type="roughconductor"><float name="extEta" value="1"/><string name="material" value="Al"/></bsdf>
+    <texture type="bitmap"><string name="filterType" value="trilinear"/></texture>
+    <emitter type="sunsky"><float name="sunRadiusScale" value="2"/></emitter></scene>"""
     a = argparse.Namespace(max_depth=8, rr_depth=3, spp=16, width=64, height=48)
     root = ET.fromstring(mitsuba_driver.edit_xml(xml, a))
     (integ,) = root.findall("integrator")
@@ -109,3 +111,7 @@ def test_driver_compiles_and_edits_the_scene(tmp_path):
     assert {e.get("name"): e.get("value") for e in film.findall("integer")} == {"width": "64", "height": "48"}
     (sampler,) = root.findall("sensor/sampler")
     assert sampler.get("type") == "independent" and sampler.find("integer").get("value") == "16"
+    assert [e.get("name") for e in root.find("bsdf")] == ["material"]  # Mitsuba 3 refuses extEta
+    assert root.find("texture/string").get("value") == "bilinear"
+    aperture = root.find("emitter/float")
+    assert aperture.get("name") == "sun_aperture" and float(aperture.get("value")) == pytest.approx(2 * 0.5338)
