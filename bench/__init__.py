@@ -9,7 +9,9 @@
 - :mod:`.analysis`: figures derived from raw results (FPS, speed-ups, rays/s);
 - :mod:`.plots`: the report's matplotlib figures;
 - :mod:`.document`: a report as blocks, written as Markdown and self-contained HTML;
-- :mod:`.report`: the ``pyclpt bench`` command (runs everything, writes the report folder).
+- :mod:`.report`: the ``pyclpt bench`` command (runs everything, writes the report folder);
+- :mod:`.versus`: ``pyclpt bench --versus mitsuba``, pyclpt against Mitsuba 3 on the same files,
+  whose Mitsuba side ``mitsuba_driver.py`` runs in Mitsuba's own environment (never imported here).
 
 The scripts ``frame_time.py``, ``variants.py``, ``bvh_build.py`` and ``inline_math.py`` run from a checkout
 (``python bench/frame_time.py``).

@@ -5,6 +5,7 @@
                  [--depths 1 2 3 4 8 16 32 64] [--spp 16] [--resolution 512x512]
                  [--repeats 3] [--device pocl] ...
     pyclpt bench --from-json bench-report/results.json   # rewrite the report, no re-run
+    pyclpt bench --versus mitsuba [...]                  # against Mitsuba 3 (bench/versus.py)
 
 Runs every scene x method (megakernel, wavefront AoS, wavefront SoA) x max depth, then writes
 a folder with ``report.md``, a self-contained ``report.html``, the raw results
@@ -119,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from-json", default=None, metavar="RESULTS",
                    help="regenerate the report from a saved results.json without running anything")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--versus", choices=("mitsuba",), default=None,
+                   help="instead: pyclpt against Mitsuba 3 on the same scene files, its own options "
+                        "(`pyclpt bench --versus mitsuba --help`)")
     return p
 
 
@@ -626,6 +630,11 @@ class NothingMeasured(RuntimeError):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if any(x == "--versus" or x.startswith("--versus=") for x in argv):
+        from . import versus
+
+        return versus.main(argv)
     a = build_parser().parse_args(argv)
     try:
         if a.from_json:

@@ -9,6 +9,7 @@
 ``PYCLPT_EMBREE_LIB``        the path of the Embree 4 library to load
 ``PYCLPT_EMBREE_CONFIG``     Embree's device configuration string (default ``threads=1``)
 ``PYCLPT_BVH_PY_BOUNDS``     a flag: the BVH builder's bounds callback is a Python function
+``PYCLPT_MITSUBA_PYTHON``    the python of a Mitsuba 3 environment (``pyclpt bench --versus mitsuba``)
 ===========================  ==================================================================
 
 Readers here refuse a bad value with :class:`EnvironmentVariableError`, whose message names the
@@ -28,6 +29,7 @@ VARIABLES: dict[str, str] = {
     "PYCLPT_EMBREE_LIB": "the path of the Embree 4 library (libembree4.so, .dylib or embree4.dll)",
     "PYCLPT_EMBREE_CONFIG": "Embree's device configuration string (default threads=1)",
     "PYCLPT_BVH_PY_BOUNDS": "1 makes the BVH builder's bounds callback a Python function",
+    "PYCLPT_MITSUBA_PYTHON": "the python of a virtual environment with mitsuba 3 (pyclpt bench --versus mitsuba)",
 }
 
 TRUE_WORDS = ("1", "true", "yes", "on")
