@@ -13,7 +13,6 @@ Real scenes are labelled ``shared/<folder>``.
 """
 from __future__ import annotations
 
-import logging
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -21,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import pyclpt
+from pyclpt.common.logs import captured_warnings
 from pyclpt.scene.library import builtin_scenes, scenes_root
 
 
@@ -91,30 +91,15 @@ def reason(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-class _Warnings(logging.Handler):
-    """The warnings logged under ``pyclpt`` while attached."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.WARNING)
-        self.messages: list[str] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.messages.append(record.getMessage())
-
-
 def load(entry: SceneEntry) -> SceneEntry:
     """Load the entry's scene; on any failure mark it skipped with the reason (never raises)."""
     if entry.skipped:
         return entry
     t0 = time.perf_counter()
     try:
-        caught = _Warnings()  # what the importer ignored or approximated, for the report's scene notes
-        logging.getLogger("pyclpt").addHandler(caught)
-        try:
+        with captured_warnings() as caught:  # what the importer ignored or approximated, for the scene notes
             scene = pyclpt.load(entry.source)
-        finally:
-            logging.getLogger("pyclpt").removeHandler(caught)
-        notes = [" ".join(m.split()) for m in caught.messages]
+        notes = [" ".join(m.split()) for m in caught]
         if notes:
             entry.info["load_warnings"] = notes
         scene.name = entry.label

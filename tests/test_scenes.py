@@ -3,28 +3,17 @@ unsupported parts reported in one warning, and renders on the megakernel and the
 the Cornell box converges to Mitsuba 3's own render of the same file."""
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import pyclpt
+from pyclpt.common.logs import captured_warnings
 from pyclpt.scene.model import Envmap, Mask, Plastic, base_material
 
 DATA = Path(__file__).parent / "data"
 SCENES = ["cornell-box", "staircase2", "living-room", "staircase", "classroom"]
-
-
-class _Warnings(logging.Handler):
-    """The warnings logged under ``pyclpt`` while attached."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.WARNING)
-        self.messages: list[str] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.messages.append(record.getMessage())
 
 
 @pytest.fixture(scope="module")
@@ -34,13 +23,9 @@ def loaded(shared_scenes):
 
     def get(name: str):
         if name not in cache:
-            logger, handler = logging.getLogger("pyclpt"), _Warnings()
-            logger.addHandler(handler)
-            try:
+            with captured_warnings() as messages:
                 scene = pyclpt.load(shared_scenes / name / "scene.xml")
-            finally:
-                logger.removeHandler(handler)
-            cache[name] = scene, handler.messages
+            cache[name] = scene, messages
         return cache[name]
 
     return get

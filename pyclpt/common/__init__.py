@@ -1,4 +1,4 @@
 """Layer 0, used by every other layer: environment settings, the on-disk cache, argument checks,
-atomic file writes and image files (OpenImageIO).
+atomic file writes, image files (OpenImageIO) and the ``pyclpt`` logger's warnings.
 
 Imports nothing else from pyclpt."""

@@ -9,20 +9,3 @@ Modules: ``model`` (the dataclasses, validated on construction and on change), `
 files), ``sunsky`` (sky and sun baked to an environment map), ``transform``.
 
 May import: :mod:`pyclpt.common`. Knows nothing of OpenCL."""
-from pyclpt.scene.model import (  # noqa: F401
-                                Bitmap,
-                                BumpMap,
-                                Camera,
-                                Checkerboard,
-                                Conductor,
-                                Dielectric,
-                                Diffuse,
-                                Envmap,
-                                Film,
-                                Mask,
-                                Mesh,
-                                Plastic,
-                                PointLight,
-                                Scene,
-                                ThinDielectric,
-)
