@@ -50,26 +50,19 @@
 #define PYCLPT_MATH_H
 
 #if defined(INLINE_MATH) && !defined(STANDARD_MATH)
-static inline float m_sqrt(float x) { return __builtin_sqrtf(x); }
-static inline float m_abs(float x) { return __builtin_fabsf(x); }
-static inline float m_min(float a, float b) { return __builtin_fminf(a, b); }
-static inline float m_max(float a, float b) { return __builtin_fmaxf(a, b); }
-static inline float m_floor(float x) { return __builtin_floorf(x); }
-static inline float m_ceil(float x) { return __builtin_ceilf(x); }
-static inline float m_rint(float x) { return __builtin_rintf(x); }
-static inline float m_copysign(float a, float b) { return __builtin_copysignf(a, b); }
-static inline float m_fma(float a, float b, float c) { return __builtin_fmaf(a, b, c); }
+#define M_PICK(builtin, standard) builtin
 #else
-static inline float m_sqrt(float x) { return sqrt(x); }
-static inline float m_abs(float x) { return fabs(x); }
-static inline float m_min(float a, float b) { return fmin(a, b); }
-static inline float m_max(float a, float b) { return fmax(a, b); }
-static inline float m_floor(float x) { return floor(x); }
-static inline float m_ceil(float x) { return ceil(x); }
-static inline float m_rint(float x) { return rint(x); }
-static inline float m_copysign(float a, float b) { return copysign(a, b); }
-static inline float m_fma(float a, float b, float c) { return fma(a, b, c); }
+#define M_PICK(builtin, standard) standard
 #endif
+static inline float m_sqrt(float x) { return M_PICK(__builtin_sqrtf, sqrt)(x); }
+static inline float m_abs(float x) { return M_PICK(__builtin_fabsf, fabs)(x); }
+static inline float m_min(float a, float b) { return M_PICK(__builtin_fminf, fmin)(a, b); }
+static inline float m_max(float a, float b) { return M_PICK(__builtin_fmaxf, fmax)(a, b); }
+static inline float m_floor(float x) { return M_PICK(__builtin_floorf, floor)(x); }
+static inline float m_ceil(float x) { return M_PICK(__builtin_ceilf, ceil)(x); }
+static inline float m_rint(float x) { return M_PICK(__builtin_rintf, rint)(x); }
+static inline float m_copysign(float a, float b) { return M_PICK(__builtin_copysignf, copysign)(a, b); }
+static inline float m_fma(float a, float b, float c) { return M_PICK(__builtin_fmaf, fma)(a, b, c); }
 
 static inline float m_rsqrt(float x) { return 1.0f / m_sqrt(x); }
 static inline float m_clamp(float x, float lo, float hi) { return m_min(m_max(x, lo), hi); }

@@ -81,45 +81,37 @@ def opencl_header(layout: str) -> str:
         params = ", ".join(f"__global {f.ctype}* ps_{c}" for f, c in comps)
         out.append(f"#define PATH_PARAMS {params}")
         out.append("#define PATH_INIT {" + ", ".join(f"ps_{c}" for _, c in comps) + "}")
-        for f in FIELDS:
-            cs = _components(f)
-            if f.width == 1:
-                out.append(f"static inline {f.ctype} path_get_{f.name}(const PathStore* P, int i) "
-                           f"{{ return P->{f.name}[i]; }}")
-                out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {f.ctype} v) "
-                           f"{{ P->{f.name}[i] = v; }}")
-            else:
-                vt = f"{f.ctype}{f.width}"
-                out.append(f"static inline {vt} path_get_{f.name}(const PathStore* P, int i) "
-                           f"{{ return ({vt})({', '.join(f'P->{c}[i]' for c in cs)}); }}")
-                sets = " ".join(f"P->{c}[i] = v.{a};" for c, a in zip(cs, _AXES))
-                out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {vt} v) "
-                           f"{{ {sets} }}")
+
+        def word(f: Field, k: int) -> str:  # component k of field f: its own array
+            return f"P->{_components(f)[k]}[i]"
+
+        def load(f: Field, k: int) -> str:
+            return word(f, k)
+
+        def store(f: Field, k: int, v: str) -> str:
+            return f"{word(f, k)} = {v};"
     else:
         words = record_words()
+        offsets = {f.name: sum(g.width for g in FIELDS[:n]) for n, f in enumerate(FIELDS)}
         out.append("typedef struct { __global float* rec; } PathStore;")
         out.append("#define PATH_PARAMS __global float* ps_records")
         out.append("#define PATH_INIT {ps_records}")
-        off = 0
-        for f in FIELDS:
-            get = (lambda k: f"P->rec[{words} * i + {k}]") if f.ctype == "float" else \
-                  (lambda k: f"as_int(P->rec[{words} * i + {k}])")
-            put = (lambda k, v: f"P->rec[{words} * i + {k}] = {v};") if f.ctype == "float" else \
-                  (lambda k, v: f"P->rec[{words} * i + {k}] = as_float({v});")
-            if f.width == 1:
-                out.append(f"static inline {f.ctype} path_get_{f.name}(const PathStore* P, int i) "
-                           f"{{ return {get(off)}; }}")
-                out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {f.ctype} v) "
-                           f"{{ {put(off, 'v')} }}")
-            else:
-                vt = f"{f.ctype}{f.width}"
-                vals = ", ".join(get(off + k) for k in range(f.width))
-                out.append(f"static inline {vt} path_get_{f.name}(const PathStore* P, int i) "
-                           f"{{ return ({vt})({vals}); }}")
-                sets = " ".join(put(off + k, f"v.{_AXES[k]}") for k in range(f.width))
-                out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {vt} v) "
-                           f"{{ {sets} }}")
-            off += f.width
+
+        def word(f: Field, k: int) -> str:  # component k of field f: a float word of the path's record
+            return f"P->rec[{words} * i + {offsets[f.name] + k}]"
+
+        def load(f: Field, k: int) -> str:
+            return word(f, k) if f.ctype == "float" else f"as_int({word(f, k)})"
+
+        def store(f: Field, k: int, v: str) -> str:
+            return f"{word(f, k)} = {v if f.ctype == 'float' else f'as_float({v})'};"
+
+    for f in FIELDS:
+        vt = f.ctype if f.width == 1 else f"{f.ctype}{f.width}"
+        value = load(f, 0) if f.width == 1 else f"({vt})({', '.join(load(f, k) for k in range(f.width))})"
+        sets = store(f, 0, "v") if f.width == 1 else " ".join(store(f, k, f"v.{_AXES[k]}") for k in range(f.width))
+        out.append(f"static inline {vt} path_get_{f.name}(const PathStore* P, int i) {{ return {value}; }}")
+        out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {vt} v) {{ {sets} }}")
     out += ["", "#endif", ""]
     return "\n".join(out)
 
