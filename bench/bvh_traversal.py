@@ -49,11 +49,10 @@ sys.path.insert(0, str(ROOT))
 import pyopencl as cl  # noqa: E402
 
 import pyclpt  # noqa: E402
+from bench.embree_ceiling import _cosine_directions, camera_rays, scene_triangles  # noqa: E402
 from pyclpt.accel import bvh as bvh_mod  # noqa: E402
 from pyclpt.accel.bvh import DEFAULT_SETTINGS, DEFAULT_WIDTH, build_bvh  # noqa: E402
 from pyclpt.scene.library import scenes_root  # noqa: E402
-
-from bench.embree_ceiling import _cosine_directions, camera_rays, scene_triangles  # noqa: E402
 
 KERNELS = r"""
 #include "scene/bvh.h"
