@@ -586,7 +586,7 @@ def test_build_failure_is_reported():
 
     pos, idx = soup_mesh(20000, seed=2)
     with pytest.raises(embree.EmbreeError, match="rtcBuildBVH"):
-        build_bvh(pos, idx, use_cache=False, settings=BuildSettings(max_depth=8, max_leaf=2))
+        build_bvh(pos, idx, use_cache=False, settings=BuildSettings(max_depth=8, max_leaf=2, width=2))
     check_structure(build_bvh(pos[:300], idx[:100], use_cache=False), pos[:300], idx[:100])
 
 
@@ -596,3 +596,13 @@ def test_degenerate_only():
     pos[:, 0] = np.repeat(np.arange(200) % 3, 3)
     bvh = build_bvh(pos, np.arange(600).reshape(200, 3), use_cache=False)
     check_structure(bvh, pos, np.arange(600).reshape(200, 3))
+
+
+def test_default_width_matches_the_header():
+    """cl/scene/bvh.h's default BVH_WIDTH (kernels built without the scene's defines) is the
+    width scenes are built with."""
+    from pyclpt.accel.bvh import DEFAULT_SETTINGS, DEFAULT_WIDTH
+
+    header = (Path(__file__).resolve().parents[1] / "cl" / "scene" / "bvh.h").read_text()
+    assert f"#define BVH_WIDTH {DEFAULT_WIDTH}\n" in header
+    assert DEFAULT_SETTINGS.width == DEFAULT_WIDTH

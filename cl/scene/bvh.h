@@ -1,6 +1,6 @@
 /* bvh.h: ray queries against the flattened BVH of pyclpt/accel/bvh.py.
  *
- * BVH_WIDTH (-D, default 2; pyclpt.accel.bvh.DEFAULT_WIDTH, passed with the
+ * BVH_WIDTH (-D, default 8; pyclpt.accel.bvh.DEFAULT_WIDTH, passed with the
  * scene's defines) picks the node layout the buffer holds: 2, 4 or 8 children.
  *
  * Binary node record (16 floats, 64 bytes, read as four float4):
@@ -41,7 +41,7 @@ typedef struct {
 } Hit;
 
 #ifndef BVH_WIDTH
-#define BVH_WIDTH 2
+#define BVH_WIDTH 8
 #endif
 
 /* Stack entries: a node pushes at most BVH_WIDTH - 1, and the builder limits

@@ -113,7 +113,7 @@ LAYOUT_VERSION = "bvh-layout-1"
 #: Node widths the traversal (cl/scene/bvh.h, ``-DBVH_WIDTH``) implements.
 WIDTHS = (2, 4, 8)
 #: The width scenes are built with (and cl/scene/bvh.h's default ``BVH_WIDTH``).
-DEFAULT_WIDTH = 2
+DEFAULT_WIDTH = 8
 #: Traversal stack entries per width (cl/scene/bvh.h's BVH_STACK_SIZE) and the deepest tree it allows:
 #: a node pushes at most width - 1 entries.
 STACK_SIZE = {2: 64, 4: 128, 8: 192}
