@@ -178,7 +178,7 @@ def main() -> None:
             c0 = time.process_time()
             bvh = build_bvh(pos, idx, use_cache=False, settings=s)
             build_cpu = time.process_time() - c0
-            links = bvh.nodes.view(np.int32)[:, 12:14].ravel()
+            links = bvh.children()[2].ravel()
             leaves = links[links < 0]
             counts = leaves & 31
             avg_leaf = counts[counts > 0].mean()

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyclpt.accel.bvh import EMPTY_LINK, FlatBVH, build_bvh
+from pyclpt.accel.bvh import EMPTY_LINK, STACK_SIZE, WIDTHS, BuildSettings, FlatBVH, build_bvh
 
 pyopencl = pytest.importorskip("pyopencl")
 rtcs = pytest.importorskip("embreex.rtcore_scene")
@@ -34,6 +34,24 @@ __kernel void trace_any(__global const float* nodes, __global const float* tris,
                         __global int* out_any) {
     int i = get_global_id(0);
     out_any[i] = bvh_any(nodes, tris, load3(org, i), load3(dir, i), tmax) ? 1 : 0;
+}
+/* Brute force: every triangle in turn, with the traversal's triangle test. */
+__kernel void trace_brute(int n_tris, __global const float* tris, __global const float* org,
+                          __global const float* dir, float tmax, __global float* out_t,
+                          __global int* out_prim) {
+    int i = get_global_id(0);
+    BvhRay r = bvh_make_ray(load3(org, i), load3(dir, i));
+    float best = tmax;
+    int prim = -1;
+    for (int k = 0; k < n_tris; ++k) {
+        float t, u, v;
+        if (bvh_triangle(tris, k, &r, best, &t, &u, &v)) {
+            best = t;
+            prim = k;
+        }
+    }
+    out_t[i] = best;
+    out_prim[i] = prim;
 }
 """
 
@@ -63,14 +81,13 @@ class Tracer:
             self.ctx = pyopencl.Context(plat.get_devices())
             self.queue = pyopencl.CommandQueue(self.ctx)
             cl_dir = Path(__file__).resolve().parents[1] / "cl"
-            self.prog = pyopencl.Program(self.ctx, KERNELS).build(
-                options=["-cl-std=CL1.2", "-I", str(cl_dir)])
+            self.progs = {w: pyopencl.Program(self.ctx, KERNELS).build(
+                options=["-cl-std=CL1.2", f"-DBVH_WIDTH={w}", "-I", str(cl_dir)]) for w in WIDTHS}
         else:
             dev = default_device()
             self.ctx, self.queue = dev.context, dev.queue
-            self.prog = build_program(dev, source=KERNELS, name="test_bvh")
-        self.k_closest = pyopencl.Kernel(self.prog, "trace_closest")
-        self.k_any = pyopencl.Kernel(self.prog, "trace_any")
+            self.progs = {w: build_program(dev, source=KERNELS, name=f"test_bvh_w{w}", defines={"BVH_WIDTH": w})
+                          for w in WIDTHS}
 
     def trace(self, bvh: FlatBVH, org: np.ndarray, dirs: np.ndarray, tmax: float = np.inf):
         mf = pyopencl.mem_flags
@@ -88,12 +105,33 @@ class Tracer:
         b_prim = pyopencl.Buffer(ctx, mf.WRITE_ONLY, prim.nbytes)
         b_any = pyopencl.Buffer(ctx, mf.WRITE_ONLY, anyhit.nbytes)
         t = np.float32(tmax)
-        self.k_closest(q, (n,), None, b_nodes, b_tris, b_org, b_dir, t, b_tuv, b_prim)
-        self.k_any(q, (n,), None, b_nodes, b_tris, b_org, b_dir, t, b_any)
+        prog = self.progs[bvh.width]  # the kernels of the BVH's node layout
+        pyopencl.Kernel(prog, "trace_closest")(q, (n,), None, b_nodes, b_tris, b_org, b_dir, t, b_tuv, b_prim)
+        pyopencl.Kernel(prog, "trace_any")(q, (n,), None, b_nodes, b_tris, b_org, b_dir, t, b_any)
         pyopencl.enqueue_copy(q, tuv, b_tuv)
         pyopencl.enqueue_copy(q, prim, b_prim)
         pyopencl.enqueue_copy(q, anyhit, b_any).wait()
         return tuv, prim, anyhit.astype(bool)
+
+
+    def brute(self, bvh: FlatBVH, org: np.ndarray, dirs: np.ndarray, tmax: float = np.inf):
+        """Closest hit over every triangle (t, original triangle index or -1)."""
+        mf = pyopencl.mem_flags
+        n = org.shape[0]
+
+        def ro(a):
+            return pyopencl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+
+        t = np.empty(n, np.float32)
+        prim = np.empty(n, np.int32)
+        b_t = pyopencl.Buffer(self.ctx, mf.WRITE_ONLY, t.nbytes)
+        b_p = pyopencl.Buffer(self.ctx, mf.WRITE_ONLY, prim.nbytes)
+        pyopencl.Kernel(self.progs[2], "trace_brute")(
+            self.queue, (n,), None, np.int32(bvh.triangle_count), ro(bvh.tris), ro(org), ro(dirs),
+            np.float32(tmax), b_t, b_p)
+        pyopencl.enqueue_copy(self.queue, t, b_t)
+        pyopencl.enqueue_copy(self.queue, prim, b_p).wait()
+        return t, np.where(prim >= 0, bvh.tri_order[np.maximum(prim, 0)], -1)
 
 
 @pytest.fixture(scope="session")
@@ -146,11 +184,14 @@ def bunny_mesh():
 MESHES = {"soup": soup_mesh, "sphere_grid": sphere_grid_mesh, "bunny": bunny_mesh}
 
 
-@pytest.fixture(scope="session", params=list(MESHES))
+@pytest.fixture(scope="session", params=[(m, w) for w in WIDTHS for m in MESHES],
+                ids=lambda p: f"{p[0]}-w{p[1]}")
 def mesh_case(request):
-    pos, idx = MESHES[request.param]()
-    bvh = build_bvh(pos, idx, use_cache=False)
-    return request.param, pos, idx, bvh
+    name, width = request.param
+    pos, idx = MESHES[name]()
+    bvh = build_bvh(pos, idx, use_cache=False, settings=BuildSettings(width=width))
+    assert bvh.width == width
+    return name, pos, idx, bvh
 
 
 def random_rays(pos, n, seed=3):
@@ -231,10 +272,12 @@ def test_tmax_limits_hits(mesh_case, tracer):
     assert np.all(tuv2[prim2 < 0, 0] == np.float32(tmax))
 
 
-def test_single_triangle_and_tiny_meshes(tracer):
+@pytest.mark.parametrize("width", WIDTHS)
+def test_single_triangle_and_tiny_meshes(tracer, width):
+    settings = BuildSettings(width=width)
     for n in (1, 2, 3, 5, 33):
         pos, idx = soup_mesh(n, seed=n)
-        bvh = build_bvh(pos, idx, use_cache=False)
+        bvh = build_bvh(pos, idx, use_cache=False, settings=settings)
         check_structure(bvh, pos, idx)
         org, dirs = random_rays(pos, 4000, seed=n)
         ref = embree_reference(pos, idx, org, dirs)
@@ -242,20 +285,29 @@ def test_single_triangle_and_tiny_meshes(tracer):
         assert np.mean((prim >= 0) == (ref["primID"] >= 0)) >= 0.999
         assert np.mean(anyhit == (ref["primID"] >= 0)) >= 0.999
     pos, idx = soup_mesh(1)
-    bvh = build_bvh(pos, idx, use_cache=False)
-    links = bvh.nodes.view(np.int32)[0, 12:14]
-    assert bvh.nodes.shape == (1, 16)
-    assert links[0] == np.int32(-(2**31) + 1) and links[1].view(np.uint32) == EMPTY_LINK
-    assert np.all(bvh.nodes[0, 6:9] == np.inf) and np.all(bvh.nodes[0, 9:12] == -np.inf)
+    bvh = build_bvh(pos, idx, use_cache=False, settings=settings)
+    assert bvh.nodes.shape == (1, 8 * width)
+    lo, hi, links = bvh.children()
+    assert links[0, 0] == np.int32(-(2**31) + 1) and np.all(links[0, 1:].view(np.uint32) == EMPTY_LINK)
+    assert np.all(lo[0, 1:] == np.inf) and np.all(hi[0, 1:] == -np.inf)
+    if width == 2:  # the binary record: left box, right box, links
+        assert np.all(bvh.nodes[0, 6:9] == np.inf) and np.all(bvh.nodes[0, 9:12] == -np.inf)
+    else:  # SoA rows lo_x hi_x lo_y hi_y lo_z hi_z link zero
+        rows = bvh.nodes.reshape(8, width)
+        assert np.all(rows[0:6:2, 1:] == np.inf) and np.all(rows[1:6:2, 1:] == -np.inf)
+        np.testing.assert_array_equal(rows[0:6:2, 0], lo[0, 0])
+        np.testing.assert_array_equal(rows[1:6:2, 0], hi[0, 0])
 
 
-def test_ray_starting_on_a_triangle_ignores_it(tracer):
+@pytest.mark.parametrize("width", WIDTHS)
+def test_ray_starting_on_a_triangle_ignores_it(tracer, width):
     """A ray whose origin lies exactly on a triangle (t = 0) must not hit that triangle: hits need
     0 < t < tmax. Parallel triangles at z = 0 and z = 2; from (0.25, 0.25, 0), +z hits the upper one
     at t = 2 and -z misses, for the closest-hit and the any-hit query; likewise from the upper one."""
     tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
     pos = np.concatenate([tri, tri + np.float32([0, 0, 2])])
-    bvh = build_bvh(pos, np.arange(6, dtype=np.int64).reshape(2, 3), use_cache=False)
+    bvh = build_bvh(pos, np.arange(6, dtype=np.int64).reshape(2, 3), use_cache=False,
+                    settings=BuildSettings(width=width))
     org = np.array([[0.25, 0.25, 0], [0.25, 0.25, 0], [0.25, 0.25, 2], [0.25, 0.25, 2]], np.float32)
     dirs = np.array([[0, 0, 1], [0, 0, -1], [0, 0, -1], [0, 0, 1]], np.float32)
     tuv, prim, anyhit = tracer.trace(bvh, org, dirs)
@@ -270,6 +322,91 @@ def test_ray_starting_on_a_triangle_ignores_it(tracer):
     assert np.all(prim == -1) and not anyhit.any()
 
 
+def edge_rays(pos: np.ndarray, bvh: FlatBVH, n: int, seed: int = 5):
+    """Rays that stress the box and triangle tests: origins on child-box planes, axis-aligned
+    and in-plane directions (zero components), rays aimed at vertices and at edge midpoints."""
+    rng = np.random.default_rng(seed)
+    lo, hi = pos.min(0), pos.max(0)
+    blo, bhi, links = bvh.children()
+    planes = np.concatenate([blo[np.isfinite(blo).all(-1)], bhi[np.isfinite(bhi).all(-1)]])
+    k = n // 4
+    # 1: origins with coordinates taken from box planes, axis-aligned directions.
+    o1 = lo + rng.random((k, 3)) * (hi - lo)
+    axis = rng.integers(0, 3, k)
+    pl = planes[rng.integers(0, len(planes), k)]
+    for a in range(3):
+        m = axis != a
+        o1[m, a] = pl[m, a]  # on the planes of the two other axes: grazing box faces
+    d1 = np.eye(3)[axis] * rng.choice([-1, 1], (k, 1))
+    # 2: directions with one zero component, origins on box planes.
+    o2 = pl[rng.permutation(k)].copy()
+    d2 = rng.normal(size=(k, 3))
+    d2[np.arange(k), rng.integers(0, 3, k)] = 0
+    # 3: aimed at vertices, 4: aimed at edge midpoints, from outside and inside the box.
+    c, radius = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
+    v = pos[rng.integers(0, len(pos), k)]
+    s = rng.normal(size=(k, 3))
+    o3 = np.where(rng.random((k, 1)) < 0.5, c + 2 * radius * s / np.linalg.norm(s, axis=1, keepdims=True),
+                  lo + rng.random((k, 3)) * (hi - lo))
+    d3 = v - o3
+    tri = bvh.tris[rng.integers(0, bvh.triangle_count, n - 3 * k)]
+    mid = tri[:, 0:3] + 0.5 * tri[:, 3:6]
+    o4 = lo + rng.random((n - 3 * k, 3)) * (hi - lo)
+    d4 = mid - o4
+    org = np.concatenate([o1, o2, o3, o4]).astype(np.float32)
+    d = np.concatenate([d1, d2, d3, d4])
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
+    d[~np.isfinite(d).all(1) | (np.abs(d).sum(1) == 0)] = [0, 0, 1]
+    return org, d.astype(np.float32)
+
+
+def ulp_close(a: np.ndarray, b: np.ndarray, ulps: int = 2) -> np.ndarray:
+    """a == b (inf included) or within `ulps` float32 spacings of b."""
+    with np.errstate(invalid="ignore"):
+        return (a == b) | (np.abs(a - b) <= ulps * np.spacing(np.abs(b)))
+
+
+@pytest.mark.parametrize("mesh", ["soup", "sphere_grid"])
+def test_wide_layouts_match_binary_and_brute_force(tracer, mesh):
+    """Every node width finds the closest hit of the binary BVH and of a loop over every triangle
+    (with the same triangle test), unbounded and with a finite tmax. Random rays, axis-aligned
+    rays, rays aimed at vertices and at edge midpoints: the same hit or miss for every ray and the
+    same t (99.9%; a handful of rays aimed at shared edges slip between boxes in every layout) but for
+    ties (two triangles hit within 2 ulp, e.g. across a shared edge, where the
+    box of the other may be culled by rounding); any-hit agrees with closest-hit. Two kinds of
+    edge ray are known limits of the slab test, for every width (the binary BVH included), and
+    checked for agreement on 95% only: rays in a box's face plane with a zero direction component
+    (0 * 1e18 = 0 collapses the slab) and rays aimed exactly at a vertex (the box corner)."""
+    pos, idx = MESHES[mesh]()
+    bvhs = {w: build_bvh(pos, idx, use_cache=False, settings=BuildSettings(width=w)) for w in WIDTHS}
+    r_org, r_dir = random_rays(pos, 8000, seed=17)
+    e_org, e_dir = edge_rays(pos, bvhs[4], 8000)
+    org, dirs = np.concatenate([r_org, e_org]), np.concatenate([r_dir, e_dir])
+    in_plane = np.zeros(len(org), bool)
+    in_plane[8000:8000 + 3 * (8000 // 4)] = True  # edge_rays' first three kinds
+    for tmax in (np.inf, float(np.linalg.norm(pos.max(0) - pos.min(0))) / 4):
+        bt, btri = tracer.brute(bvhs[2], org, dirs, tmax)
+        assert 0.05 < np.mean(btri >= 0) < 0.95
+        ref_t = None
+        for w, bvh in bvhs.items():
+            tuv, prim, anyhit = tracer.trace(bvh, org, dirs, tmax)
+            t = tuv[:, 0]
+            tri = np.where(prim >= 0, bvh.tri_order[np.maximum(prim, 0)], -1)
+            np.testing.assert_array_equal(anyhit, tri >= 0, err_msg=f"width {w}: any-hit differs")
+            ok = ulp_close(t, bt) & ((tri >= 0) == (btri >= 0))
+            # (a handful of rays aimed at shared edges slip between boxes, binary BVH included)
+            assert np.mean(ok[~in_plane]) >= 0.999, \
+                f"width {w}: {np.count_nonzero(~ok[~in_plane])} rays differ from brute force"
+            assert np.mean(ok[in_plane]) >= 0.95, f"width {w}: in-plane rays"
+            exact = (t == bt) & (tri == btri)
+            assert np.mean(exact[~in_plane]) >= 0.98, f"width {w}: {np.count_nonzero(~exact[~in_plane])} ties"
+            if ref_t is None:
+                ref_t = t
+            else:  # the same as the binary BVH, ties aside
+                same = ulp_close(t, ref_t)
+                assert np.mean(same[~in_plane]) >= 0.999 and np.mean(t[~in_plane] == ref_t[~in_plane]) >= 0.98
+
+
 # --------------------------------------------------------------------------
 # Structure
 
@@ -277,7 +414,7 @@ def test_ray_starting_on_a_triangle_ignores_it(tracer):
 def check_structure(bvh: FlatBVH, pos: np.ndarray, idx: np.ndarray) -> None:
     T = idx.shape[0]
     nodes, tris, order = bvh.nodes, bvh.tris, bvh.tri_order
-    assert nodes.dtype == np.float32 and nodes.ndim == 2 and nodes.shape[1] == 16
+    assert nodes.dtype == np.float32 and nodes.ndim == 2
     assert tris.dtype == np.float32 and tris.shape == (T, 9)
     assert order.dtype == np.int32 and order.shape == (T,)
     assert np.array_equal(np.sort(order), np.arange(T)), "tri_order is not a permutation"
@@ -286,12 +423,14 @@ def check_structure(bvh: FlatBVH, pos: np.ndarray, idx: np.ndarray) -> None:
     assert np.array_equal(tris[:, 0:3], p[:, 0])
     assert np.array_equal(tris[:, 3:6], p[:, 1] - p[:, 0])
     assert np.array_equal(tris[:, 6:9], p[:, 2] - p[:, 0])
-    assert np.all(nodes.view(np.uint32)[:, 14:16] == 0)
-
-    N = nodes.shape[0]
-    links = nodes.view(np.int32)[:, 12:14]
-    lo = nodes[:, [0, 1, 2, 6, 7, 8]].reshape(N, 2, 3)
-    hi = nodes[:, [3, 4, 5, 9, 10, 11]].reshape(N, 2, 3)
+    N, W = nodes.shape[0], bvh.width
+    assert W in WIDTHS and nodes.shape[1] == 8 * W
+    if W == 2:
+        assert np.all(nodes.view(np.uint32)[:, 14:16] == 0)
+    else:
+        assert np.all(nodes.view(np.uint32).reshape(N, 8, W)[:, 7] == 0)
+    lo, hi, links = bvh.children()
+    assert lo.shape == hi.shape == (N, W, 3) and links.shape == (N, W)
     internal = links >= 0
     assert np.all(links[internal] < N)
     # Depth-first order: an internal left child comes right after its parent.
@@ -308,7 +447,7 @@ def check_structure(bvh: FlatBVH, pos: np.ndarray, idx: np.ndarray) -> None:
         c = links[frontier].ravel()
         frontier = c[c >= 0]
         depth += 1
-    assert depth_seen.all() and depth < 64
+    assert depth_seen.all() and depth * (W - 1) + 1 <= STACK_SIZE[W]
     # Internal children: the parent's box for the child contains the child's boxes.
     pi, side = np.nonzero(internal)
     child = links[pi, side]
@@ -413,15 +552,15 @@ def test_build_with_parallel_embree_threads():
     assert abs(parallel.node_count - serial.node_count) <= 0.05 * serial.node_count
 
 
-def test_low_quality_build(tracer):
+@pytest.mark.parametrize("width", WIDTHS)
+def test_low_quality_build(tracer, width):
     # RTC_BUILD_QUALITY_LOW (Morton builder) hands leaves copies of the
     # primitives rather than slices of the input array: the copy path.
     from pyclpt.accel import embree
-    from pyclpt.accel.bvh import BuildSettings
 
     pos, idx = soup_mesh(3000, seed=21)
     bvh = build_bvh(pos, idx, use_cache=False,
-                    settings=BuildSettings(quality=embree.RTC_BUILD_QUALITY_LOW))
+                    settings=BuildSettings(quality=embree.RTC_BUILD_QUALITY_LOW, width=width))
     check_structure(bvh, pos, idx)
     org, dirs = random_rays(pos, 20_000, seed=4)
     ref = embree_reference(pos, idx, org, dirs)
@@ -444,11 +583,10 @@ def test_build_failure_is_reported():
     # Embree's own error (here its depth limit) surfaces as EmbreeError, and the
     # device stays usable afterwards.
     from pyclpt.accel import embree
-    from pyclpt.accel.bvh import BuildSettings
 
     pos, idx = soup_mesh(20000, seed=2)
     with pytest.raises(embree.EmbreeError, match="rtcBuildBVH"):
-        build_bvh(pos, idx, use_cache=False, settings=BuildSettings(max_depth=8, max_leaf=2))
+        build_bvh(pos, idx, use_cache=False, settings=BuildSettings(max_depth=8, max_leaf=2, width=2))
     check_structure(build_bvh(pos[:300], idx[:100], use_cache=False), pos[:300], idx[:100])
 
 
@@ -458,3 +596,13 @@ def test_degenerate_only():
     pos[:, 0] = np.repeat(np.arange(200) % 3, 3)
     bvh = build_bvh(pos, np.arange(600).reshape(200, 3), use_cache=False)
     check_structure(bvh, pos, np.arange(600).reshape(200, 3))
+
+
+def test_default_width_matches_the_header():
+    """cl/scene/bvh.h's default BVH_WIDTH (kernels built without the scene's defines) is the
+    width scenes are built with."""
+    from pyclpt.accel.bvh import DEFAULT_SETTINGS, DEFAULT_WIDTH
+
+    header = (Path(__file__).resolve().parents[1] / "cl" / "scene" / "bvh.h").read_text()
+    assert f"#define BVH_WIDTH {DEFAULT_WIDTH}\n" in header
+    assert DEFAULT_SETTINGS.width == DEFAULT_WIDTH

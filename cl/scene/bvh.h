@@ -1,11 +1,20 @@
-/* bvh.h: ray queries against the flattened binary BVH of pyclpt/bvh.py.
+/* bvh.h: ray queries against the flattened BVH of pyclpt/accel/bvh.py.
  *
- * Node record (16 floats, 64 bytes, read as four float4):
+ * BVH_WIDTH (-D, default 8; pyclpt.accel.bvh.DEFAULT_WIDTH, passed with the
+ * scene's defines) picks the node layout the buffer holds: 2, 4 or 8 children.
+ *
+ * Binary node record (16 floats, 64 bytes, read as four float4):
  *   [0:3] left min   [3:6] left max   [6:9] right min   [9:12] right max
  *   [12] left link   [13] right link  (int32 bits)       [14:16] unused
  * link >= 0: internal node index. link with the high bit set: leaf with
  * start = (link & 0x7fffffff) >> 5, count = link & 31 (count 0 = empty child,
  * whose box is inverted and therefore never entered).
+ * Wide node record (BVH_WIDTH = W = 4 or 8; 8 * W floats, 128 or 256 bytes, read
+ * as eight floatW): lo_x[W] hi_x[W] lo_y[W] hi_y[W] lo_z[W] hi_z[W] link[W]
+ * zero[W], the child boxes as structure of arrays so that one work-item tests
+ * all W boxes with floatW arithmetic. Links as above; unused children are
+ * empty leaves with inverted boxes. Hit children are pushed on the stack
+ * sorted far to near and the nearest is visited next.
  * Triangles (9 floats each, leaf order): v0, e1 = v1 - v0, e2 = v2 - v0.
  *
  * Box test: per-ray precomputed reciprocal direction, components of
@@ -31,7 +40,21 @@ typedef struct {
     int prim; /* leaf-order triangle index, -1 for none */
 } Hit;
 
+#ifndef BVH_WIDTH
+#define BVH_WIDTH 8
+#endif
+
+/* Stack entries: a node pushes at most BVH_WIDTH - 1, and the builder limits
+ * the depth to fit (pyclpt.accel.bvh.STACK_SIZE mirrors these). */
+#if BVH_WIDTH == 2
 #define BVH_STACK_SIZE 64
+#elif BVH_WIDTH == 4
+#define BVH_STACK_SIZE 128
+#elif BVH_WIDTH == 8
+#define BVH_STACK_SIZE 192
+#else
+#error "BVH_WIDTH must be 2, 4 or 8"
+#endif
 #define BVH_TFAR_SCALE 1.00000048f /* 1 + 2^-21 */
 
 /* Everything below is written with plain operators rather than builtins
@@ -46,6 +69,7 @@ typedef struct {
     float4 inv;       /* reciprocal direction, never 0 or inf; w = 1 */
     int4 neg;         /* -1 where inv < 0: the near plane is the box max */
     float dx, dy, dz; /* direction */
+    int nx, ny, nz;   /* 1 where inv < 0 (wide nodes: offset of the near plane's row) */
 } BvhRay;
 
 static inline float bvh_safe_rcp(float d) {
@@ -61,6 +85,9 @@ static inline BvhRay bvh_make_ray(float3 org, float3 dir) {
     r.dx = dir.x;
     r.dy = dir.y;
     r.dz = dir.z;
+    r.nx = r.inv.x < 0.0f ? 1 : 0;
+    r.ny = r.inv.y < 0.0f ? 1 : 0;
+    r.nz = r.inv.z < 0.0f ? 1 : 0;
     return r;
 }
 
@@ -128,6 +155,7 @@ static inline bool bvh_triangle(__global const float* tris, int i, const BvhRay*
     return true;
 }
 
+#if BVH_WIDTH == 2
 /* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
  * On a miss hit->prim = -1 and hit->t = tmax. */
 static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, float3 org,
@@ -215,6 +243,148 @@ static inline bool bvh_any_alpha(__global const float* nodes, __global const flo
         cur = stack_node[--sp];
     }
 }
+
+#else /* wide nodes */
+
+#if BVH_WIDTH == 4
+typedef float4 BvhVf;
+typedef int4 BvhVi;
+#define BVH_AS_VI as_int4
+#define BVH_EACH(M) M(s0) M(s1) M(s2) M(s3)
+#else
+typedef float8 BvhVf;
+typedef int8 BvhVi;
+#define BVH_AS_VI as_int8
+#define BVH_EACH(M) M(s0) M(s1) M(s2) M(s3) M(s4) M(s5) M(s6) M(s7)
+#endif
+
+static inline BvhVf bvh_vmin(BvhVf a, BvhVf b) { return a < b ? a : b; }
+static inline BvhVf bvh_vmax(BvhVf a, BvhVf b) { return a > b ? a : b; }
+
+/* Entry distances of the ray into the BVH_WIDTH child boxes of `node`,
+ * clipped to [0, tmax] (INFINITY where missed), and the child links: the
+ * binary node's slab test, component for component, on SoA rows. The row
+ * of the near plane per axis is picked by the ray's sign (nx, ny, nz). */
+static inline BvhVf bvh_wide_node(__global const float* nodes, int node, const BvhRay* r, float tmax,
+                                  BvhVi* links) {
+    __global const BvhVf* p = (__global const BvhVf*)nodes + 8 * node;
+    BvhVf ox = (BvhVf)(r->org.x), oy = (BvhVf)(r->org.y), oz = (BvhVf)(r->org.z);
+    BvhVf ix = (BvhVf)(r->inv.x), iy = (BvhVf)(r->inv.y), iz = (BvhVf)(r->inv.z);
+    BvhVf tnx = (p[r->nx] - ox) * ix;
+    BvhVf tfx = (p[1 - r->nx] - ox) * ix;
+    BvhVf tny = (p[2 + r->ny] - oy) * iy;
+    BvhVf tfy = (p[3 - r->ny] - oy) * iy;
+    BvhVf tnz = (p[4 + r->nz] - oz) * iz;
+    BvhVf tfz = (p[5 - r->nz] - oz) * iz;
+    BvhVf t0 = bvh_vmax(bvh_vmax(tnx, tny), bvh_vmax(tnz, (BvhVf)(0.0f)));
+    BvhVf t1 = bvh_vmin(bvh_vmin(tfx, tfy), bvh_vmin(tfz, (BvhVf)(tmax))) * BVH_TFAR_SCALE;
+    *links = BVH_AS_VI(p[6]);
+    return t0 <= t1 ? t0 : (BvhVf)(INFINITY);
+}
+
+/* Push the hit children of a node (entry distances t, links l) on the stack,
+ * sorted so that the nearest is on top; returns how many were pushed. */
+static inline int bvh_wide_push(BvhVf t, BvhVi l, int* stack_node, float* stack_t, int sp) {
+    int base = sp;
+#define BVH_PUSH(c)                   \
+    if (t.c != INFINITY) {            \
+        stack_node[sp] = l.c;         \
+        stack_t[sp] = t.c;            \
+        ++sp;                         \
+    }
+    BVH_EACH(BVH_PUSH)
+#undef BVH_PUSH
+    /* Insertion sort of the (at most BVH_WIDTH) new entries, far to near. */
+    for (int i = base + 1; i < sp; ++i) {
+        float kt = stack_t[i];
+        int kn = stack_node[i];
+        int j = i - 1;
+        while (j >= base && stack_t[j] < kt) {
+            stack_t[j + 1] = stack_t[j];
+            stack_node[j + 1] = stack_node[j];
+            --j;
+        }
+        stack_t[j + 1] = kt;
+        stack_node[j + 1] = kn;
+    }
+    return sp - base;
+}
+
+/* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
+ * On a miss hit->prim = -1 and hit->t = tmax. */
+static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, float3 org,
+                                     float3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
+    BvhRay r = bvh_make_ray(org, dir);
+    int stack_node[BVH_STACK_SIZE];
+    float stack_t[BVH_STACK_SIZE];
+    int sp = 0;
+    float best = tmax;
+    float bu = 0.0f, bv = 0.0f;
+    int prim = -1;
+    int cur = 0;
+    for (;;) {
+        if (cur >= 0) {
+            BvhVi l;
+            BvhVf t = bvh_wide_node(nodes, cur, &r, best, &l);
+            int n = bvh_wide_push(t, l, stack_node, stack_t, sp);
+            sp += n;
+            /* As in the binary traversal: the nearest hit child next, unconditionally. */
+            if (n > 0) {
+                cur = stack_node[--sp];
+                continue;
+            }
+        } else {
+            int start = (cur & 0x7fffffff) >> 5;
+            int end = start + (cur & 31);
+            for (int i = start; i < end; ++i) {
+                float t, u, v;
+                if (bvh_triangle(tris, i, &r, best, &t, &u, &v) && alpha_accept(alpha, i, u, v)) {
+                    best = t;
+                    bu = u;
+                    bv = v;
+                    prim = i;
+                }
+            }
+        }
+        /* Pop the next subtree that may still hold something nearer. */
+        while (sp > 0 && !(stack_t[sp - 1] < best)) --sp;
+        if (sp == 0) break;
+        cur = stack_node[--sp];
+    }
+    hit->t = best;
+    hit->u = bu;
+    hit->v = bv;
+    hit->prim = prim;
+    return prim >= 0;
+}
+
+/* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */
+static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, float3 org,
+                                 float3 dir, float tmax, const AlphaTest* alpha) {
+    BvhRay r = bvh_make_ray(org, dir);
+    int stack_node[BVH_STACK_SIZE];
+    float stack_t[BVH_STACK_SIZE];
+    int sp = 0;
+    int cur = 0;
+    for (;;) {
+        if (cur >= 0) {
+            BvhVi l;
+            BvhVf t = bvh_wide_node(nodes, cur, &r, tmax, &l);
+            sp += bvh_wide_push(t, l, stack_node, stack_t, sp);
+        } else {
+            int start = (cur & 0x7fffffff) >> 5;
+            int end = start + (cur & 31);
+            for (int i = start; i < end; ++i) {
+                float t, u, v;
+                if (bvh_triangle(tris, i, &r, tmax, &t, &u, &v) && alpha_accept(alpha, i, u, v)) return true;
+            }
+        }
+        if (sp == 0) return false;
+        cur = stack_node[--sp];
+    }
+}
+
+#endif /* BVH_WIDTH */
 
 /* The queries without opacity (every triangle opaque). */
 static inline bool bvh_closest(__global const float* nodes, __global const float* tris, float3 org,

@@ -110,6 +110,14 @@ __all__ = ["FlatBVH", "BuildSettings", "DEFAULT_SETTINGS", "build_bvh", "LAYOUT_
 #: Bumped whenever the flattened layout or the build changes meaning.
 LAYOUT_VERSION = "bvh-layout-1"
 
+#: Node widths the traversal (cl/scene/bvh.h, ``-DBVH_WIDTH``) implements.
+WIDTHS = (2, 4, 8)
+#: The width scenes are built with (and cl/scene/bvh.h's default ``BVH_WIDTH``).
+DEFAULT_WIDTH = 8
+#: Traversal stack entries per width (cl/scene/bvh.h's BVH_STACK_SIZE) and the deepest tree it allows:
+#: a node pushes at most width - 1 entries.
+STACK_SIZE = {2: 64, 4: 128, 8: 192}
+
 LEAF_BIT = 0x80000000
 MAX_LEAF = 31                 # 5-bit count field
 MAX_TRIANGLES = 1 << 26       # 26-bit start field
@@ -125,15 +133,22 @@ class BuildSettings:
     max_leaf: int = 16
     traversal_cost: float = 1.0
     intersection_cost: float = 0.35
-    max_depth: int = 60       # cl/scene/bvh.h's stack holds 64 entries (> depth + 1)
+    max_depth: int = 0        # 0: the deepest the traversal stack allows (60 for width 2)
+    width: int = DEFAULT_WIDTH  # children per node: 2, 4 or 8 (module docstring)
 
     def __post_init__(self) -> None:
+        if self.width not in WIDTHS:
+            raise ValueError(f"width must be one of {WIDTHS}")
+        if self.max_depth == 0:
+            object.__setattr__(self, "max_depth", {2: 60, 4: 40, 8: 24}[self.width])
         if not 1 <= self.min_leaf <= self.max_leaf <= MAX_LEAF:
             raise ValueError(f"need 1 <= min_leaf <= max_leaf <= {MAX_LEAF}")
         if self.quality not in (embree.RTC_BUILD_QUALITY_LOW, embree.RTC_BUILD_QUALITY_MEDIUM):
             raise ValueError("quality must be RTC_BUILD_QUALITY_LOW or _MEDIUM")
-        if not 8 <= self.max_depth <= 60:
-            raise ValueError("max_depth must be in 8..60 (traversal stack is 64)")
+        deepest = min(60, (STACK_SIZE[self.width] - 2) // (self.width - 1))
+        if not 8 <= self.max_depth <= deepest:
+            raise ValueError(f"max_depth must be in 8..{deepest} for width {self.width} "
+                             f"(the traversal stack holds {STACK_SIZE[self.width]} entries)")
 
 
 DEFAULT_SETTINGS = BuildSettings()
@@ -141,7 +156,7 @@ DEFAULT_SETTINGS = BuildSettings()
 
 @dataclass(frozen=True)
 class FlatBVH:
-    nodes: np.ndarray      # (N, 16) float32 — layout in the module docstring
+    nodes: np.ndarray      # (N, 8 * width) float32 — layout in the module docstring
     tris: np.ndarray       # (T, 9) float32 in leaf order: v0, v1-v0, v2-v0
     tri_order: np.ndarray  # (T,) int32: leaf-order slot -> original triangle index
     build_seconds: float   # 0 when loaded from cache
@@ -153,6 +168,25 @@ class FlatBVH:
     @property
     def triangle_count(self) -> int:
         return int(self.tris.shape[0])
+
+    @property
+    def width(self) -> int:
+        """Children per node (2, 4 or 8), from the record size: 8 * width floats."""
+        return int(self.nodes.shape[1]) // 8
+
+    def children(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every node's child boxes and links, whatever the layout: lo, hi (N, W, 3) float32, links (N, W) int32."""
+        N, W = self.node_count, self.width
+        if W == 2:
+            lo = self.nodes[:, [0, 1, 2, 6, 7, 8]].reshape(N, 2, 3)
+            hi = self.nodes[:, [3, 4, 5, 9, 10, 11]].reshape(N, 2, 3)
+            links = self.nodes.view(np.int32)[:, 12:14]
+        else:
+            f = self.nodes.reshape(N, 8, W)
+            lo = f[:, [0, 2, 4]].transpose(0, 2, 1)
+            hi = f[:, [1, 3, 5]].transpose(0, 2, 1)
+            links = f.view(np.int32)[:, 6]
+        return lo, hi, links
 
 
 # --------------------------------------------------------------------------
@@ -240,8 +274,9 @@ def _set_bounds_callback():
 def _embree_build(prims: np.ndarray, settings: BuildSettings):
     """Run rtcBuildBVH over ``prims`` ((T, 8) float32 RTCBuildPrimitive rows, reordered in place).
 
-    Returns (root, n_nodes, left, right, copies) where root/left/right hold the callback
-    "pointers" (internal node id >= 1 or a tagged leaf) and copies the
+    Returns (root, n_nodes, kids, copies) where root and kids hold the callback
+    "pointers" (internal node id >= 1 or a tagged leaf; node ``i``'s children
+    are ``kids[W * i:W * i + W]``, 0 where it has fewer) and copies the
     primitive bytes of copied leaves.
     """
     T = prims.shape[0]
@@ -249,9 +284,9 @@ def _embree_build(prims: np.ndarray, settings: BuildSettings):
     dev = embree.device()
     base = prims.ctypes.data
     nbytes = 32 * T
+    W = settings.width
     cap = 2 * T + 2
-    left = [0] * cap
-    right = [0] * cap
+    kids = [0] * (cap * W)   # W child "pointers" per node id (0: no child)
     copies: list[bytes] = []
     counter = itertools.count(1)
     if _FREE_THREADED:
@@ -283,14 +318,18 @@ def _embree_build(prims: np.ndarray, settings: BuildSettings):
 
     # The callbacks run once per node or leaf (about T/2 times each), so they
     # do as little as possible: no allocation, no ctypes calls on the hot path.
-    def create_node(alloc, n, user, _next=next_id):
-        if n != 2:
+    def create_node(alloc, n, user, _next=next_id, _w=W):
+        if not 2 <= n <= _w:
             errors.append(RuntimeError(f"Embree created a node with {n} children"))
         return _next()
 
-    def set_children(node, ch, n, user, _l=left, _r=right):
-        _l[node] = ch[0]
-        _r[node] = ch[1]
+    if W == 2:
+        def set_children(node, ch, n, user, _k=kids):
+            _k[2 * node] = ch[0]
+            _k[2 * node + 1] = ch[1]
+    else:
+        def set_children(node, ch, n, user, _k=kids, _w=W):
+            _k[_w * node:_w * node + n] = ch[:n]
 
     # Leaf primitives are copied only when the pointer is not into our array
     # (the Morton builder of RTC_BUILD_QUALITY_LOW passes a local copy, and
@@ -322,7 +361,7 @@ def _embree_build(prims: np.ndarray, settings: BuildSettings):
     )
     args = embree.default_build_arguments()
     args.buildQuality = settings.quality
-    args.maxBranchingFactor = 2
+    args.maxBranchingFactor = W
     args.maxDepth = settings.max_depth
     args.sahBlockSize = 1
     args.minLeafSize = settings.min_leaf
@@ -350,50 +389,42 @@ def _embree_build(prims: np.ndarray, settings: BuildSettings):
     if errors:
         raise embree.EmbreeError(str(errors[0]))
     n_nodes = next_id() - 1
-    return int(root), n_nodes, left, right, copies
+    return int(root), n_nodes, kids, copies
 
 
 # --------------------------------------------------------------------------
 # Flattening
 
 
-def _flatten(root: int, n_nodes: int, left: list, right: list, copies: list[bytes],
+def _flatten(root: int, n_nodes: int, kids: list, W: int, copies: list[bytes],
              prims: np.ndarray, tri9: np.ndarray, prim_lo: np.ndarray,
              prim_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     T = prims.shape[0]
-    n_int = 0 if root & (_LEAF_TAG | _COPY_TAG) else n_nodes
-    if n_int == 0:
-        # Root is a single leaf: children table with one pseudo node.
-        child = np.array([[root, 0]], dtype=np.uint64)
+    if root & (_LEAF_TAG | _COPY_TAG):
+        # Root is a single leaf: one node holding it, its other children empty.
+        child = np.zeros((1, W), dtype=np.uint64)
+        child[0, 0] = root
         n_int = 1
-        pseudo_root = True
-    else:
-        child = np.empty((n_int, 2), dtype=np.uint64)
-        child[:, 0] = np.array(left[1:n_int + 1], dtype=np.uint64)
-        child[:, 1] = np.array(right[1:n_int + 1], dtype=np.uint64)
-        pseudo_root = False
-    # Child references: internal -> node index (>= 0); leaf -> ~leaf index (< 0).
-    tags = child >> np.uint64(61)
-    is_leaf = tags != 0
-    if pseudo_root:
-        is_leaf[0, 1] = True  # the empty right child, a leaf with count 0
-    leaf_raw = child[is_leaf]
-    n_leaf = leaf_raw.size
-    ref = np.empty((n_int, 2), dtype=np.int64)
-    ref[~is_leaf] = child[~is_leaf].astype(np.int64) - 1
-    ref[is_leaf] = ~np.arange(n_leaf, dtype=np.int64)
-    if pseudo_root:
         root_idx = 0
     else:
+        n_int = n_nodes
+        child = np.array(kids[W:W * (n_int + 1)], dtype=np.uint64).reshape(n_int, W)
         root_idx = root - 1
+    # Child references: internal -> node index (>= 0); leaf -> ~leaf index (< 0).
+    # Missing children (0: a node with fewer than W) become empty leaves (count 0).
+    tags = child >> np.uint64(61)
+    is_leaf = (tags != 0) | (child == 0)
+    leaf_raw = child[is_leaf]
+    n_leaf = leaf_raw.size
+    ref = np.empty((n_int, W), dtype=np.int64)
+    ref[~is_leaf] = child[~is_leaf].astype(np.int64) - 1
+    ref[is_leaf] = ~np.arange(n_leaf, dtype=np.int64)
     if np.any(ref[~is_leaf] >= n_int) or np.any(ref[~is_leaf] < 0) or not 0 <= root_idx < n_int:
         raise embree.EmbreeError("Embree returned an inconsistent tree")
 
     leaf_count = (leaf_raw & np.uint64(31)).astype(np.int64)
     leaf_is_copy = (leaf_raw >> np.uint64(61)) == 1
     leaf_payload = ((leaf_raw & np.uint64((1 << 61) - 1)) >> np.uint64(5)).astype(np.int64)
-    if pseudo_root:
-        leaf_count[-1] = 0  # is_leaf order is row-major, so the pseudo child comes last
 
     # Levels, top-down from the root.
     levels = []
@@ -414,14 +445,13 @@ def _flatten(root: int, n_nodes: int, left: list, right: list, copies: list[byte
     for lev in reversed(levels):
         r = ref[lev]
         s = np.where(r >= 0, size[np.maximum(r, 0)], 1)
-        size[lev] = 1 + s[:, 0] + s[:, 1]
+        size[lev] = 1 + s.sum(axis=1)
     pre = np.zeros(n_int, dtype=np.int64)
     leaf_pre = np.zeros(n_leaf, dtype=np.int64)
     for lev in levels:
         r = ref[lev]
-        p = pre[lev]
-        s_left = np.where(r[:, 0] >= 0, size[np.maximum(r[:, 0], 0)], 1)
-        pos = np.stack([p + 1, p + 1 + s_left], axis=1)
+        s = np.where(r >= 0, size[np.maximum(r, 0)], 1)
+        pos = pre[lev][:, None] + 1 + np.cumsum(s, axis=1) - s   # children in order after the parent
         internal = r >= 0
         pre[r[internal]] = pos[internal]
         leaf_pre[~r[~internal]] = pos[~internal]
@@ -488,8 +518,8 @@ def _flatten(root: int, n_nodes: int, left: list, right: list, copies: list[byte
         r = ref[lev]
         clo = np.where((r >= 0)[..., None], node_lo[np.maximum(r, 0)], leaf_lo[np.maximum(~r, 0)])
         chi = np.where((r >= 0)[..., None], node_hi[np.maximum(r, 0)], leaf_hi[np.maximum(~r, 0)])
-        node_lo[lev] = np.minimum(clo[:, 0], clo[:, 1])
-        node_hi[lev] = np.maximum(chi[:, 0], chi[:, 1])
+        node_lo[lev] = clo.min(axis=1)
+        node_hi[lev] = chi.max(axis=1)
 
     # Records in DFS order.
     r = ref[node_order]
@@ -499,12 +529,18 @@ def _flatten(root: int, n_nodes: int, left: list, right: list, copies: list[byte
     clo = np.where(internal[..., None], node_lo[safe_int], leaf_lo[safe_leaf])
     chi = np.where(internal[..., None], node_hi[safe_int], leaf_hi[safe_leaf])
     links = np.where(internal, node_rank[safe_int].astype(np.uint32), leaf_link[safe_leaf])
-    nodes = np.zeros((n_int, 16), dtype=np.float32)
-    nodes[:, 0:3] = clo[:, 0]
-    nodes[:, 3:6] = chi[:, 0]
-    nodes[:, 6:9] = clo[:, 1]
-    nodes[:, 9:12] = chi[:, 1]
-    nodes.view(np.uint32)[:, 12:14] = links
+    nodes = np.zeros((n_int, 8 * W), dtype=np.float32)
+    if W == 2:
+        nodes[:, 0:3] = clo[:, 0]
+        nodes[:, 3:6] = chi[:, 0]
+        nodes[:, 6:9] = clo[:, 1]
+        nodes[:, 9:12] = chi[:, 1]
+        nodes.view(np.uint32)[:, 12:14] = links
+    else:  # SoA: lo_x[W] hi_x[W] lo_y[W] hi_y[W] lo_z[W] hi_z[W] link[W] zero[W]
+        f = nodes.reshape(n_int, 8, W)
+        f[:, 0:6:2] = clo.transpose(0, 2, 1)
+        f[:, 1:6:2] = chi.transpose(0, 2, 1)
+        f.view(np.uint32)[:, 6] = links
 
     tris = np.take(tri9, src_slot, axis=0)
     return nodes, tris, src_slot.astype(np.int32)
@@ -536,8 +572,9 @@ def _build(pos32: np.ndarray, idx: np.ndarray, settings: BuildSettings) -> FlatB
     prims[:, 0:3] = prim_lo
     prims[:, 4:7] = prim_hi
     prims.view(np.uint32)[:, 7] = np.arange(T, dtype=np.uint32)
-    root, n_nodes, left, right, copies = _embree_build(prims, settings)
-    nodes, tris, tri_order = _flatten(root, n_nodes, left, right, copies, prims, tri9, prim_lo, prim_hi)
+    root, n_nodes, kids, copies = _embree_build(prims, settings)
+    nodes, tris, tri_order = _flatten(root, n_nodes, kids, settings.width, copies, prims, tri9,
+                                      prim_lo, prim_hi)
     return FlatBVH(nodes=nodes, tris=tris, tri_order=tri_order,
                    build_seconds=time.perf_counter() - start)
 
@@ -564,7 +601,7 @@ def build_bvh(positions: np.ndarray, indices: np.ndarray, *, use_cache: bool = T
             with np.load(path, allow_pickle=False) as z:
                 nodes, tris, order = z["nodes"], z["tris"], z["tri_order"]
             T = idx.shape[0]
-            if (nodes.dtype == np.float32 and nodes.ndim == 2 and nodes.shape[1] == 16
+            if (nodes.dtype == np.float32 and nodes.ndim == 2 and nodes.shape[1] == 8 * settings.width
                     and tris.dtype == np.float32 and tris.shape == (T, 9)
                     and order.dtype == np.int32 and order.shape == (T,)):
                 return FlatBVH(nodes=nodes, tris=tris, tri_order=order, build_seconds=0.0)

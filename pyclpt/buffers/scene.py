@@ -38,7 +38,7 @@ class SceneArrays:
     lights: LightArrays
     textures: TextureTable
     bounds: np.ndarray  # (2, 3) scene bounding box
-    defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS
+    defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, BVH_WIDTH (node layout)
 
     @property
     def triangle_count(self) -> int:
@@ -97,7 +97,8 @@ def pack_scene(scene: Scene) -> SceneArrays:
         lights=lights,
         textures=mats.textures,
         bounds=bounds,
-        defines={"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps},
+        defines={"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
+                 "BVH_WIDTH": bvh.width},
     )
 
 
