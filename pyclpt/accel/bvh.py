@@ -2,20 +2,26 @@
 
 Layout
 ------
-A binary BVH whose child bounds live in the parent. Each node is 16 32-bit
-words (64 bytes, one cache line)::
+A BVH of width W = 2, 4 or 8 (``BuildSettings.width``; 8 by default, see docs/bvh.md) whose
+child bounds live in the parent. A binary node (W = 2) is 16 32-bit words (64 bytes, one
+cache line)::
 
     [0:3]   left child min xyz      [3:6]   left child max xyz
     [6:9]   right child min xyz     [9:12]  right child max xyz
     [12]    left child link         [13]    right child link     (int32 bits)
     [14:16] zero
 
+A wide node (W = 4 or 8) is 8·W words, eight rows of W, the children's boxes as structure of
+arrays so that one work-item tests them together in ``floatW`` arithmetic::
+
+    lo_x[W] hi_x[W] lo_y[W] hi_y[W] lo_z[W] hi_z[W] link[W] zero[W]
+
 A link ``>= 0`` is the index of an internal node. A link with the high bit set
 is a leaf: ``start = (link & 0x7fffffff) >> 5``, ``count = link & 31``,
 triangles ``tris[start:start + count]``; ``count == 0`` is an empty child
 (link ``0x80000000``) whose bounds are ``min=+inf, max=-inf``, never entered.
-Node 0 is the root (a single-leaf tree is a root with the leaf on the left and
-an empty right child). Nodes are in depth-first order, the left child right
+Node 0 is the root (a single-leaf tree is a root with the leaf as its first child and
+empty others). Nodes are in depth-first order, the first child right
 after its parent. ``tris`` rows are ``v0, v1-v0, v2-v0`` (9 float32) in leaf
 order, in which every subtree's triangles are contiguous; ``tri_order`` maps a
 leaf-order slot back to the caller's triangle index.
@@ -25,7 +31,7 @@ Building
 Embree's builder calls back for every node and leaf, and Python callbacks cost
 about a microsecond each, so they do almost nothing: ``createNode`` returns
 the next id of a counter (cast to a pointer, never 0); ``setNodeChildren``
-stores the two child "pointers" into preallocated lists; ``setNodeBounds`` is a
+stores the child "pointers" (2 to W) into preallocated lists; ``setNodeBounds`` is a
 native no-op (see ``_set_bounds_callback``) because bounds are refitted in
 numpy afterwards from the triangles, exactly the unions Embree would pass; and
 ``createLeaf`` stores nothing: Embree's SAH builder (``RTC_BUILD_QUALITY_MEDIUM``)

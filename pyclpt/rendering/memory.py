@@ -21,7 +21,7 @@ from pyclpt.scene.model import Bitmap, Checkerboard, Envmap, Scene
 # Bytes of one value of the accumulation sum (pyclpt.film.accumulator): a float, or two words.
 SUM_VALUE_BYTES = {"single": 4, "compensated": 8, "double": 8}
 # Scene buffers per triangle: BVH triangle (36), info (8), vertex indices (12), BVH nodes (about
-# one 64-byte node per 4 triangles, counted twice for safety) and an emitter record (32).
+# one 64-byte binary node per 4 triangles, counted twice; 8-wide trees need less) and an emitter record (32).
 BYTES_PER_TRIANGLE = 36 + 8 + 12 + 32 + 32
 BYTES_PER_VERTEX = 12 + 8  # shading normal, uv
 BYTES_PER_MATERIAL = 4 * 32
