@@ -10,6 +10,10 @@ OpenCL accessors (``path_get_<field>`` / ``path_set_<field>``, the
 - ``aos`` (array of structures): one buffer of records, ``record_words`` words
   per path.
 
+A vector field also gets one accessor per component (``path_get_L_x``): code
+written on scalars is what PoCL's vectorizer accepts (a ``float3`` operation in
+a work-item loop stops it).
+
 Stage code (``cl/*.cl``) only uses the accessors, so it compiles unchanged
 either way.
 """
@@ -95,6 +99,11 @@ def opencl_header(layout: str) -> str:
                 sets = " ".join(f"P->{c}[i] = v.{a};" for c, a in zip(cs, _AXES))
                 out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {vt} v) "
                            f"{{ {sets} }}")
+                for c in cs:  # one component: scalar code, which PoCL can vectorize across work-items
+                    out.append(f"static inline {f.ctype} path_get_{c}(const PathStore* P, int i) "
+                               f"{{ return P->{c}[i]; }}")
+                    out.append(f"static inline void path_set_{c}(const PathStore* P, int i, {f.ctype} v) "
+                               f"{{ P->{c}[i] = v; }}")
     else:
         words = record_words()
         out.append("typedef struct { __global float* rec; } PathStore;")
@@ -119,6 +128,12 @@ def opencl_header(layout: str) -> str:
                 sets = " ".join(put(off + k, f"v.{_AXES[k]}") for k in range(f.width))
                 out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {vt} v) "
                            f"{{ {sets} }}")
+                for k in range(f.width):
+                    c = f"{f.name}_{_AXES[k]}"
+                    out.append(f"static inline {f.ctype} path_get_{c}(const PathStore* P, int i) "
+                               f"{{ return {get(off + k)}; }}")
+                    out.append(f"static inline void path_set_{c}(const PathStore* P, int i, {f.ctype} v) "
+                               f"{{ {put(off + k, 'v')} }}")
             off += f.width
     out += ["", "#endif", ""]
     return "\n".join(out)
