@@ -66,7 +66,7 @@ def test_small_waves_give_the_same_image(cornell_box):
     assert np.array_equal(whole, chunked)
 
 
-def test_repeat_runs_are_bit_identical_despite_atomics(cornell_box):
+def test_repeat_runs_are_bit_identical(cornell_box):
     kw = dict(spp=4, max_depth=-1, width=32, height=32, seed=5)
     a, _ = render(cornell_box, integrator="wavefront", **dict(kw))
     b, _ = render(cornell_box, integrator="wavefront", **dict(kw))
@@ -121,6 +121,99 @@ def test_every_pixel_is_committed_once_per_sample(cornell_box):
         assert np.all(img == 0.0)
 
 
+# bounce_stats rows (rays, hits, misses, shadow_rays, unoccluded) of the queues as atomic_inc filled
+# them before the order-preserving compaction (main at 5f14a23): the compaction must route the same paths
+OLD_COUNTS = {
+    ("cornell-box", 6): [(768, 477, 291, 343, 309), (477, 349, 128, 225, 194), (349, 293, 56, 206, 184),
+                         (110, 86, 24, 64, 55), (63, 49, 14, 34, 26), (34, 32, 2, 0, 0)],
+    ("cornell-bunny", 8): [(768, 477, 291, 356, 328), (476, 393, 83, 252, 229), (392, 323, 69, 221, 201),
+                           (146, 129, 17, 90, 84), (99, 80, 19, 59, 50), (57, 46, 11, 30, 25),
+                           (32, 27, 5, 16, 14), (20, 17, 3, 0, 0)],
+}
+
+
+@pytest.mark.parametrize("name, max_depth", list(OLD_COUNTS))
+@pytest.mark.parametrize("schedule", ["readback", "capacity"])
+def test_queue_counts_equal_those_of_atomic_queues(name, max_depth, schedule, shared_scenes):
+    r = pyclpt.Renderer(pyclpt.load(name), integrator="wavefront", max_depth=max_depth, width=24, height=16,
+                        wave_size=300)
+    r.integrator.schedule = schedule
+    r.render(2, seed=4, progress=False)
+    rows = [tuple(row[k] for k in ("rays", "hits", "misses", "shadow_rays", "unoccluded")) for row in r.stats.bounces]
+    assert rows == OLD_COUNTS[(name, max_depth)]
+
+
+def read_queue(r, buf, count):
+    import pyopencl as cl
+
+    out = np.empty(r.integrator.capacity, np.int32)
+    cl.enqueue_copy(r.device.queue, out, buf)
+    return out[:count]
+
+
+@pytest.mark.parametrize("schedule", ["readback", "capacity"])
+def test_queues_list_slots_in_ascending_order(cornell_box, schedule):
+    """After every bounce each queue lists distinct slots in strictly ascending order, and each is the
+    subsequence of its source the stage chose: hits and misses partition the rays, shadow rays are hits,
+    unoccluded rays are shadow rays, the next rays are hits."""
+    import pyopencl as cl
+
+    from pyclpt.integrators.wavefront import Q_COUNT
+
+    r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=-1, width=40, height=30, wave_size=1000)
+    w = r.integrator
+    w.schedule = schedule
+    w.warm_up()
+    q = r.device.queue
+    cl.enqueue_fill_buffer(q, w.counters, np.int32(0), 0, w._counts.nbytes)
+    w.path_init(1000, 7, 0, 100)
+    bounces = 0
+    for bounce in range(12):
+        cl.enqueue_copy(q, w._counts, w.counters)
+        rays = int(w._counts[bounce, 0])
+        if rays == 0:
+            break
+        w.bounce(rays if schedule == "readback" else w.capacity, bounce, 7, 0)
+        cl.enqueue_copy(q, w._counts, w.counters)
+        n_ray, n_hit, n_miss, n_shadow, n_light = (int(c) for c in w._counts[bounce, :Q_COUNT])
+        assert n_ray == rays
+        ray = read_queue(r, w.ray_queues[bounce % 2], n_ray)
+        hit = read_queue(r, w.hit_queue, n_hit)
+        miss = read_queue(r, w.miss_queue, n_miss)
+        shadow = read_queue(r, w.shadow_queue, n_shadow)
+        light = read_queue(r, w.light_queue, n_light)
+        nxt = read_queue(r, w.ray_queues[(bounce + 1) % 2], int(w._counts[bounce + 1, 0]))
+        for queue in (ray, hit, miss, shadow, light, nxt):
+            assert np.all(np.diff(queue) > 0), (bounce, queue)
+            assert queue.size == 0 or (queue[0] >= 0 and queue[-1] < w.capacity)
+        if bounce == 0:
+            assert np.array_equal(ray, np.arange(1000))
+        assert np.array_equal(np.union1d(hit, miss), ray) and np.intersect1d(hit, miss).size == 0
+        assert np.all(np.isin(shadow, hit)) and np.all(np.isin(light, shadow)) and np.all(np.isin(nxt, hit))
+        if bounce == 0:  # every queue has entries to order
+            assert 0 < n_light < n_shadow < n_hit and 0 < n_miss
+        bounces += 1
+    assert bounces >= 4
+
+
+def test_dropped_samples_are_counted_alike_by_both_integrators():
+    """Some samples (the object's) overflow to inf, the sky's do not: every integrator and wave size
+    counts the same number of dropped samples, accumulated over frames, and draws the same image."""
+    from scenes import object_under_sky
+
+    scene = object_under_sky({"type": "diffuse", "reflectance": 0.9}, radiance=3.0e38)
+    scene.meshes[0].emission = (3.0e38, 3.0e38, 3.0e38)
+    counts, images = [], []
+    for integrator, kw in (("megakernel", {}), ("wavefront", {}), ("wavefront", {"wave_size": 100}),
+                           ("wavefront", {"layout": "aos"})):
+        r = pyclpt.Renderer(scene, integrator=integrator, max_depth=3, width=20, height=20, **kw)
+        images.append(r.render(3, seed=5, progress=False))
+        counts.append(r.stats.dropped_samples)
+        assert r.film.dropped_samples() == counts[-1]
+    assert 20 < counts[0] < 20 * 20 * 3 and len(set(counts)) == 1, counts
+    assert all(np.array_equal(img, images[0]) for img in images)
+
+
 def test_no_path_ends_by_roulette_before_rr_depth():
     """Inside a closed diffuse sphere every ray hits and every BSDF sample is valid, so until Russian
     roulette starts (on rays of bounce RR_DEPTH = 3, docs/architecture.md) every path is alive; from
@@ -139,12 +232,15 @@ def test_launch_sequence_per_bounce(cornell_box):
     r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=3, width=8, height=8)
     r.render(1, progress=False)
     seq = r.integrator.profile.sequence
-    per_bounce = ["intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf"]
+    compact = ["compact_count", "compact_scatter"]
+    per_bounce = ["intersect", *compact, "miss", "process_hit", *compact, "shadow_test", *compact,
+                  "light_contribution", "sample_bsdf", *compact]
     assert seq == ["path_init"] + per_bounce * 3
     table = {row["kernel"]: row for row in r.stats.kernels}
     assert set(table) == set(STAGES)
     for name, row in table.items():  # the table counts what was launched, and shares the time it measured
-        assert row["launches"] == seq.count(name) == (1 if name == "path_init" else 3)
+        assert row["launches"] == seq.count(name) == {"path_init": 1, "compact_count": 12,
+                                                       "compact_scatter": 12}.get(name, 3)
         assert row["mean_ms"] == pytest.approx(row["total_ms"] / row["launches"])
         assert row["share"] == pytest.approx(row["total_ms"] / sum(x["total_ms"] for x in table.values()))
     # the readback schedule stops when no path is left: under a sky, with the only shape behind the
@@ -178,5 +274,5 @@ def test_wavefront_memory_does_not_grow_with_image_or_spp(cornell_box):
     assert r.integrator.capacity == 512
     assert r.integrator.paths.nbytes == 512 * bytes_per_path()
     r.render(1, progress=False)
-    assert r.stats.memory == {"wave_size": 512, "bytes_per_path": bytes_per_path() + 24,
+    assert r.stats.memory == {"wave_size": 512, "bytes_per_path": bytes_per_path() + 25,
                               "path_state_bytes": 512 * bytes_per_path()}

@@ -1,13 +1,13 @@
 /* megakernel: one work-item runs a whole path for one (pixel, sample).
  *
  * Consumes: the pixels [pixel_offset, pixel_offset + count) of one sample index.
- * Produces: each path's radiance in frame[pixel] (3 floats), and
- *           dropped[0] += number of NaN/inf samples.
+ * Produces: each path's radiance in frame[pixel] (3 floats), 0 for a NaN/inf sample, which
+ *           adds 1 to drop_marks[pixel] (counted by the film after the frame).
  * The baseline the wavefront integrator is measured against: same estimator
  * (path.h), same random numbers. */
 #include "integrators/path.h"
 
-__kernel void megakernel(SCENE_PARAMS, __global float* frame, volatile __global int* dropped,
+__kernel void megakernel(SCENE_PARAMS, __global float* frame, __global uchar* drop_marks,
                          uint seed, uint sample, int pixel_offset, int count, int max_depth) {
     int i = get_global_id(0);
     if (i >= count) return;
@@ -34,5 +34,5 @@ __kernel void megakernel(SCENE_PARAMS, __global float* frame, volatile __global 
             if (!path_sample_bsdf(key, &s, &b, &ps, max_depth)) break;
         }
     }
-    film_commit(frame, dropped, pixel, ps.L);
+    film_commit(frame, drop_marks, pixel, ps.L);
 }

@@ -142,13 +142,16 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     return true;
 }
 
-/* The end of a path: its radiance goes to the frame, a NaN or inf sample is dropped and counted. */
-static inline void film_commit(__global float* frame, volatile __global int* dropped, int slot, float3 L) {
-    if (!all_finite3(L)) {
-        atomic_inc(dropped);
-        L = (float3)(0.0f);
-    }
-    store3(frame, slot, L);
+/* The end of a path: its radiance goes to the frame; a NaN or inf sample is dropped (0 is
+ * written) and marked in drop_marks[pixel], which the film counts after the frame
+ * (cl/film/count_dropped.cl). A plain add, not an atomic: one path owns its pixel in a frame,
+ * so the stages that commit can vectorize; a path committed twice would count twice. */
+static inline void film_commit(__global float* frame, __global uchar* drop_marks, int pixel, float3 L) {
+    bool bad = !all_finite3(L);
+    drop_marks[pixel] += bad ? (uchar)1 : (uchar)0;
+    frame[3 * pixel + 0] = bad ? 0.0f : L.x;
+    frame[3 * pixel + 1] = bad ? 0.0f : L.y;
+    frame[3 * pixel + 2] = bad ? 0.0f : L.z;
 }
 
 #endif

@@ -2,8 +2,11 @@
 pixel, averaged on the device by an :class:`~pyclpt.film.accumulator.Accumulator`.
 
 Frames are added in sample order, so the sum does not depend on the order in
-which paths finished. NaN/inf samples never reach the frame: the kernels drop
-them and count them in ``dropped``.
+which paths finished. NaN/inf samples never reach the frame: the integrators'
+kernels write 0 instead and mark the pixel in ``drop_marks`` (one byte a pixel,
+a plain add, so no kernel that commits a path needs an atomic), and
+:meth:`count_dropped`, run by the integrator after each frame, adds the marks to
+``dropped`` and clears them (``cl/film/count_dropped.cl``).
 """
 from __future__ import annotations
 
@@ -11,12 +14,14 @@ import numpy as np
 import pyopencl as cl
 
 from pyclpt.device.context import Device, alloc
+from pyclpt.device.program import build_program
 from pyclpt.film.accumulator import Accumulator
 
 # Renderer.render's precision: the sum of the samples in double (emulated double-float on a device
 # without cl_khr_fp64), so a long render's mean is as exact as its float samples allow; the
 # accumulation is one add per pixel per frame, negligible next to the paths.
 DEFAULT_PRECISION = "double"
+COUNT_CHUNK = 1024  # marks summed per work-item, as in cl/film/count_dropped.cl
 
 
 class Film:
@@ -27,6 +32,8 @@ class Film:
         self.pixels = width * height
         self.frame = alloc(device, 4 * self.pixels * 3, f"frame buffer {width}x{height}")
         self.dropped = alloc(device, 4, "dropped-sample counter")
+        self.drop_marks = alloc(device, self.pixels, "dropped-sample marks")
+        self._count_kernel = cl.Kernel(build_program(device, ["film/count_dropped.cl"]), "count_dropped")
         self.accumulator = Accumulator(device, width, height, channels=3, precision=precision,
                                        input_type="float", **accumulator_options)
         self.clear()
@@ -41,6 +48,13 @@ class Film:
         self.accumulator.reset()
         cl.enqueue_fill_buffer(q, self.frame, np.float32(0), 0, 4 * self.pixels * 3)
         cl.enqueue_fill_buffer(q, self.dropped, np.int32(0), 0, 4)
+        cl.enqueue_fill_buffer(q, self.drop_marks, np.uint8(0), 0, self.pixels)
+
+    def count_dropped(self) -> cl.Event:
+        """Add the frame's dropped-sample marks to the counter and clear them (after each frame)."""
+        chunks = -(-self.pixels // COUNT_CHUNK)
+        return self._count_kernel(self.device.queue, (chunks,), None, self.drop_marks,
+                                  np.int32(self.pixels), self.dropped)
 
     def add_frame(self) -> cl.Event | None:
         """Add the frame buffer to the accumulation (None when the accumulator has stopped)."""

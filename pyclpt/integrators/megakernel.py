@@ -32,7 +32,7 @@ class Megakernel:
         """One empty launch, so that the driver's lazy compilation counts as compile time."""
         args = self.scene.args(self.film.width, self.film.height)
         self.kernel(self.device.queue, (self.local_size,), (self.local_size,), *args, self.film.frame,
-                    self.film.dropped, np.uint32(0), np.uint32(0), np.int32(0), np.int32(0),
+                    self.film.drop_marks, np.uint32(0), np.uint32(0), np.int32(0), np.int32(0),
                     np.int32(self.max_depth))
         self.device.queue.finish()
 
@@ -43,7 +43,8 @@ class Megakernel:
             count = min(self.wave_size, self.film.pixels - offset)
             # fixed work-group size: PoCL compiles once per size; extra work-items return at once
             g = -(-count // self.local_size) * self.local_size
-            ev = self.kernel(self.device.queue, (g,), (self.local_size,), *args, self.film.frame, self.film.dropped,
+            ev = self.kernel(self.device.queue, (g,), (self.local_size,), *args, self.film.frame, self.film.drop_marks,
                              np.uint32(seed), np.uint32(sample), np.int32(offset), np.int32(count),
                              np.int32(self.max_depth))
             self.profile.record("megakernel", ev)
+        self.film.count_dropped()

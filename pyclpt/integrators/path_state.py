@@ -10,6 +10,10 @@ OpenCL accessors (``path_get_<field>`` / ``path_set_<field>``, the
 - ``aos`` (array of structures): one buffer of records, ``record_words`` words
   per path.
 
+A vector field also gets one accessor per component (``path_get_L_x``): code
+written on scalars is what PoCL's vectorizer accepts (a ``float3`` operation in
+a work-item loop stops it).
+
 Stage code (``cl/*.cl``) only uses the accessors, so it compiles unchanged
 either way.
 """
@@ -112,6 +116,11 @@ def opencl_header(layout: str) -> str:
         sets = store(f, 0, "v") if f.width == 1 else " ".join(store(f, k, f"v.{_AXES[k]}") for k in range(f.width))
         out.append(f"static inline {vt} path_get_{f.name}(const PathStore* P, int i) {{ return {value}; }}")
         out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {vt} v) {{ {sets} }}")
+        for k in range(f.width if f.width > 1 else 0):  # one component: scalar code, which PoCL can vectorize
+            c = f"{f.name}_{_AXES[k]}"
+            out.append(f"static inline {f.ctype} path_get_{c}(const PathStore* P, int i) {{ return {load(f, k)}; }}")
+            out.append(f"static inline void path_set_{c}(const PathStore* P, int i, {f.ctype} v) "
+                       f"{{ {store(f, k, 'v')} }}")
     out += ["", "#endif", ""]
     return "\n".join(out)
 

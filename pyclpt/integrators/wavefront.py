@@ -4,8 +4,12 @@ one file per stage; see docs/wavefront.md).
 
 Per wave (a chunk of at most ``wave_size`` pixels of one sample index):
 
-    path_init -> [ intersect -> miss -> process_hit -> shadow_test
-                   -> light_contribution -> sample_bsdf ] per bounce
+    path_init -> [ intersect, C -> miss -> process_hit, C -> shadow_test, C
+                   -> light_contribution -> sample_bsdf, C ] per bounce
+
+where C is the order-preserving compaction (``compact_count``, ``compact_scatter``)
+that builds the next queue(s) from the flags the stage before wrote, so every queue
+lists path slots in ascending order and no stage needs an atomic.
 
 Each method of :class:`Wavefront` named after a stage launches that stage's
 kernel. Paths in flight never exceed ``wave_size`` whatever the image size or
@@ -24,10 +28,15 @@ from pyclpt.device.program import build_program
 from pyclpt.film.film import Film
 from pyclpt.integrators.path_state import PathStorage, bytes_per_path, opencl_header
 
-STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf")
+STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf",
+          "compact_count", "compact_scatter")
 # counter order, as Q_* in cl/integrators/wavefront/wavefront.h
 QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")
 Q_COUNT = len(QUEUES)
+Q_RAY, Q_HIT, Q_MISS, Q_SHADOW, Q_LIGHT = range(Q_COUNT)
+COMPACT_BLOCK = 1024  # queue entries per work-item of the compaction, as in wavefront.h
+# six int queues and one flag byte per path
+QUEUE_BYTES_PER_PATH = 6 * 4 + 1
 SCHEDULES = ("readback", "capacity")
 DEFAULT_WAVE_SIZE = 1 << 18
 CAPACITY_CHECK = 4
@@ -56,6 +65,8 @@ class Wavefront:
         self.miss_queue = alloc(device, nbytes, "miss queue")
         self.shadow_queue = alloc(device, nbytes, "shadow queue")
         self.light_queue = alloc(device, nbytes, "light-contribution queue")
+        self.flags = alloc(device, self.capacity, "queue flags")
+        self.block_counts = alloc(device, 4 * -(-self.capacity // COMPACT_BLOCK), "compaction block counts")
         self.counters = alloc(device, 4 * Q_COUNT * (max_depth + 2), "queue counters")
         generated = {"path_state.h": opencl_header(layout)}
         self.kernels = {s: cl.Kernel(build_program(device, [f"integrators/wavefront/{s}.cl"], generated=generated,
@@ -66,8 +77,8 @@ class Wavefront:
 
     @property
     def bytes_per_path(self) -> int:
-        """Path state plus one entry in each of the six queues."""
-        return bytes_per_path() + 6 * 4
+        """Path state plus one entry in each of the six queues and one flag byte."""
+        return bytes_per_path() + QUEUE_BYTES_PER_PATH
 
     # -- stages: each launches the kernel of the same name --------------------------
     def _launch(self, stage: str, n: int, *args) -> None:
@@ -85,32 +96,66 @@ class Wavefront:
     def path_init(self, n: int, seed: int, sample: int, offset: int) -> None:
         f = self.film
         self._launch("path_init", n, *self._scene_args, *self._common(0), self.ray_queues[0], f.frame,
-                     f.dropped, np.uint32(seed), np.uint32(sample), np.int32(offset), np.int32(n),
+                     f.drop_marks, np.uint32(seed), np.uint32(sample), np.int32(offset), np.int32(n),
                      np.int32(self.max_depth))
 
     def intersect(self, n: int, bounce: int, seed: int, sample: int) -> None:
         self._launch("intersect", n, *self._scene_args, *self._common(bounce), self.ray_queues[bounce % 2],
-                     self.hit_queue, self.miss_queue, np.uint32(seed), np.uint32(sample))
+                     self.flags, np.uint32(seed), np.uint32(sample))
 
     def miss(self, n: int, bounce: int) -> None:
         self._launch("miss", n, *self._scene_args, *self._common(bounce), self.miss_queue, self.film.frame,
-                     self.film.dropped)
+                     self.film.drop_marks)
 
     def process_hit(self, n: int, bounce: int, seed: int, sample: int) -> None:
         self._launch("process_hit", n, *self._scene_args, *self._common(bounce), self.hit_queue,
-                     self.shadow_queue, np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
+                     self.flags, np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
 
     def shadow_test(self, n: int, bounce: int, seed: int, sample: int) -> None:
         self._launch("shadow_test", n, *self._scene_args, *self._common(bounce), self.shadow_queue,
-                     self.light_queue, np.uint32(seed), np.uint32(sample))
+                     self.flags, np.uint32(seed), np.uint32(sample))
 
     def light_contribution(self, n: int, bounce: int) -> None:
         self._launch("light_contribution", n, *self._common(bounce), self.light_queue)
 
     def sample_bsdf(self, n: int, bounce: int, seed: int, sample: int) -> None:
         self._launch("sample_bsdf", n, *self._scene_args, *self._common(bounce), self.hit_queue,
-                     self.ray_queues[(bounce + 1) % 2], self.film.frame, self.film.dropped,
+                     self.flags, self.film.frame, self.film.drop_marks,
                      np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
+
+    def compact_count(self, n: int, bounce: int, src_q: int) -> None:
+        """Count the flagged entries per block of the queue ``src_q`` (at most ``n`` entries)."""
+        self._launch("compact_count", -(-n // COMPACT_BLOCK), self.counters, np.int32(bounce), np.int32(src_q),
+                     self.flags, self.block_counts)
+
+    def compact_scatter(self, n: int, bounce: int, src_q: int, src: cl.Buffer, out: cl.Buffer,
+                        out_q: int, out_bounce: int, rest: cl.Buffer | None = None, rest_q: int = -1) -> None:
+        """Copy the flagged entries of ``src`` to ``out`` (the others to ``rest``), in order."""
+        self._launch("compact_scatter", -(-n // COMPACT_BLOCK), self.counters, np.int32(bounce), np.int32(src_q),
+                     self.flags, self.block_counts, src, out, np.int32(out_bounce), np.int32(out_q),
+                     out if rest is None else rest, np.int32(rest_q))
+
+    def compact(self, n: int, bounce: int, src_q: int, src: cl.Buffer, out: cl.Buffer, out_q: int,
+                out_bounce: int | None = None, rest: cl.Buffer | None = None, rest_q: int = -1) -> None:
+        """The order-preserving compaction after a stage: compact_count, then compact_scatter."""
+        self.compact_count(n, bounce, src_q)
+        self.compact_scatter(n, bounce, src_q, src, out, out_q, bounce if out_bounce is None else out_bounce,
+                             rest, rest_q)
+
+    def bounce(self, rays: int, bounce: int, seed: int, sample: int) -> None:
+        """The launches of one bounce; ``rays`` bounds every queue of the bounce."""
+        self.intersect(rays, bounce, seed, sample)
+        self.compact(rays, bounce, Q_RAY, self.ray_queues[bounce % 2], self.hit_queue, Q_HIT,
+                     rest=self.miss_queue, rest_q=Q_MISS)
+        self.miss(rays, bounce)
+        self.process_hit(rays, bounce, seed, sample)
+        self.compact(rays, bounce, Q_HIT, self.hit_queue, self.shadow_queue, Q_SHADOW)
+        self.shadow_test(rays, bounce, seed, sample)
+        self.compact(rays, bounce, Q_SHADOW, self.shadow_queue, self.light_queue, Q_LIGHT)
+        self.light_contribution(rays, bounce)
+        self.sample_bsdf(rays, bounce, seed, sample)
+        self.compact(rays, bounce, Q_HIT, self.hit_queue, self.ray_queues[(bounce + 1) % 2], Q_RAY,
+                     out_bounce=bounce + 1)
 
     def warm_up(self) -> None:
         """Launch every stage once with empty queues, so that the driver's lazy compilation
@@ -120,8 +165,7 @@ class Wavefront:
         cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
         self.path_init(1, 0, 0, 0)
         cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
-        for stage in STAGES[1:]:
-            getattr(self, stage)(*((1, 0) if stage in ("miss", "light_contribution") else (1, 0, 0, 0)))
+        self.bounce(1, 0, 0, 0)
         cl.enqueue_fill_buffer(q, self.film.frame, np.float32(0), 0, 4 * 3 * self.film.pixels)
         q.finish()
         self.profile.clear()
@@ -147,14 +191,10 @@ class Wavefront:
                     rays = n
                     if bounce and bounce % CAPACITY_CHECK == 0 and self._read_count(bounce, 0) == 0:
                         break
-                self.intersect(rays, bounce, seed, sample)
-                self.miss(rays, bounce)
-                self.process_hit(rays, bounce, seed, sample)
-                self.shadow_test(rays, bounce, seed, sample)
-                self.light_contribution(rays, bounce)
-                self.sample_bsdf(rays, bounce, seed, sample)
+                self.bounce(rays, bounce, seed, sample)
             cl.enqueue_copy(q, self._counts, self.counters)
             self._bounce_totals += self._counts
+        self.film.count_dropped()
 
     def _read_count(self, bounce: int, queue: int) -> int:
         out = np.zeros(1, np.int32)

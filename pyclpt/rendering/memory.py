@@ -64,16 +64,17 @@ def render_memory(scene: Scene, width: int, height: int, *, precision: str, inte
     pixels = width * height
     parts = {
         f"frame buffer {width}x{height}": 12 * pixels,
+        "dropped-sample marks": pixels,
         f"accumulation sum ({precision})": SUM_VALUE_BYTES.get(precision, 8) * 3 * pixels,
         "accumulated image": 12 * pixels,
         "scene buffers (estimate)": scene_bytes(scene),
     }
     if integrator == "wavefront":
         from pyclpt.integrators.path_state import bytes_per_path
-        from pyclpt.integrators.wavefront import DEFAULT_WAVE_SIZE, Q_COUNT
+        from pyclpt.integrators.wavefront import DEFAULT_WAVE_SIZE, Q_COUNT, QUEUE_BYTES_PER_PATH
 
         capacity = min(wave_size or DEFAULT_WAVE_SIZE, pixels)
-        parts[f"path state and queues ({capacity} paths)"] = (capacity * (bytes_per_path() + 6 * 4)
+        parts[f"path state and queues ({capacity} paths)"] = (capacity * (bytes_per_path() + QUEUE_BYTES_PER_PATH)
                                                               + 4 * Q_COUNT * (max_depth + 2))
     return parts
 

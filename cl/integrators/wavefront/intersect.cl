@@ -1,25 +1,24 @@
 /* intersect: closest hit for every queued ray.
  * Consumes: the ray queue of this bounce.
- * Produces: the hit record (hit_t/u/v/prim) and an entry in the hit queue, or
- *           an entry in the miss queue. */
+ * Produces: the hit record (hit_t/u/v/prim) and flags[i] = 1 for a hit, 0 for a miss
+ *           (compaction then splits the ray queue into the hit and miss queues). */
 #include "integrators/wavefront/wavefront.h"
 
 __kernel void intersect(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* ray_queue,
-                        __global int* hit_queue, __global int* miss_queue, uint seed, uint sample) {
+                        __global uchar* flags, uint seed, uint sample) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_RAY)) return;
     Scene sc = SCENE_INIT;
     PathStore P = PATH_INIT;
     int slot = ray_queue[i];
     Hit hit;
-    if (scene_closest(&sc, path_key(&P, slot, seed, sample), bounce, path_get_org(&P, slot),
-                      path_get_dir(&P, slot), &hit)) {
+    bool found = scene_closest(&sc, path_key(&P, slot, seed, sample), bounce, path_get_org(&P, slot),
+                               path_get_dir(&P, slot), &hit);
+    if (found) {
         path_set_hit_t(&P, slot, hit.t);
         path_set_hit_u(&P, slot, hit.u);
         path_set_hit_v(&P, slot, hit.v);
         path_set_hit_prim(&P, slot, hit.prim);
-        queue_push(hit_queue, counters, bounce, Q_HIT, slot);
-    } else {
-        queue_push(miss_queue, counters, bounce, Q_MISS, slot);
     }
+    flags[i] = found ? 1 : 0;
 }

@@ -1,10 +1,10 @@
 /* miss: environment radiance for paths that left the scene (MIS-weighted); the path ends.
  * Consumes: the miss queue of this bounce.
- * Produces: the path's radiance in frame[pixel]. */
+ * Produces: the path's radiance in frame[pixel] (0 and a mark in drop_marks for NaN/inf). */
 #include "integrators/wavefront/wavefront.h"
 
 __kernel void miss(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* miss_queue,
-                   __global float* frame, volatile __global int* dropped) {
+                   __global float* frame, __global uchar* drop_marks) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_MISS)) return;
     Scene sc = SCENE_INIT;
@@ -12,5 +12,5 @@ __kernel void miss(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* mi
     int slot = miss_queue[i];
     PathState ps = path_load_shading(&P, slot, bounce);
     path_miss(&sc, &ps);
-    film_commit(frame, dropped, path_get_pixel(&P, slot), ps.L);
+    film_commit(frame, drop_marks, path_get_pixel(&P, slot), ps.L);
 }

@@ -2,12 +2,13 @@
  * found it), then light sampling: choose an emitter and a point on it.
  * Consumes: the hit queue of this bounce.
  * Produces: updated radiance; for valid light samples (pdf > 0, non-zero
- *           contribution) a shadow ray and an entry in the shadow queue. Every
- *           hit path stays in the hit queue for BSDF sampling. */
+ *           contribution) a shadow ray and flags[i] = 1, else flags[i] = 0
+ *           (compaction then builds the shadow queue). Every hit path stays in
+ *           the hit queue for BSDF sampling. */
 #include "integrators/wavefront/wavefront.h"
 
 __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* hit_queue,
-                          __global int* shadow_queue, uint seed, uint sample, int max_depth) {
+                          __global uchar* flags, uint seed, uint sample, int max_depth) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_HIT)) return;
     Scene sc = SCENE_INIT;
@@ -17,14 +18,17 @@ __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     Surface s = surface_at(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
     path_hit_emission(&sc, &s, path_get_hit_t(&P, slot), &ps);
     path_set_L(&P, slot, ps.L);
-    if (!depth_allows(bounce + 1, max_depth)) return;
-    ShadowRay sr;
-    Bsdf b = bsdf_at(&sc, &s);
-    if (path_sample_light(&sc, path_key(&P, slot, seed, sample), &s, &b, &ps, &sr)) {
-        path_set_shadow_org(&P, slot, sr.org);
-        path_set_shadow_dir(&P, slot, sr.dir);
-        path_set_shadow_tmax(&P, slot, sr.tmax);
-        path_set_shadow_contrib(&P, slot, sr.contrib);
-        queue_push(shadow_queue, counters, bounce, Q_SHADOW, slot);
+    bool shadow = false;
+    if (depth_allows(bounce + 1, max_depth)) {
+        ShadowRay sr;
+        Bsdf b = bsdf_at(&sc, &s);
+        shadow = path_sample_light(&sc, path_key(&P, slot, seed, sample), &s, &b, &ps, &sr);
+        if (shadow) {
+            path_set_shadow_org(&P, slot, sr.org);
+            path_set_shadow_dir(&P, slot, sr.dir);
+            path_set_shadow_tmax(&P, slot, sr.tmax);
+            path_set_shadow_contrib(&P, slot, sr.contrib);
+        }
     }
+    flags[i] = shadow ? 1 : 0;
 }

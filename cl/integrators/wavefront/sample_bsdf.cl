@@ -1,11 +1,12 @@
 /* sample_bsdf: next direction, throughput update and Russian roulette.
  * Consumes: the hit queue of this bounce (after hit processing and light contribution).
- * Produces: survivors in the ray queue of the next bounce; paths that end
- *           (depth limit, invalid sample, roulette) commit their radiance to frame[pixel]. */
+ * Produces: for survivors the next ray and flags[i] = 1 (compaction then builds the next
+ *           bounce's ray queue); paths that end (depth limit, invalid sample, roulette) get
+ *           flags[i] = 0 and commit their radiance to frame[pixel]. */
 #include "integrators/wavefront/wavefront.h"
 
 __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* hit_queue,
-                          __global int* next_ray_queue, __global float* frame, volatile __global int* dropped,
+                          __global uchar* flags, __global float* frame, __global uchar* drop_marks,
                           uint seed, uint sample, int max_depth) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_HIT)) return;
@@ -19,10 +20,8 @@ __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     ps.depth = bounce;
     Surface s = surface_at(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
     Bsdf b = bsdf_at(&sc, &s);
-    if (path_sample_bsdf(path_key(&P, slot, seed, sample), &s, &b, &ps, max_depth)) {
-        path_store_ray(&P, slot, &ps);
-        queue_push(next_ray_queue, counters, bounce + 1, Q_RAY, slot);
-    } else {
-        film_commit(frame, dropped, path_get_pixel(&P, slot), path_get_L(&P, slot));
-    }
+    bool alive = path_sample_bsdf(path_key(&P, slot, seed, sample), &s, &b, &ps, max_depth);
+    if (alive) path_store_ray(&P, slot, &ps);
+    else film_commit(frame, drop_marks, path_get_pixel(&P, slot), path_get_L(&P, slot));
+    flags[i] = alive ? 1 : 0;
 }

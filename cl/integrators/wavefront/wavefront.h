@@ -27,10 +27,8 @@ static inline int queue_count(__global const int* counters, int bounce, int q) {
     return counters[bounce * Q_COUNT + q];
 }
 
-static inline void queue_push(__global int* queue, __global int* counters, int bounce, int q, int slot) {
-    int at = atomic_inc((volatile __global int*)&counters[bounce * Q_COUNT + q]);
-    queue[at] = slot;
-}
+/* Entries of a queue that one work-item of the compaction stages handles. */
+#define COMPACT_BLOCK 1024
 
 /* The random-number key of the path in a slot: (seed, pixel, sample). */
 static inline RngKey path_key(const PathStore* P, int slot, uint seed, uint sample) {

@@ -1,0 +1,21 @@
+/* count_dropped: adds up the frame's dropped (NaN/inf) samples and clears their marks.
+ *
+ * The integrators' film_commit (integrators/path.h) writes 0 to the frame for a NaN/inf sample
+ * and adds 1 to marks[pixel] (a plain add: one path owns a pixel per frame), so the stages that
+ * commit need no atomic. One work-item sums COUNT_CHUNK marks; integer sums do not depend on
+ * the order the work-items run in.
+ * Consumes: marks[0 .. pixels-1] (uchar, dropped samples per pixel since the last count).
+ * Produces: dropped[0] += their sum; marks zeroed. */
+
+#define COUNT_CHUNK 1024
+
+__kernel void count_dropped(__global uchar* marks, int pixels, volatile __global int* dropped) {
+    int begin = (int)get_global_id(0) * COUNT_CHUNK;
+    if (begin >= pixels) return;
+    int end = min(begin + COUNT_CHUNK, pixels);
+    int sum = 0;
+    for (int i = begin; i < end; ++i) sum += marks[i];
+    if (sum == 0) return;
+    for (int i = begin; i < end; ++i) marks[i] = 0;
+    atomic_add(dropped, sum);
+}
