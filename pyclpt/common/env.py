@@ -91,8 +91,8 @@ def describe(name: str) -> str:
 
 def error(name: str, problem: str) -> EnvironmentVariableError:
     """An error for ``name``: its value, the problem, what the variable is for and to unset it."""
-    return EnvironmentVariableError(f"{describe(name)}: {problem}; it should name {VARIABLES.get(name) or FOREIGN[name]} "
-                                    f"(or unset it)")
+    what = VARIABLES.get(name) or FOREIGN[name]
+    return EnvironmentVariableError(f"{describe(name)}: {problem}; it should name {what} (or unset it)")
 
 
 def flag(name: str) -> bool:
