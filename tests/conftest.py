@@ -1,5 +1,11 @@
 """Shared fixtures: one OpenCL device (PoCL) and its compiled programs for the whole session,
-a private cache folder, and the shared scene folder when it exists."""
+a private cache folder, and the shared scene folder when it exists.
+
+``each_device`` parametrises a test over the devices it should pass on, as PyOpenCL's tests do:
+PoCL and, when installed (``pip install ".[intel]"``), Intel's CPU OpenCL runtime. One context and
+its compiled programs per device for the session (:func:`pyclpt.get_device` keeps them). Without
+the runtime the Intel cases are skipped with the reason, unless ``PYCLPT_REQUIRE_INTEL=1`` (CI sets
+it) makes them fail: a failed download cannot turn them off unseen."""
 from __future__ import annotations
 
 import os
@@ -12,12 +18,37 @@ import pytest
 os.environ.setdefault("PYCLPT_CACHE_DIR", tempfile.mkdtemp(prefix="pyclpt-test-cache-"))
 
 import pyclpt  # noqa: E402
+from pyclpt.common import env  # noqa: E402
+from pyclpt.device.context import DeviceError  # noqa: E402
 from pyclpt.scene.library import scenes_root  # noqa: E402
 
 
 @pytest.fixture(scope="session")
 def device() -> pyclpt.Device:
     return pyclpt.default_device()
+
+
+DEVICES = ["pocl", "intel"]
+
+
+def open_intel() -> pyclpt.Device:
+    """Intel's CPU OpenCL device; skips the test without it (fails under PYCLPT_REQUIRE_INTEL=1)."""
+    try:
+        return pyclpt.get_device("intel")
+    except DeviceError as exc:
+        if env.flag("PYCLPT_REQUIRE_INTEL"):
+            pytest.fail(f"PYCLPT_REQUIRE_INTEL=1 but {exc}", pytrace=False)
+        pytest.skip(f"Intel's CPU OpenCL runtime is not available: {exc}")
+
+
+@pytest.fixture(scope="session")
+def intel_device() -> pyclpt.Device:
+    return open_intel()
+
+
+@pytest.fixture(scope="session", params=DEVICES)
+def each_device(request, device) -> pyclpt.Device:
+    return device if request.param == "pocl" else open_intel()
 
 
 @pytest.fixture(scope="session")

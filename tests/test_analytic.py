@@ -105,13 +105,13 @@ def test_form_factor_matches_quadrature():
 
 
 @pytest.mark.parametrize("integrator", INTEGRATORS)
-def test_direct_light_from_a_quad_matches_the_form_factor(integrator):
+def test_direct_light_from_a_quad_matches_the_form_factor(integrator, each_device):
     """Next-event estimation + BSDF sampling + the power heuristic, max depth 2: albedo Le F(x) per
-    pixel. Image mean within 1 % (~12 standard errors), 4x4 blocks within 3 % (~6)."""
+    pixel. Image mean within 1 % (~12 standard errors), 4x4 blocks within 3 % (~6). On every device."""
     scene = floor_scene()
     expected = expected_floor(scene, SIZE)
     assert 0.25 < expected.min() and expected.max() > 2.5 * expected.min()  # strongly varying: off-centre
-    img = render(scene, integrator, spp=512, max_depth=2, seed=1)
+    img = render(scene, integrator, spp=512, max_depth=2, seed=1, device=each_device)
     assert np.isfinite(img).all()
     np.testing.assert_array_equal(img[..., 0], img[..., 2])  # grey in, grey out
     lum = img[..., 0].astype(np.float64)

@@ -14,7 +14,7 @@ from scenes import interior_furnace, sensor
 
 def render(scene, **kw):
     r = pyclpt.Renderer(scene, **{k: kw.pop(k) for k in list(kw) if k in (
-        "integrator", "layout", "max_depth", "width", "height", "wave_size")})
+        "integrator", "layout", "max_depth", "width", "height", "wave_size", "device")})
     img = r.render(kw.pop("spp"), seed=kw.pop("seed", 0), progress=False)
     return img, r
 
@@ -25,11 +25,12 @@ def assert_same_image(a, b):
 
 
 @pytest.mark.parametrize("max_depth", [1, 3, -1])
-def test_wavefront_equals_megakernel_cornell_box(cornell_box, max_depth):
-    """Same estimator (path.h), same random numbers: the same image. Equality cannot see a bug the two
-    share; the independent checks of both integrators are tests/test_analytic.py (closed forms) and,
-    here, the depth-1 image, which ray casting in numpy predicts exactly away from the light's edges."""
-    kw = dict(spp=16, max_depth=max_depth, width=32, height=32, seed=9)
+def test_wavefront_equals_megakernel_cornell_box(cornell_box, max_depth, each_device):
+    """Same estimator (path.h), same random numbers: the same image, on every device (PoCL, Intel's
+    CPU runtime). Equality cannot see a bug the two share; the independent checks of both integrators
+    are tests/test_analytic.py (closed forms) and, here, the depth-1 image, which ray casting in numpy
+    predicts exactly away from the light's edges."""
+    kw = dict(spp=16, max_depth=max_depth, width=32, height=32, seed=9, device=each_device)
     mega, _ = render(cornell_box, integrator="megakernel", **dict(kw))
     soa, _ = render(cornell_box, integrator="wavefront", layout="soa", **dict(kw))
     aos, _ = render(cornell_box, integrator="wavefront", layout="aos", **dict(kw))

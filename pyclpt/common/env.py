@@ -1,7 +1,7 @@
 """Every environment variable pyclpt reads, in one place.
 
 ===========================  ==================================================================
-``PYCLPT_DEVICE``            the default OpenCL device (a selector: ``pocl``, ``gpu``, ``1:0``, a name)
+``PYCLPT_DEVICE``            the default OpenCL device (a selector: ``pocl``, ``intel``, ``gpu``, ``1:0``, a name)
 ``PYCLPT_SCENES``            the shared scene folder (real scenes and meshes outside the package)
 ``PYCLPT_CACHE_DIR``         the cache folder for parsed meshes and BVHs (default ``~/.cache/pyclpt``)
 ``PYCLPT_DUMP_KERNELS``      a folder where every OpenCL program built is written, for inspection
@@ -10,6 +10,15 @@
 ``PYCLPT_EMBREE_CONFIG``     Embree's device configuration string (default ``threads=1``)
 ``PYCLPT_BVH_PY_BOUNDS``     a flag: the BVH builder's bounds callback is a Python function
 ``PYCLPT_MITSUBA_PYTHON``    the python of a Mitsuba 3 environment (``pyclpt bench --versus mitsuba``)
+``PYCLPT_REQUIRE_INTEL``     a flag: the tests fail, instead of skipping, where Intel's CPU OpenCL runtime is missing
+===========================  ==================================================================
+
+Variables of other programs that pyclpt reads or sets for itself (:data:`FOREIGN`):
+
+===========================  ==================================================================
+``OCL_ICD_VENDORS``          the folder of ``.icd`` files the OpenCL ICD loader reads; pyclpt points
+                             it at a folder registering Intel's CPU runtime unless the user set it
+                             (pyclpt/device/vendors.py)
 ===========================  ==================================================================
 
 Readers here refuse a bad value with :class:`EnvironmentVariableError`, whose message names the
@@ -21,7 +30,7 @@ import os
 from pathlib import Path
 
 VARIABLES: dict[str, str] = {
-    "PYCLPT_DEVICE": "the default OpenCL device (pocl, gpu, cpu, P:D or a platform/device name substring)",
+    "PYCLPT_DEVICE": "the default OpenCL device (pocl, intel, gpu, cpu, P:D or a platform/device name substring)",
     "PYCLPT_SCENES": "the shared scene folder (holding meshes/ and the real scenes)",
     "PYCLPT_CACHE_DIR": "the cache folder for parsed meshes and BVHs (default ~/.cache/pyclpt)",
     "PYCLPT_DUMP_KERNELS": "a folder that receives the source of every OpenCL program built",
@@ -30,6 +39,14 @@ VARIABLES: dict[str, str] = {
     "PYCLPT_EMBREE_CONFIG": "Embree's device configuration string (default threads=1)",
     "PYCLPT_BVH_PY_BOUNDS": "1 makes the BVH builder's bounds callback a Python function",
     "PYCLPT_MITSUBA_PYTHON": "the python of a virtual environment with mitsuba 3 (pyclpt bench --versus mitsuba)",
+    "PYCLPT_REQUIRE_INTEL": "1 makes the tests fail, instead of skipping, where Intel's CPU OpenCL runtime is missing "
+                            "(CI sets it)",
+}
+
+# Variables that belong to other programs: pyclpt reads them, and sets them for its own process only
+# through set_for_process.
+FOREIGN: dict[str, str] = {
+    "OCL_ICD_VENDORS": "the folder of .icd files (one OpenCL driver library path each) that the ICD loader reads",
 }
 
 TRUE_WORDS = ("1", "true", "yes", "on")
@@ -41,7 +58,7 @@ class EnvironmentVariableError(ValueError):
 
 
 def _known(name: str) -> None:
-    if name not in VARIABLES:
+    if name not in VARIABLES and name not in FOREIGN:
         raise KeyError(f"{name} is not one of pyclpt's environment variables ({', '.join(VARIABLES)})")
 
 
@@ -50,6 +67,14 @@ def get(name: str) -> str | None:
     _known(name)
     value = os.environ.get(name, "").strip()
     return value or None
+
+
+def set_for_process(name: str, value: str) -> None:
+    """Set ``name`` (one of :data:`FOREIGN`) in this process's environment, where the C libraries it
+    loads later (the OpenCL ICD loader) read it; child processes inherit it."""
+    if name not in FOREIGN:
+        raise KeyError(f"{name} is not a variable pyclpt sets ({', '.join(FOREIGN)})")
+    os.environ[name] = value
 
 
 def child_environment(**values: str) -> dict[str, str]:
@@ -66,8 +91,8 @@ def describe(name: str) -> str:
 
 def error(name: str, problem: str) -> EnvironmentVariableError:
     """An error for ``name``: its value, the problem, what the variable is for and to unset it."""
-    return EnvironmentVariableError(f"{describe(name)}: {problem}; it should name {VARIABLES[name]} "
-                                    f"(or unset it)")
+    what = VARIABLES.get(name) or FOREIGN[name]
+    return EnvironmentVariableError(f"{describe(name)}: {problem}; it should name {what} (or unset it)")
 
 
 def flag(name: str) -> bool:

@@ -2,8 +2,10 @@
 
 PoCL (the CPU driver shipped by ``pocl-binary-distribution``) is the default
 device everywhere. ``device=`` arguments and the ``PYCLPT_DEVICE`` setting pick
-another one: ``"pocl"``, ``"gpu"``, ``"cpu"``, a platform/device index pair
-``"1:0"``, or any substring of a platform or device name (``"NVIDIA"``).
+another one: ``"pocl"``, ``"intel"`` (Intel's CPU OpenCL runtime, ``pip install "pyclpt[intel]"``,
+registered with the ICD loader by :mod:`pyclpt.device.vendors` when this module is imported),
+``"gpu"``, ``"cpu"``, a platform/device index pair ``"1:0"``, or any substring of a platform or
+device name (``"NVIDIA"``).
 
 The only global state in pyclpt is the lazily created default device.
 
@@ -23,6 +25,7 @@ from typing import Any
 import pyopencl as cl
 
 from pyclpt.common import env
+from pyclpt.device import vendors
 
 try:
     import resource
@@ -30,6 +33,9 @@ except ImportError:  # Windows: no RLIMIT_AS
     resource = None  # type: ignore[assignment]
 
 DEVICE_ENV = "PYCLPT_DEVICE"
+
+# Before anything enumerates platforms: the ICD loader reads OCL_ICD_VENDORS once per process.
+vendors.register()
 
 
 class DeviceError(RuntimeError):
@@ -64,6 +70,11 @@ class Device:
     @property
     def is_pocl(self) -> bool:
         return "portable computing language" in self.device.platform.name.lower()
+
+    @property
+    def is_intel_cpu(self) -> bool:
+        """Intel's CPU OpenCL runtime (``intel-opencl-rt``)."""
+        return _is_intel_cpu(self.device)
 
     @property
     def max_alloc(self) -> int:
@@ -103,6 +114,9 @@ def list_devices() -> list[tuple[int, int, cl.Device]]:
         platforms = cl.get_platforms()
     except cl.Error as exc:  # pyopencl raises when the ICD loader finds nothing
         raise DeviceError(f"no OpenCL platform found ({exc}). {INSTALL_HINT}") from None
+    if vendors.registered():
+        # the Intel platform pyclpt registered comes after the loader's others: indices stay as without it
+        platforms = sorted(platforms, key=lambda p: p.name.strip() == vendors.INTEL_PLATFORM)
     found = []
     for pi, platform in enumerate(platforms):
         try:
@@ -119,9 +133,31 @@ def _is_pocl(d: cl.Device) -> bool:
     return "portable computing language" in d.platform.name.lower()
 
 
+def _is_intel_cpu(d: cl.Device) -> bool:
+    return d.platform.name.strip() == vendors.INTEL_PLATFORM and bool(d.type & cl.device_type.CPU)
+
+
+def intel_missing_reason() -> str:
+    """Why there is no Intel CPU OpenCL device here, with what to do."""
+    state = vendors.register()
+    if state == "absent":
+        return 'Intel\'s CPU OpenCL runtime is not installed (pip install "pyclpt[intel]")'
+    if state == "user":
+        return (f"Intel's CPU OpenCL runtime is not registered in {env.describe(vendors.VENDORS_ENV)}, which "
+                f"pyclpt leaves as the user set it (add an .icd naming {vendors.intel_library()} there, or unset it)")
+    if state == "unsupported":
+        return "pyclpt registers Intel's CPU OpenCL runtime on Linux only"
+    return f"Intel's CPU OpenCL runtime did not load (registration: {state}; OCL_ICD_DEBUG=7 shows the loader's steps)"
+
+
 def _select(spec: str) -> cl.Device:
     devices = list_devices()
     s = spec.strip().lower()
+    if s == "intel":
+        intel = [d for _, _, d in devices if _is_intel_cpu(d)]
+        if not intel:
+            raise DeviceError(f"no Intel CPU OpenCL device: {intel_missing_reason()}; found: {_names(devices)}")
+        return intel[0]
     if s in ("", "default", "pocl"):
         pocl = [d for _, _, d in devices if _is_pocl(d)]
         if pocl:
@@ -187,7 +223,7 @@ def get_device(device: Device | str | None = None) -> Device:
     if device is None:
         return default_device()
     if not isinstance(device, str):
-        raise TypeError(f"device must be a pyclpt.Device, a selector string (pocl, gpu, cpu, P:D or a "
+        raise TypeError(f"device must be a pyclpt.Device, a selector string (pocl, intel, gpu, cpu, P:D or a "
                         f"platform/device name substring) or None, got {type(device).__name__} {device!r}")
     if device not in _opened:
         _opened[device] = open_device(device)

@@ -1,0 +1,96 @@
+"""A second CPU OpenCL implementation as a check: Intel's CPU runtime (``pip install ".[intel]"``) beside
+PoCL. Its registration with the ICD loader (pyclpt/device/vendors.py), the ``intel`` selector, every
+kernel of cl/ built and run on it, and its images against PoCL's: exactly equal within a device (tested
+in test_wavefront.py over ``each_device``), within a tolerance across devices (different compilers and
+math libraries may differ in the last bits)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import pyclpt
+from pyclpt.common import env
+from pyclpt.device import vendors
+from pyclpt.device.context import DeviceError, list_devices
+
+CHILD = ("import pyclpt, os; print(os.environ.get('OCL_ICD_VENDORS', '')); "
+         "print([d.platform.name.strip() for _, _, d in pyclpt.list_devices()])")
+
+
+def child(**extra: str) -> list[str]:
+    """Run CHILD in a fresh interpreter (the ICD loader reads OCL_ICD_VENDORS once per process)."""
+    environ = env.child_environment()
+    environ.pop("OCL_ICD_VENDORS", None)
+    environ.update(extra)
+    out = subprocess.run([sys.executable, "-c", CHILD], env=environ, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.splitlines()
+
+
+def test_pocl_stays_first(device):
+    """The registered Intel platform is listed after the loader's others: PoCL keeps 0:0."""
+    assert list_devices()[0][2].platform.name.strip().lower().startswith("portable computing language")
+    assert pyclpt.get_device("0:0").is_pocl and device.is_pocl
+
+
+def test_intel_selector(intel_device):
+    assert intel_device.is_intel_cpu and not intel_device.is_pocl
+    assert vendors.register() in ("registered", "system", "user")
+    names = [d.platform.name.strip() for _, _, d in list_devices()]
+    assert "Portable Computing Language" in names and vendors.INTEL_PLATFORM in names  # together
+
+
+def test_registration_in_a_fresh_process(tmp_path):
+    if vendors.intel_library() is None:
+        if env.flag("PYCLPT_REQUIRE_INTEL"):
+            pytest.fail("PYCLPT_REQUIRE_INTEL=1 but intel-opencl-rt is not installed")
+        pytest.skip("intel-opencl-rt is not installed")
+    folder, platforms = child(PYCLPT_CACHE_DIR=str(tmp_path))
+    assert folder.startswith(str(tmp_path / "opencl-vendors"))
+    icd = (tmp_path / "opencl-vendors").glob("*/intel-cpu.icd")
+    assert [p.read_text().strip() for p in icd] == [str(vendors.intel_library())]
+    assert platforms == f"['Portable Computing Language', '{vendors.INTEL_PLATFORM}']"
+
+
+def test_a_users_vendors_folder_is_respected(tmp_path):
+    """OCL_ICD_VENDORS set by the user: pyclpt writes nothing and changes nothing."""
+    (tmp_path / "vendors").mkdir()
+    folder, platforms = child(PYCLPT_CACHE_DIR=str(tmp_path / "cache"), OCL_ICD_VENDORS=str(tmp_path / "vendors"))
+    assert folder == str(tmp_path / "vendors")
+    assert vendors.INTEL_PLATFORM not in platforms
+    assert not (tmp_path / "cache" / "opencl-vendors").exists()
+
+
+def test_missing_intel_says_how_to_install(monkeypatch):
+    monkeypatch.setattr(vendors, "state", "absent")
+    from pyclpt.device import context
+
+    monkeypatch.setattr(context, "_is_intel_cpu", lambda d: False)
+    with pytest.raises(DeviceError, match=r'no Intel CPU OpenCL device: .*pip install "pyclpt\[intel\]"'):
+        context._select("intel")
+
+
+@pytest.mark.parametrize("integrator,layout", [("megakernel", "soa"), ("wavefront", "soa"), ("wavefront", "aos")])
+def test_intel_matches_pocl_cornell_box(cornell_box, device, intel_device, integrator, layout):
+    """Every kernel the render uses (integrator, accumulation) builds and runs on Intel's runtime, and the
+    image matches PoCL's within float rounding (the Cornell box: diffuse only, area light, depth 8; the
+    megakernel crashed there before cl/scene/lights.h's env_eval kept its record index non-negative)."""
+    kw = dict(spp=4, max_depth=8, width=32, height=32, seed=5, integrator=integrator, layout=layout, progress=False)
+    pocl = pyclpt.render(cornell_box, device=device, **kw)
+    intel = pyclpt.render(cornell_box, device=intel_device, **kw)
+    assert pocl.max() > 0 and np.isfinite(intel).all()
+    np.testing.assert_allclose(intel, pocl, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("precision", ["single", "compensated", "double"])
+def test_accumulation_on_intel(cornell_box, intel_device, precision):
+    """cl/film/accumulate.cl in every precision: the progressive average of 4 frames is the 4-spp render."""
+    pr = pyclpt.ProgressiveRenderer(cornell_box, seed=2, width=16, height=16, max_depth=4, precision=precision,
+                                    device=intel_device)
+    pr.step(4)
+    ref = pyclpt.render(cornell_box, spp=4, seed=2, width=16, height=16, max_depth=4, device=intel_device,
+                        progress=False)
+    np.testing.assert_allclose(pr.image(), ref, rtol=1e-5, atol=1e-6)
