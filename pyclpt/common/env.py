@@ -19,6 +19,9 @@ Variables of other programs that pyclpt reads or sets for itself (:data:`FOREIGN
 ``OCL_ICD_VENDORS``          the folder of ``.icd`` files the OpenCL ICD loader reads; pyclpt points
                              it at a folder registering Intel's CPU runtime unless the user set it
                              (pyclpt/device/vendors.py)
+``CL_CONFIG_USE_VECTORIZER`` Intel's CPU runtime: whether its compiler vectorizes kernels across
+                             work-items; pyclpt sets ``False`` where the runtime is registered, unless
+                             the user set it (its vectorizer miscompiles some kernels: docs/devices.md)
 ===========================  ==================================================================
 
 Readers here refuse a bad value with :class:`EnvironmentVariableError`, whose message names the
@@ -47,6 +50,7 @@ VARIABLES: dict[str, str] = {
 # through set_for_process.
 FOREIGN: dict[str, str] = {
     "OCL_ICD_VENDORS": "the folder of .icd files (one OpenCL driver library path each) that the ICD loader reads",
+    "CL_CONFIG_USE_VECTORIZER": "Intel's CPU OpenCL runtime: True/False, vectorize kernels across work-items",
 }
 
 TRUE_WORDS = ("1", "true", "yes", "on")

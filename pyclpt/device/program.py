@@ -25,6 +25,7 @@ import pyopencl as cl
 
 from pyclpt.common import env
 from pyclpt.device.context import Device
+from pyclpt.device.vendors import VECTORIZER_ENV
 
 log = logging.getLogger("pyclpt.device.program")
 
@@ -117,8 +118,16 @@ INLINE_MATH_DEFINE = "INLINE_MATH"
 
 
 def device_options(device: Device) -> list[str]:
-    """Options chosen by the device: PoCL gets ``-DINLINE_MATH`` (see cl/core/math.h)."""
-    return [f"-D{INLINE_MATH_DEFINE}"] if device.is_pocl else []
+    """Options chosen by the device: PoCL gets ``-DINLINE_MATH`` (see cl/core/math.h). Intel's CPU
+    runtime gets a define naming its vectorizer setting (``CL_CONFIG_USE_VECTORIZER``, which
+    pyclpt/device/vendors.py sets to False), so that pyopencl's binary cache, keyed by source and
+    options, never hands back a binary compiled under the other setting."""
+    if device.is_pocl:
+        return [f"-D{INLINE_MATH_DEFINE}"]
+    if device.is_intel_cpu:
+        setting = re.sub(r"\W", "_", env.get(VECTORIZER_ENV) or "default")
+        return [f"-DINTEL_VECTORIZER_{setting}"]
+    return []
 
 
 _compile_seconds = 0.0

@@ -13,6 +13,13 @@ then appear together; :func:`pyclpt.list_devices` lists the registered Intel pla
 others, so PoCL keeps its ``0:0``. ``PYCLPT_DEVICE=intel`` (any substring of the platform name)
 selects it.
 
+Intel's vectorizer (which packs work-items into SIMD lanes) miscompiles some of pyclpt's kernels:
+lanes of the wavefront's ``sample_bsdf`` end live paths, and the rough materials' visible-normal
+sampling returns wrong directions in some lanes (different images from PoCL's; with the vectorizer
+off every image is bit-identical to PoCL's). So wherever Intel's runtime may be loaded, pyclpt sets
+``CL_CONFIG_USE_VECTORIZER=False`` for this process (Intel's runtime reads it when it loads) unless
+the user set that variable.
+
 A user's own ``OCL_ICD_VENDORS`` is left alone (nothing is registered then); so is a system where
 ``/etc/OpenCL/vendors`` already registers ``libintelocl.so``. Without the runtime nothing changes.
 """
@@ -31,6 +38,7 @@ from pyclpt.common.cache import cache_root
 log = logging.getLogger(__name__)
 
 VENDORS_ENV = "OCL_ICD_VENDORS"
+VECTORIZER_ENV = "CL_CONFIG_USE_VECTORIZER"
 SYSTEM_VENDORS = Path("/etc/OpenCL/vendors")
 INTEL_DISTRIBUTION = "intel-opencl-rt"
 INTEL_LIBRARY = "libintelocl.so"
@@ -101,6 +109,8 @@ def register() -> str:
     if state is not None:
         return state
     state = _register()
+    if state in ("registered", "system", "user") and env.get(VECTORIZER_ENV) is None:
+        env.set_for_process(VECTORIZER_ENV, "False")  # see the module docstring
     log.debug("Intel CPU OpenCL runtime: %s", state)
     return state
 
