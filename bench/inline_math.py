@@ -15,14 +15,15 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import sys
 import time
-from collections import defaultdict
-
-import pyopencl as cl
 
 import pyclpt
+
+if __package__:
+    from .vectorizer_remarks import collect
+else:  # run as a script: this folder is sys.path[0]
+    from vectorizer_remarks import collect
 
 SIZE, SPP, DEPTH = 256, 64, 8
 ITEMS = {"path_init": "paths", "intersect": "rays", "miss": "misses", "process_hit": "hits", "sample_bsdf": "hits",
@@ -59,57 +60,12 @@ def compile_seconds() -> dict:
     return {"build_s": total(), "wall_s": time.perf_counter() - start}
 
 
-_Kernel = cl.Kernel
-
-
-class _MarkedKernel(_Kernel):
-    """A kernel whose first launch (when PoCL compiles it) is framed by markers on stdout."""
-
-    def __call__(self, *args, **kwargs):  # type: ignore[override]
-        first = not getattr(self, "_marked", False)
-        if first:
-            os.write(1, f"\n@@KERNEL {self.function_name}\n".encode())
-            self._marked = True
-        ev = _Kernel.__call__(self, *args, **kwargs)
-        if first:
-            args[0].finish()  # PoCL compiles the work-group function when the launch runs
-            os.write(1, b"\n@@KERNEL ?\n")
-        return ev
-
-
 def remarks() -> dict:
-    """Render once with every kernel marked, reading LLVM's remarks (stdout) back through a pipe."""
-    read, write = os.pipe()
-    sys.stdout.flush()
-    saved = os.dup(1)  # PoCL prints LLVM's remarks on stdout
-    os.dup2(write, 1)
-    os.close(write)
-    cl.Kernel = _MarkedKernel  # type: ignore[misc]
-    chunks = []
-    import threading
-
-    def drain() -> None:
-        while data := os.read(read, 1 << 16):
-            chunks.append(data)
-    t = threading.Thread(target=drain)
-    t.start()
-    try:
+    """Every kernel's vectorizer remarks, from one render with each integrator (POCL_KERNEL_CACHE=0)."""
+    def render() -> None:
         renderer("megakernel", 64).render(1)
         renderer("wavefront", 64).render(1)
-    finally:
-        os.dup2(saved, 1)
-        t.join()
-    text = b"".join(chunks).decode(errors="replace").replace("<unknown>:0:0: ", "\n")
-    verdicts: dict = defaultdict(lambda: defaultdict(int))
-    kernel = "?"
-    for line in text.splitlines():
-        m = re.match(r"@@KERNEL (\w+)", line)
-        if m:
-            kernel = m.group(1)
-        elif line.startswith("loop not vectorized") or "vectorized loop" in line or "cannot be vectorized" in line:
-            if kernel != "?":
-                verdicts[kernel][line.strip()[:160]] += 1
-    return {k: dict(v) for k, v in verdicts.items()}
+    return collect(render)
 
 
 if __name__ == "__main__":

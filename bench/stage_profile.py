@@ -18,23 +18,23 @@ compiles it) framed by markers, and prints every kernel's loop-vectorizer remark
 stdout) with counts (the loop vectorizer's only; PoCL vectorizes across work-items by vectorizing the
 work-item loop it wraps around a kernel). Needs PoCL's kernel cache off.
 
-Self-contained (it imports only pyclpt), so a copy runs against another checkout for a before/after.
+It runs against whichever pyclpt the interpreter imports, so the same script measures two checkouts.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
-import re
 import statistics
-import sys
-import threading
 import time
 from collections import defaultdict
 
-import pyopencl as cl
-
 import pyclpt
+
+if __package__:
+    from .vectorizer_remarks import collect
+else:  # run as a script: this folder is sys.path[0]
+    from vectorizer_remarks import collect
 
 ITEMS = {"path_init": "paths", "intersect": "rays", "miss": "misses", "process_hit": "hits",
          "sample_bsdf": "hits", "shadow_test": "shadow_rays", "light_contribution": "unoccluded",
@@ -102,57 +102,12 @@ def speed(args: argparse.Namespace) -> None:
             }), flush=True)
 
 
-_Kernel = cl.Kernel
-
-
-class _MarkedKernel(_Kernel):
-    """A kernel whose first launch (when PoCL compiles it) is framed by markers on stdout."""
-
-    def __call__(self, *args, **kwargs):  # type: ignore[override]
-        first = not getattr(self, "_marked", False)
-        if first:
-            os.write(1, f"\n@@KERNEL {self.function_name}\n".encode())
-            self._marked = True
-        ev = _Kernel.__call__(self, *args, **kwargs)
-        if first:
-            args[0].finish()
-            os.write(1, b"\n@@KERNEL ?\n")
-        return ev
-
-
 def remarks(args: argparse.Namespace) -> None:
-    read, write = os.pipe()
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(write, 1)
-    os.close(write)
-    chunks: list[bytes] = []
-
-    def drain() -> None:
-        while data := os.read(read, 1 << 16):
-            chunks.append(data)
-    t = threading.Thread(target=drain)
-    t.start()
-    cl.Kernel = _MarkedKernel  # type: ignore[misc]
-    try:
+    def render() -> None:
         r = pyclpt.Renderer(pyclpt.load(args.scenes[0]), integrator="wavefront", layout=args.layout,
                             max_depth=8, width=64, height=64)
         r.render(1, progress=False)
-    finally:
-        cl.Kernel = _Kernel  # type: ignore[misc]
-        os.dup2(saved, 1)
-        t.join()
-    text = b"".join(chunks).decode(errors="replace").replace("<unknown>:0:0: ", "\n")
-    verdicts: dict = defaultdict(lambda: defaultdict(int))
-    kernel = "?"
-    for line in text.splitlines():
-        m = re.match(r"@@KERNEL (\w+)", line)
-        if m:
-            kernel = m.group(1)
-        elif kernel != "?" and ("loop" in line or "cost-model" in line) and "vectoriz" in line:
-            verdicts[kernel][line.strip()[:160]] += 1
-    print(json.dumps({"pyclpt": os.path.dirname(pyclpt.__file__), **{k: dict(v) for k, v in verdicts.items()}},
-                     indent=1))
+    print(json.dumps({"pyclpt": os.path.dirname(pyclpt.__file__), **collect(render)}, indent=1))
 
 
 def main() -> None:

@@ -16,9 +16,9 @@ selects it.
 Intel's vectorizer (which packs work-items into SIMD lanes) miscompiles some of pyclpt's kernels:
 lanes of the wavefront's ``sample_bsdf`` end live paths, and the rough materials' visible-normal
 sampling returns wrong directions in some lanes (different images from PoCL's; with the vectorizer
-off every image is bit-identical to PoCL's, and the megakernel runs 4x faster). So wherever Intel's runtime may be loaded, pyclpt sets
-``CL_CONFIG_USE_VECTORIZER=False`` for this process (Intel's runtime reads it when it loads) unless
-the user set that variable.
+off every image is bit-identical to PoCL's, and the megakernel runs 4x faster). So wherever Intel's
+runtime may be loaded, pyclpt sets ``CL_CONFIG_USE_VECTORIZER=False`` for this process (Intel's
+runtime reads it when it loads) unless the user set that variable.
 
 A user's own ``OCL_ICD_VENDORS`` is left alone (nothing is registered then); so is a system where
 ``/etc/OpenCL/vendors`` already registers ``libintelocl.so``. Without the runtime nothing changes.
