@@ -10,7 +10,6 @@ Checks that closest-hit t and prim and any-hit results are identical.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -27,11 +26,11 @@ from pyclpt.accel.bvh import build_bvh, leaf_packet_buffer  # noqa: E402
 
 
 class Tracer:
-    def __init__(self, width: int) -> None:
-        from pyclpt.device.context import default_device
+    def __init__(self, width: int, device: str | None) -> None:
+        from pyclpt.device.context import get_device
         from pyclpt.device.program import build_program
 
-        self.dev = default_device()
+        self.dev = get_device(device)
         self.ctx, self.queue = self.dev.context, self.dev.queue
         self.progs = {v: build_program(self.dev, source=KERNELS, name=f"bench_leaf_w{width}_{v}",
                                        defines={"BVH_WIDTH": width, "BVH_LEAF_PACKETS": v})
@@ -98,10 +97,8 @@ def main() -> None:
                     help="also packets on a BVH built with MIN,MAX,INTERSECTION_COST leaves "
                          "(repeatable; s:MIN,MAX,COST: the scalar loop)")
     a = ap.parse_args()
-    if a.device:
-        os.environ["PYCLPT_DEVICE"] = a.device
-    tr = Tracer(a.width)
-    print(f"# {cpu_model()}, {tr.dev.name if hasattr(tr.dev, 'name') else tr.dev}, width {a.width}, "
+    tr = Tracer(a.width, a.device)
+    print(f"# {cpu_model()}, {tr.dev.name}, width {a.width}, "
           f"{a.size}^2 rays, medians of {a.repeats}")
     print("| scene | variant | closest Mrays/s | vs scalar | any Mrays/s | vs scalar |")
     print("|---|---|---|---|---|---|")

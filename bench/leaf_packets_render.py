@@ -8,7 +8,6 @@ versus leaf packets on the new default build (LEAF_DEFAULTS), alternating, media
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -36,11 +35,11 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--mode", default=None)
     a = ap.parse_args()
-    if a.device:
-        os.environ["PYCLPT_DEVICE"] = a.device
     from pyclpt.rendering.renderer import Renderer
 
     kw = {"integrator": a.mode} if a.mode else {}
+    if a.device:
+        kw["device"] = a.device
     print(f"# {cpu_model()}, device {a.device or 'default'}, {a.size}^2 {a.spp} spp depth {a.depth}, "
           f"medians of {a.repeats}")
     for name in a.scenes:
