@@ -51,7 +51,8 @@ import pyopencl as cl  # noqa: E402
 import pyclpt  # noqa: E402
 from bench.embree_ceiling import _cosine_directions, camera_rays, scene_triangles  # noqa: E402
 from pyclpt.accel import bvh as bvh_mod  # noqa: E402
-from pyclpt.accel.bvh import DEFAULT_SETTINGS, DEFAULT_WIDTH, build_bvh  # noqa: E402
+from pyclpt.accel.bvh import DEFAULT_SETTINGS, DEFAULT_WIDTH, build_bvh, leaf_packet_buffer  # noqa: E402
+from pyclpt.buffers import scene as scene_mod  # noqa: E402
 from pyclpt.scene.library import scenes_root  # noqa: E402
 
 KERNELS = r"""
@@ -108,7 +109,13 @@ class Tracer:
         self.dev = default_device()
         self.ctx, self.queue = self.dev.context, self.dev.queue
         self.progs = {w: build_program(self.dev, source=KERNELS, name=f"bench_bvh_w{w}",
-                                       defines={"BVH_WIDTH": w}) for w in WIDTHS}
+                                       defines={"BVH_WIDTH": w, "BVH_LEAF_PACKETS": self.packets(w)})
+                      for w in WIDTHS}
+
+    @staticmethod
+    def packets(width: int) -> bool:
+        """Whether scenes of this width are traversed with leaf packets (as pyclpt.buffers.scene does)."""
+        return scene_mod.LEAF_PACKETS and width == 8
 
     def buf(self, a: np.ndarray) -> cl.Buffer:
         return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
@@ -116,7 +123,8 @@ class Tracer:
 
     def setup(self, width: int, bvh, org, dirs, tmax) -> dict:
         n = len(org)
-        s = {"n": n, "nodes": self.buf(bvh.nodes), "tris": self.buf(bvh.tris), "org": self.buf(org),
+        nodes = leaf_packet_buffer(bvh) if self.packets(width) else bvh.nodes
+        s = {"n": n, "nodes": self.buf(nodes), "tris": self.buf(bvh.tris), "org": self.buf(org),
              "dir": self.buf(dirs), "tmax": self.buf(tmax.astype(np.float32)),
              "t": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n),
              "p": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n),

@@ -26,6 +26,18 @@
  *
  * Triangle test: Moeller-Trumbore without backface culling, with the division
  * deferred until a hit is certain; t must lie in (0, tmax).
+ *
+ * BVH_LEAF_PACKETS (-D, default 0; wide nodes only; pyclpt.buffers.scene passes 1 for
+ * width 8): leaf links are LEAF_BIT | q << 5 | count with q the leaf's first packet
+ * record, BVH_PACKET_ROWS (10) rows of BVH_WIDTH words from the start of the node
+ * buffer: idx[W] (leaf-order triangle index, int32 bits; -1 = padding) v0x[W] v0y[W]
+ * v0z[W] e1x[W] e1y[W] e1z[W] e2x[W] e2y[W] e2z[W], ceil(count / W) records per leaf
+ * (pyclpt.accel.bvh.leaf_packet_buffer). A record's W triangles are tested together
+ * in floatW arithmetic with the scalar test's operations, in its order, per lane;
+ * padding lanes have zero edges (det = 0, never hit). The passing lanes are then
+ * taken in leaf order with the scalar loop's rule (re-checked against the current
+ * tmax, opacity test per candidate), so the hits are the scalar loop's, bit for bit.
+ * `tris` is then not read by the traversal (surface_at and the lights still use it).
  */
 #ifndef PYCLPT_BVH_H
 #define PYCLPT_BVH_H
@@ -310,6 +322,99 @@ static inline int bvh_wide_push(BvhVf t, BvhVi l, int* stack_node, float* stack_
     return sp - base;
 }
 
+#ifndef BVH_LEAF_PACKETS
+#define BVH_LEAF_PACKETS 0
+#endif
+
+#if BVH_LEAF_PACKETS
+#if BVH_WIDTH == 4
+#define BVH_LANES(M) M(s0, 0) M(s1, 1) M(s2, 2) M(s3, 3)
+#else
+#define BVH_LANES(M) M(s0, 0) M(s1, 1) M(s2, 2) M(s3, 3) M(s4, 4) M(s5, 5) M(s6, 6) M(s7, 7)
+#endif
+#define BVH_PACKET_ROWS 10
+
+/* bvh_triangle on BVH_WIDTH triangles at once: the packet record at row `row`
+ * (floatW units) of the node buffer is idx[W] v0x v0y v0z e1x e1y e1z e2x e2y e2z,
+ * padding lanes have idx -1 and zero edges (det = 0: never hit). Every lane does
+ * the scalar test's operations in the same order (no early exits); returns the
+ * lanes that pass against tmax, with t (divided), u, v, the undivided t and |det|
+ * for the re-check against a nearer tmax. */
+static inline BvhVi bvh_packet(__global const BvhVf* p, const BvhRay* r, float tmax, BvhVf* t_out, BvhVf* u_out,
+                               BvhVf* v_out, BvhVf* tn_out, BvhVf* adet_out) {
+    BvhVf v0x = p[1], v0y = p[2], v0z = p[3];
+    BvhVf e1x = p[4], e1y = p[5], e1z = p[6];
+    BvhVf e2x = p[7], e2y = p[8], e2z = p[9];
+    BvhVf dx = (BvhVf)(r->dx), dy = (BvhVf)(r->dy), dz = (BvhVf)(r->dz);
+    BvhVf pvx = dy * e2z - dz * e2y;
+    BvhVf pvy = dz * e2x - dx * e2z;
+    BvhVf pvz = dx * e2y - dy * e2x;
+    BvhVf det = e1x * pvx + e1y * pvy + e1z * pvz;
+    BvhVf sgn = det < (BvhVf)(0.0f) ? (BvhVf)(-1.0f) : (BvhVf)(1.0f);
+    BvhVf adet = det * sgn;
+    BvhVf sx = (BvhVf)(r->org.x) - v0x, sy = (BvhVf)(r->org.y) - v0y, sz = (BvhVf)(r->org.z) - v0z;
+    BvhVf u = (sx * pvx + sy * pvy + sz * pvz) * sgn;
+    BvhVf qx = sy * e1z - sz * e1y;
+    BvhVf qy = sz * e1x - sx * e1z;
+    BvhVf qz = sx * e1y - sy * e1x;
+    BvhVf v = (dx * qx + dy * qy + dz * qz) * sgn;
+    BvhVf t = (e2x * qx + e2y * qy + e2z * qz) * sgn;
+    BvhVf zero = (BvhVf)(0.0f);
+    BvhVi ok = (u >= zero) & (u <= adet) & (v >= zero) & (u + v <= adet) & (t > zero) & (adet > zero)
+               & (t < (BvhVf)(tmax) * adet);
+    BvhVf inv = (BvhVf)(1.0f) / adet;
+    BvhVf th = t * inv;
+    ok = ok & (th < (BvhVf)(tmax));
+    *t_out = th;
+    *u_out = u * inv;
+    *v_out = v * inv;
+    *tn_out = t;
+    *adet_out = adet;
+    return ok;
+}
+
+/* The leaf `cur` (LEAF_BIT | packet << 5 | count, packet in units of BVH_PACKET_ROWS rows):
+ * closest hit, lanes taken in leaf order with the scalar loop's rule (a lane found against
+ * the packet's starting tmax is re-checked against the current one, exactly the scalar test). */
+static inline void bvh_packet_leaf_closest(__global const float* nodes, int cur, const BvhRay* r, float* best,
+                                           float* bu, float* bv, int* prim, const AlphaTest* alpha) {
+    int q = (cur & 0x7fffffff) >> 5;
+    int count = cur & 31;
+    __global const BvhVf* p = (__global const BvhVf*)nodes + BVH_PACKET_ROWS * q;
+    for (int k = 0; k < count; k += BVH_WIDTH, p += BVH_PACKET_ROWS) {
+        BvhVf t, u, v, tn, adet;
+        BvhVi ok = bvh_packet(p, r, *best, &t, &u, &v, &tn, &adet);
+        BvhVi idx = BVH_AS_VI(p[0]);
+#define BVH_LANE_CLOSEST(c, j)                                                                     \
+        if (ok.c && tn.c < *best * adet.c && t.c < *best && alpha_accept(alpha, idx.c, u.c, v.c)) { \
+            *best = t.c;                                                                           \
+            *bu = u.c;                                                                             \
+            *bv = v.c;                                                                             \
+            *prim = idx.c;                                                                         \
+        }
+        BVH_LANES(BVH_LANE_CLOSEST)
+#undef BVH_LANE_CLOSEST
+    }
+}
+
+static inline bool bvh_packet_leaf_any(__global const float* nodes, int cur, const BvhRay* r, float tmax,
+                                       const AlphaTest* alpha) {
+    int q = (cur & 0x7fffffff) >> 5;
+    int count = cur & 31;
+    __global const BvhVf* p = (__global const BvhVf*)nodes + BVH_PACKET_ROWS * q;
+    for (int k = 0; k < count; k += BVH_WIDTH, p += BVH_PACKET_ROWS) {
+        BvhVf t, u, v, tn, adet;
+        BvhVi ok = bvh_packet(p, r, tmax, &t, &u, &v, &tn, &adet);
+        BvhVi idx = BVH_AS_VI(p[0]);
+#define BVH_LANE_ANY(c, j) \
+        if (ok.c && alpha_accept(alpha, idx.c, u.c, v.c)) return true;
+        BVH_LANES(BVH_LANE_ANY)
+#undef BVH_LANE_ANY
+    }
+    return false;
+}
+#endif /* BVH_LEAF_PACKETS */
+
 /* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
  * On a miss hit->prim = -1 and hit->t = tmax. */
 static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, float3 org,
@@ -334,6 +439,9 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
                 continue;
             }
         } else {
+#if BVH_LEAF_PACKETS
+            bvh_packet_leaf_closest(nodes, cur, &r, &best, &bu, &bv, &prim, alpha);
+#else
             int start = (cur & 0x7fffffff) >> 5;
             int end = start + (cur & 31);
             for (int i = start; i < end; ++i) {
@@ -345,6 +453,7 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
                     prim = i;
                 }
             }
+#endif
         }
         /* Pop the next subtree that may still hold something nearer. */
         while (sp > 0 && !(stack_t[sp - 1] < best)) --sp;
@@ -372,12 +481,16 @@ static inline bool bvh_any_alpha(__global const float* nodes, __global const flo
             BvhVf t = bvh_wide_node(nodes, cur, &r, tmax, &l);
             sp += bvh_wide_push(t, l, stack_node, stack_t, sp);
         } else {
+#if BVH_LEAF_PACKETS
+            if (bvh_packet_leaf_any(nodes, cur, &r, tmax, alpha)) return true;
+#else
             int start = (cur & 0x7fffffff) >> 5;
             int end = start + (cur & 31);
             for (int i = start; i < end; ++i) {
                 float t, u, v;
                 if (bvh_triangle(tris, i, &r, tmax, &t, &u, &v) && alpha_accept(alpha, i, u, v)) return true;
             }
+#endif
         }
         if (sp == 0) return false;
         cur = stack_node[--sp];

@@ -1,7 +1,7 @@
 /* scene.h: the scene as the kernels see it, a set of plain buffers written by
  * pyclpt/scene_buffers.py (the offsets below are mirrored there).
  *
- *   nodes      BVH nodes, 8 * BVH_WIDTH floats each (bvh.h)
+ *   nodes      BVH nodes, 8 * BVH_WIDTH floats each, then leaf packets with BVH_LEAF_PACKETS (bvh.h)
  *   tris       triangles in BVH leaf order: v0, e1 = v1 - v0, e2 = v2 - v0 (9 floats)
  *   tri_info   2 ints per triangle: material id | TRI_HAS_* flags, light index or -1
  *   tri_vidx   3 ints per triangle: vertex indices into vnormals / vuvs

@@ -26,6 +26,10 @@ after its parent. ``tris`` rows are ``v0, v1-v0, v2-v0`` (9 float32) in leaf
 order, in which every subtree's triangles are contiguous; ``tri_order`` maps a
 leaf-order slot back to the caller's triangle index.
 
+For width 8 the renderer uploads :func:`leaf_packet_buffer` instead of ``nodes``: the nodes with
+their leaf links pointing at packet records of 8 triangles (structure of arrays) appended to them,
+which ``cl/scene/bvh.h`` tests 8 at a time (``-DBVH_LEAF_PACKETS=1``, docs/bvh.md "Leaf packets").
+
 Building
 --------
 Embree's builder calls back for every node and leaf, and Python callbacks cost
@@ -111,7 +115,7 @@ from pyclpt.common.cache import cache_path, content_key, save_npz
 
 log = logging.getLogger("pyclpt.accel.bvh")
 
-__all__ = ["FlatBVH", "BuildSettings", "DEFAULT_SETTINGS", "build_bvh", "LAYOUT_VERSION"]
+__all__ = ["FlatBVH", "BuildSettings", "DEFAULT_SETTINGS", "build_bvh", "leaf_packet_buffer", "LAYOUT_VERSION"]
 
 #: Bumped whenever the flattened layout or the build changes meaning.
 LAYOUT_VERSION = "bvh-layout-1"
@@ -128,6 +132,10 @@ LEAF_BIT = 0x80000000
 MAX_LEAF = 31                 # 5-bit count field
 MAX_TRIANGLES = 1 << 26       # 26-bit start field
 EMPTY_LINK = LEAF_BIT         # start 0, count 0
+#: Default (min_leaf, intersection_cost) per width. Width 8 is traversed with leaf packets
+#: (8 triangles tested at once, cl/scene/bvh.h BVH_LEAF_PACKETS), which make a triangle test
+#: cheaper relative to a node: larger leaves (docs/bvh.md, "Leaf packets").
+LEAF_DEFAULTS = {2: (1, 0.35), 4: (1, 0.35), 8: (2, 0.1)}
 
 
 @dataclass(frozen=True)
@@ -135,10 +143,10 @@ class BuildSettings:
     """Embree builder parameters (part of the cache key)."""
 
     quality: int = embree.RTC_BUILD_QUALITY_MEDIUM
-    min_leaf: int = 1
+    min_leaf: int = 0         # 0: the width's default (LEAF_DEFAULTS)
     max_leaf: int = 16
     traversal_cost: float = 1.0
-    intersection_cost: float = 0.35
+    intersection_cost: float = 0.0  # 0: the width's default (LEAF_DEFAULTS)
     max_depth: int = 0        # 0: the deepest the traversal stack allows (60 for width 2)
     width: int = DEFAULT_WIDTH  # children per node: 2, 4 or 8 (module docstring)
 
@@ -147,6 +155,10 @@ class BuildSettings:
             raise ValueError(f"width must be one of {WIDTHS}")
         if self.max_depth == 0:
             object.__setattr__(self, "max_depth", {2: 60, 4: 40, 8: 24}[self.width])
+        if self.min_leaf == 0:
+            object.__setattr__(self, "min_leaf", LEAF_DEFAULTS[self.width][0])
+        if self.intersection_cost == 0.0:
+            object.__setattr__(self, "intersection_cost", LEAF_DEFAULTS[self.width][1])
         if not 1 <= self.min_leaf <= self.max_leaf <= MAX_LEAF:
             raise ValueError(f"need 1 <= min_leaf <= max_leaf <= {MAX_LEAF}")
         if self.quality not in (embree.RTC_BUILD_QUALITY_LOW, embree.RTC_BUILD_QUALITY_MEDIUM):
@@ -193,6 +205,52 @@ class FlatBVH:
             hi = f[:, [1, 3, 5]].transpose(0, 2, 1)
             links = f.view(np.int32)[:, 6]
         return lo, hi, links
+
+
+#: Rows (of ``width`` words) of one leaf packet record (cl/scene/bvh.h, ``BVH_PACKET_ROWS``).
+PACKET_ROWS = 10
+
+
+def leaf_packet_buffer(bvh: FlatBVH) -> np.ndarray:
+    """The node buffer of ``-DBVH_LEAF_PACKETS=1`` (wide BVHs only): a flat float32 array.
+
+    The nodes, their leaf links rewritten to ``LEAF_BIT | q << 5 | count`` where ``q`` is the
+    leaf's first packet record in units of ``PACKET_ROWS`` rows of ``width`` words from the buffer
+    start, then (after zero padding to a record boundary) the packets: per leaf, ``ceil(count /
+    width)`` records of ``idx[W] v0x[W] v0y[W] v0z[W] e1x[W] e1y[W] e1z[W] e2x[W] e2y[W] e2z[W]``
+    holding the leaf's triangles in leaf order (``idx``: the leaf-order index, int32 bits), the
+    last one padded with ``idx = -1`` and all-zero rows (zero edges: det = 0, never hit).
+    """
+    W, N = bvh.width, bvh.node_count
+    if W == 2:
+        raise ValueError("leaf packets need a wide BVH (width 4 or 8)")
+    nodes = bvh.nodes.reshape(N, 8, W).copy()
+    links = nodes.view(np.int32)[:, 6]
+    leaf = (links < 0) & ((links & 31) > 0)
+    start = (links[leaf] & 0x7FFFFFFF) >> 5
+    count = links[leaf] & 31
+    npk = (count + W - 1) // W
+    first = np.concatenate([[0], np.cumsum(npk)[:-1]]).astype(np.int64)
+    base = -(-8 * N // PACKET_ROWS)  # first record after the nodes
+    q = base + first
+    if q.size and int(q.max()) + int(npk.max()) >= 1 << 26:
+        raise ValueError("too many leaf packets for the 26-bit link field")
+    links[leaf] = (np.int64(-(1 << 31)) | (q << 5) | count).astype(np.int32)
+    P = int(npk.sum())
+    packets = np.zeros((P, PACKET_ROWS, W), np.float32)
+    pi = packets[:, 0].view(np.int32)
+    pi[:] = -1
+    # Every leaf triangle: its packet and lane.
+    tot = int(count.sum())
+    lstart = np.repeat(start, count)
+    k = np.arange(tot) - np.repeat(np.concatenate([[0], np.cumsum(count)[:-1]]), count)
+    pk = np.repeat(first, count) + k // W
+    lane = k % W
+    tri = lstart + k
+    pi[pk, lane] = tri
+    packets[pk, 1:, lane] = bvh.tris[tri]
+    pad = np.zeros(base * PACKET_ROWS * W - 8 * N * W, np.float32)
+    return np.concatenate([nodes.ravel(), pad, packets.ravel()])
 
 
 # --------------------------------------------------------------------------

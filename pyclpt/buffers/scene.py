@@ -14,11 +14,15 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.accel.bvh import FlatBVH, build_bvh
+from pyclpt.accel.bvh import FlatBVH, build_bvh, leaf_packet_buffer
 from pyclpt.buffers.lights import LightArrays, camera_consts, pack_lights
 from pyclpt.buffers.materials import MAT_STRIDE, TextureTable, pack_material, pack_materials  # noqa: F401
 from pyclpt.device.context import Device, upload
 from pyclpt.scene.model import Scene
+
+#: Test an 8-wide BVH's leaf triangles 8 at a time (cl/scene/bvh.h BVH_LEAF_PACKETS, docs/bvh.md);
+#: the same hits as the scalar loop, faster on PoCL and Intel's runtime (measured for width 8 only).
+LEAF_PACKETS = True
 
 TRI_HAS_NORMALS = 1 << 24
 TRI_HAS_UVS = 1 << 25
@@ -38,7 +42,8 @@ class SceneArrays:
     lights: LightArrays
     textures: TextureTable
     bounds: np.ndarray  # (2, 3) scene bounding box
-    defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, BVH_WIDTH (node layout)
+    defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, BVH_WIDTH, BVH_LEAF_PACKETS
+    node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer)
 
     @property
     def triangle_count(self) -> int:
@@ -50,7 +55,7 @@ class SceneArrays:
 
     def device_arrays(self) -> list[tuple[str, np.ndarray]]:
         """(name, array) of every scene buffer but the constants, in SCENE_PARAMS order."""
-        return [("BVH nodes", self.bvh.nodes), ("triangles", self.bvh.tris), ("triangle info", self.tri_info),
+        return [("BVH nodes", self.node_buffer), ("triangles", self.bvh.tris), ("triangle info", self.tri_info),
                 ("triangle vertices", self.tri_vidx), ("vertex normals", self.vnormals),
                 ("vertex uvs", self.vuvs), ("materials", self.materials), ("lights", self.lights.lights),
                 ("light data", self.lights.light_data), ("texture records", self.textures.info()),
@@ -81,6 +86,7 @@ def pack_scene(scene: Scene) -> SceneArrays:
     P = np.concatenate(positions)
     tris = np.concatenate(indices)
     bvh = build_bvh(P, tris)
+    packets = LEAF_PACKETS and bvh.width == 8
     order = bvh.tri_order
     bounds = np.stack([P.min(0), P.max(0)])
     lights = pack_lights(scene, bvh.tris.reshape(-1, 9), np.concatenate(emission)[order], bounds, mats.textures)
@@ -98,7 +104,8 @@ def pack_scene(scene: Scene) -> SceneArrays:
         textures=mats.textures,
         bounds=bounds,
         defines={"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
-                 "BVH_WIDTH": bvh.width},
+                 "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets},
+        node_buffer=leaf_packet_buffer(bvh) if packets else bvh.nodes,
     )
 
 

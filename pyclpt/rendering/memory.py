@@ -21,8 +21,11 @@ from pyclpt.scene.model import Bitmap, Checkerboard, Envmap, Scene
 # Bytes of one value of the accumulation sum (pyclpt.film.accumulator): a float, or two words.
 SUM_VALUE_BYTES = {"single": 4, "compensated": 8, "double": 8}
 # Scene buffers per triangle: BVH triangle (36), info (8), vertex indices (12), BVH nodes (about
-# one 64-byte binary node per 4 triangles, counted twice; 8-wide trees need less) and an emitter record (32).
-BYTES_PER_TRIANGLE = 36 + 8 + 12 + 32 + 32
+# one 64-byte binary node per 4 triangles, counted twice; 8-wide trees need less), an emitter record (32)
+# and the 8-wide BVH's leaf packets in the node buffer (pyclpt.accel.bvh.leaf_packet_buffer: 320-byte
+# records of 8 triangle slots; 73-91 bytes per triangle on the shared scenes, counted as 128).
+LEAF_PACKET_BYTES_PER_TRIANGLE = 128
+BYTES_PER_TRIANGLE = 36 + 8 + 12 + 32 + 32 + LEAF_PACKET_BYTES_PER_TRIANGLE
 BYTES_PER_VERTEX = 12 + 8  # shading normal, uv
 BYTES_PER_MATERIAL = 4 * 32
 # The parts of render_memory() that are one buffer each (the others add up several).

@@ -1,0 +1,142 @@
+"""Leaf packets (cl/scene/bvh.h BVH_LEAF_PACKETS) versus the scalar leaf loop: exactness and speed.
+
+Same rays as bench/bvh_traversal.py (bounce rays for closest hit, shadow rays for any hit, from the
+first hits of camera rays); the two variants run alternately, figures are medians of --repeats.
+Checks that closest-hit t and prim and any-hit results are identical.
+
+    python bench/leaf_packets.py [--device pocl|intel] [--width 8] [--size 256] [--repeats 7] [scenes...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import pyopencl as cl  # noqa: E402
+
+from bench.bvh_traversal import KERNELS, cpu_model, load_scene, make_rays  # noqa: E402
+from pyclpt.accel import bvh as bvh_mod  # noqa: E402
+from pyclpt.accel.bvh import build_bvh, leaf_packet_buffer  # noqa: E402
+
+
+class Tracer:
+    def __init__(self, width: int, device: str | None) -> None:
+        from pyclpt.device.context import get_device
+        from pyclpt.device.program import build_program
+
+        self.dev = get_device(device)
+        self.ctx, self.queue = self.dev.context, self.dev.queue
+        self.progs = {v: build_program(self.dev, source=KERNELS, name=f"bench_leaf_w{width}_{v}",
+                                       defines={"BVH_WIDTH": width, "BVH_LEAF_PACKETS": v})
+                      for v in (0, 1)}
+        # make_rays traces with width 2
+        self.progs2 = build_program(self.dev, source=KERNELS, name="bench_leaf_w2", defines={"BVH_WIDTH": 2})
+
+    def buf(self, a):
+        return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+
+    def setup(self, variant, nodes, tris, org, dirs, tmax):
+        n = len(org)
+        s = {"n": n, "t": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n),
+             "p": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n),
+             "a": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n)}
+        prog = self.progs2 if variant == "w2" else self.progs[variant]
+        b = [self.buf(x) for x in (nodes, tris, org, dirs, tmax.astype(np.float32))]
+        s["keep"] = b
+        kc, ka = cl.Kernel(prog, "closest"), cl.Kernel(prog, "any_hit")
+        kc.set_args(b[0], b[1], b[2], b[3], s["t"], s["p"])
+        ka.set_args(b[0], b[1], b[2], b[3], b[4], s["a"])
+        s["kernels"] = {"closest": kc, "any": ka}
+        return s
+
+    def time(self, s, which):
+        ev = cl.enqueue_nd_range_kernel(self.queue, s["kernels"][which], (s["n"],), None)
+        ev.wait()
+        return (ev.profile.end - ev.profile.start) * 1e-9
+
+    def results(self, s):
+        n = s["n"]
+        t, p, a = np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.int32)
+        cl.enqueue_copy(self.queue, t, s["t"])
+        cl.enqueue_copy(self.queue, p, s["p"])
+        cl.enqueue_copy(self.queue, a, s["a"]).wait()
+        return t, p, a
+
+
+class _RayTracer:
+    """make_rays' interface (setup(width, bvh, ...), time, results) on the width-2 program."""
+
+    def __init__(self, tr: Tracer) -> None:
+        self.tr = tr
+
+    def setup(self, width, bvh, org, dirs, tmax):
+        return self.tr.setup("w2", bvh.nodes, bvh.tris, org, dirs, tmax)
+
+    def time(self, s, which):
+        return self.tr.time(s, which)
+
+    def results(self, s):
+        return self.tr.results(s)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("scenes", nargs="*", default=["cornell-box", "shared/cornell-box", "shared/staircase2",
+                                                   "shared/living-room"])
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--width", type=int, default=8)
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--tuned", action="append", default=[],
+                    help="also packets on a BVH built with MIN,MAX,INTERSECTION_COST leaves "
+                         "(repeatable; s:MIN,MAX,COST: the scalar loop)")
+    a = ap.parse_args()
+    tr = Tracer(a.width, a.device)
+    print(f"# {cpu_model()}, {tr.dev.name}, width {a.width}, "
+          f"{a.size}^2 rays, medians of {a.repeats}")
+    print("| scene | variant | closest Mrays/s | vs scalar | any Mrays/s | vs scalar |")
+    print("|---|---|---|---|---|---|")
+    for name in a.scenes:
+        scene = load_scene(name)
+        if scene is None:
+            continue
+        pos, idx, bounds, p, bounce, shadow, smax, _ = make_rays(_RayTracer(tr), scene, a.size, 1)
+        bvh = build_bvh(pos, idx, settings=bvh_mod.BuildSettings(width=a.width))
+        inf = np.full(len(p), np.inf, np.float32)
+        variants = {"scalar": (0, bvh, bvh.nodes), "packets": (1, bvh, leaf_packet_buffer(bvh))}
+        for spec in a.tuned:
+            scalar = spec.startswith("s:")
+            lo, hi, ic = spec.removeprefix("s:").split(",")
+            b = build_bvh(pos, idx, settings=bvh_mod.BuildSettings(width=a.width, min_leaf=int(lo), max_leaf=int(hi),
+                                                                   intersection_cost=float(ic)))
+            variants[f"{'scalar' if scalar else 'packets'} {lo}-{hi} {ic} ({b.node_count} nodes)"] = \
+                (0, b, b.nodes) if scalar else (1, b, leaf_packet_buffer(b))
+        sets = {k: (tr.setup(v, nb, b.tris, p, bounce, inf), tr.setup(v, nb, b.tris, p, shadow, smax))
+                for k, (v, b, nb) in variants.items()}
+        for k in variants:
+            tr.time(sets[k][0], "closest")
+            tr.time(sets[k][1], "any")
+        (t0, p0, _), (t1, p1, _) = tr.results(sets["scalar"][0]), tr.results(sets["packets"][0])
+        a0, a1 = tr.results(sets["scalar"][1])[2], tr.results(sets["packets"][1])[2]
+        bad = (np.count_nonzero(t0.view(np.int32) != t1.view(np.int32)), np.count_nonzero(p0 != p1),
+               np.count_nonzero(a0 != a1))
+        print(f"  {name}: {bvh.node_count} nodes; packets vs scalar differ in t {bad[0]}, prim {bad[1]}, "
+              f"any {bad[2]} of {len(p)} rays")
+        times = {(k, q): [] for k in variants for q in ("closest", "any")}
+        for _ in range(a.repeats):
+            for k in variants:
+                times[k, "closest"].append(tr.time(sets[k][0], "closest"))
+                times[k, "any"].append(tr.time(sets[k][1], "any"))
+        m = {k: len(p) / float(np.median(x)) / 1e6 for k, x in times.items()}
+        for k in variants:
+            print(f"| {name} | {k} | {m[k, 'closest']:.2f} | {m[k, 'closest'] / m['scalar', 'closest']:.2f} "
+                  f"| {m[k, 'any']:.2f} | {m[k, 'any'] / m['scalar', 'any']:.2f} |", flush=True)
+
+if __name__ == "__main__":
+    main()
