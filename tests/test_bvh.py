@@ -88,8 +88,20 @@ class Tracer:
             self.ctx, self.queue = dev.context, dev.queue
             self.progs = {w: build_program(dev, source=KERNELS, name=f"test_bvh_w{w}", defines={"BVH_WIDTH": w})
                           for w in WIDTHS}
+            # leaf triangles tested W at a time (BVH_LEAF_PACKETS; the renderer's default for width 8)
+            self.packet_progs = {w: build_program(dev, source=KERNELS, name=f"test_bvh_packets_w{w}",
+                                                  defines={"BVH_WIDTH": w, "BVH_LEAF_PACKETS": 1}) for w in (4, 8)}
 
-    def trace(self, bvh: FlatBVH, org: np.ndarray, dirs: np.ndarray, tmax: float = np.inf):
+    def trace(self, bvh: FlatBVH, org: np.ndarray, dirs: np.ndarray, tmax: float = np.inf, packets: bool = False):
+        """Closest hit (t, u, v; leaf-order prim) and any hit of each ray; with ``packets`` through the
+        leaf packets (leaf_packet_buffer) as the renderer traces an 8-wide BVH."""
+        if packets:
+            from pyclpt.accel.bvh import leaf_packet_buffer
+
+            buf = leaf_packet_buffer(bvh)
+            padded = np.concatenate([buf, np.zeros(-buf.size % (8 * bvh.width), np.float32)]).reshape(
+                -1, 8 * bvh.width)
+            bvh = FlatBVH(nodes=padded, tris=bvh.tris, tri_order=bvh.tri_order, build_seconds=0.0)
         mf = pyopencl.mem_flags
         ctx, q = self.ctx, self.queue
         n = org.shape[0]
@@ -105,7 +117,7 @@ class Tracer:
         b_prim = pyopencl.Buffer(ctx, mf.WRITE_ONLY, prim.nbytes)
         b_any = pyopencl.Buffer(ctx, mf.WRITE_ONLY, anyhit.nbytes)
         t = np.float32(tmax)
-        prog = self.progs[bvh.width]  # the kernels of the BVH's node layout
+        prog = (self.packet_progs if packets else self.progs)[bvh.width]  # the kernels of the node layout
         pyopencl.Kernel(prog, "trace_closest")(q, (n,), None, b_nodes, b_tris, b_org, b_dir, t, b_tuv, b_prim)
         pyopencl.Kernel(prog, "trace_any")(q, (n,), None, b_nodes, b_tris, b_org, b_dir, t, b_any)
         pyopencl.enqueue_copy(q, tuv, b_tuv)
@@ -272,8 +284,13 @@ def test_tmax_limits_hits(mesh_case, tracer):
     assert np.all(tuv2[prim2 < 0, 0] == np.float32(tmax))
 
 
-@pytest.mark.parametrize("width", WIDTHS)
-def test_single_triangle_and_tiny_meshes(tracer, width):
+# (width, leaf packets): every node layout, and the renderer's default (8 wide, leaf packets)
+LAYOUTS = [(w, False) for w in WIDTHS] + [(8, True)]
+LAYOUT_IDS = [f"w{w}{'-packets' if p else ''}" for w, p in LAYOUTS]
+
+
+@pytest.mark.parametrize("width,packets", LAYOUTS, ids=LAYOUT_IDS)
+def test_single_triangle_and_tiny_meshes(tracer, width, packets):
     settings = BuildSettings(width=width)
     for n in (1, 2, 3, 5, 33):
         pos, idx = soup_mesh(n, seed=n)
@@ -281,7 +298,7 @@ def test_single_triangle_and_tiny_meshes(tracer, width):
         check_structure(bvh, pos, idx)
         org, dirs = random_rays(pos, 4000, seed=n)
         ref = embree_reference(pos, idx, org, dirs)
-        _, prim, anyhit = tracer.trace(bvh, org, dirs)
+        _, prim, anyhit = tracer.trace(bvh, org, dirs, packets=packets)
         assert np.mean((prim >= 0) == (ref["primID"] >= 0)) >= 0.999
         assert np.mean(anyhit == (ref["primID"] >= 0)) >= 0.999
     pos, idx = soup_mesh(1)
@@ -299,8 +316,8 @@ def test_single_triangle_and_tiny_meshes(tracer, width):
         np.testing.assert_array_equal(rows[1:6:2, 0], hi[0, 0])
 
 
-@pytest.mark.parametrize("width", WIDTHS)
-def test_ray_starting_on_a_triangle_ignores_it(tracer, width):
+@pytest.mark.parametrize("width,packets", LAYOUTS, ids=LAYOUT_IDS)
+def test_ray_starting_on_a_triangle_ignores_it(tracer, width, packets):
     """A ray whose origin lies exactly on a triangle (t = 0) must not hit that triangle: hits need
     0 < t < tmax. Parallel triangles at z = 0 and z = 2; from (0.25, 0.25, 0), +z hits the upper one
     at t = 2 and -z misses, for the closest-hit and the any-hit query; likewise from the upper one."""
@@ -310,7 +327,7 @@ def test_ray_starting_on_a_triangle_ignores_it(tracer, width):
                     settings=BuildSettings(width=width))
     org = np.array([[0.25, 0.25, 0], [0.25, 0.25, 0], [0.25, 0.25, 2], [0.25, 0.25, 2]], np.float32)
     dirs = np.array([[0, 0, 1], [0, 0, -1], [0, 0, -1], [0, 0, 1]], np.float32)
-    tuv, prim, anyhit = tracer.trace(bvh, org, dirs)
+    tuv, prim, anyhit = tracer.trace(bvh, org, dirs, packets=packets)
     hit_tri = np.where(prim >= 0, bvh.tri_order[np.maximum(prim, 0)], -1)
     np.testing.assert_array_equal(hit_tri, [1, -1, 0, -1])
     np.testing.assert_array_equal(tuv[[0, 2], 0], [2.0, 2.0])
@@ -318,7 +335,7 @@ def test_ray_starting_on_a_triangle_ignores_it(tracer, width):
     assert np.all(tuv[[1, 3], 0] == np.inf)
     np.testing.assert_array_equal(anyhit, [True, False, True, False])
     # with tmax short of the other triangle, nothing is hit at all
-    _, prim, anyhit = tracer.trace(bvh, org, dirs, tmax=1.5)
+    _, prim, anyhit = tracer.trace(bvh, org, dirs, tmax=1.5, packets=packets)
     assert np.all(prim == -1) and not anyhit.any()
 
 
@@ -625,7 +642,7 @@ def packet_progs(tracer):
 @pytest.mark.parametrize("mesh", ["soup", "sphere_grid"])
 @pytest.mark.parametrize("width", [4, 8])
 @pytest.mark.parametrize("leaves", [(0, 0.0), (1, 0.35), (9, 0.05)])
-def test_leaf_packets_match_scalar_leaves(tracer, packet_progs, mesh, width, leaves):
+def test_leaf_packets_match_scalar_leaves(tracer, mesh, width, leaves):
     """Testing a leaf's triangles W at a time (leaf_packet_buffer) gives exactly the scalar loop's
     closest hit (t, u, v, prim bit for bit) and any-hit on random and edge rays, unbounded and with
     a finite tmax; also for leaves of several packets (min_leaf 9) and padded lanes."""
@@ -642,19 +659,12 @@ def test_leaf_packets_match_scalar_leaves(tracer, packet_progs, mesh, width, lea
     assert np.array_equal(np.sort(ids[ids >= 0]), np.arange(bvh.triangle_count))
     np.testing.assert_array_equal(packets[:, 1:].transpose(0, 2, 1)[ids >= 0], bvh.tris[ids[ids >= 0]])
     assert not packets[:, 1:].transpose(0, 2, 1)[ids < 0].any()  # padding: zero edges, never hit
-    padded = np.concatenate([buf, np.zeros(-buf.size % (8 * W), np.float32)]).reshape(-1, 8 * W)
     r_org, r_dir = random_rays(pos, 8000, seed=23)
     e_org, e_dir = edge_rays(pos, bvh, 8000)
     org, dirs = np.concatenate([r_org, e_org]), np.concatenate([r_dir, e_dir])
     for tmax in (np.inf, float(np.linalg.norm(pos.max(0) - pos.min(0))) / 4):
         tuv, prim, anyhit = tracer.trace(bvh, org, dirs, tmax)
-        progs = tracer.progs
-        try:
-            tracer.progs = {**progs, W: packet_progs[W]}
-            ptuv, pprim, pany = tracer.trace(FlatBVH(nodes=padded, tris=bvh.tris,
-                                                     tri_order=bvh.tri_order, build_seconds=0.0), org, dirs, tmax)
-        finally:
-            tracer.progs = progs
+        ptuv, pprim, pany = tracer.trace(bvh, org, dirs, tmax, packets=True)
         assert np.mean(prim >= 0) > 0.05
         np.testing.assert_array_equal(ptuv.view(np.int32), tuv.view(np.int32))
         np.testing.assert_array_equal(pprim, prim)
