@@ -23,31 +23,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import pyopencl as cl  # noqa: E402
 
+from bench.bvh_traversal import Tracer as TraversalTracer  # noqa: E402
 from pyclpt.accel import embree  # noqa: E402
 from pyclpt.accel.bvh import DEFAULT_SETTINGS, BuildSettings, build_bvh  # noqa: E402
 from pyclpt.scene.library import scenes_root  # noqa: E402
 from pyclpt.scene.mesh_io import load_mesh  # noqa: E402
-
-KERNELS = r"""
-#include "scene/bvh.h"
-__kernel void closest(__global const float* nodes, __global const float* tris,
-                      __global const float* org, __global const float* dir,
-                      __global float* out_t, __global int* out_prim) {
-    int i = get_global_id(0);
-    Hit h;
-    bool ok = bvh_closest(nodes, tris, load3(org, i), load3(dir, i), INFINITY, &h);
-    out_t[i] = ok ? h.t : -1.0f;
-    out_prim[i] = h.prim;
-}
-__kernel void any_hit(__global const float* nodes, __global const float* tris,
-                  __global const float* org, __global const float* dir,
-                  __global int* out_any) {
-    int i = get_global_id(0);
-    out_any[i] = bvh_any(nodes, tris, load3(org, i), load3(dir, i), INFINITY) ? 1 : 0;
-}
-"""
 
 
 def scenes_dir() -> Path:
@@ -73,55 +54,26 @@ def random_rays(pos: np.ndarray, n: int, seed: int = 1) -> tuple[np.ndarray, np.
     return org, dirs
 
 
-class Tracer:
-    def __init__(self) -> None:
-        try:
-            from pyclpt.device.context import default_device
-            from pyclpt.device.program import build_program
-
-            self.dev = default_device()
-            self.ctx, self.queue = self.dev.context, self.dev.queue
-            self.prog = build_program(self.dev, source=KERNELS, name="bench_bvh")
-        except ImportError:
-            plat = next(p for p in cl.get_platforms() if "Portable" in p.name)
-            self.ctx = cl.Context(plat.get_devices())
-            self.queue = cl.CommandQueue(
-                self.ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
-            self.prog = cl.Program(self.ctx, KERNELS).build(
-                options=["-cl-std=CL1.2", "-I", str(ROOT / "cl")])
+class Tracer(TraversalTracer):
+    """bench/bvh_traversal.py's kernels (leaf packets where the renderer uses them), best-of timing."""
 
     def throughput(self, bvh, org: np.ndarray, dirs: np.ndarray, repeats: int = 3):
-        mf = cl.mem_flags
-        ctx, q = self.ctx, self.queue
-        n = org.shape[0]
-        b_nodes = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=bvh.nodes)
-        b_tris = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=bvh.tris)
-        b_org = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=org)
-        b_dir = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=dirs)
-        b_t = cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)
-        b_p = cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)
-        b_a = cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)
-        kc = cl.Kernel(self.prog, "closest")
-        ka = cl.Kernel(self.prog, "any_hit")
-        kc.set_args(b_nodes, b_tris, b_org, b_dir, b_t, b_p)
-        ka.set_args(b_nodes, b_tris, b_org, b_dir, b_a)
+        s = self.setup(bvh.width, bvh, org, dirs, np.full(len(org), np.inf, np.float32))
         # Best of `repeats` for wall time (profiling events) and, separately,
         # for process CPU time (all PoCL threads): on a shared machine the
         # latter is the steadier comparison.
-        wall = {"c": float("inf"), "a": float("inf")}
+        wall = {"closest": float("inf"), "any": float("inf")}
         cpu = dict(wall)
         for _ in range(repeats):
-            for key, k in (("c", kc), ("a", ka)):
+            for key in wall:
                 c0 = time.process_time()
-                ev = cl.enqueue_nd_range_kernel(q, k, (n,), None)
-                ev.wait()
+                wall[key] = min(wall[key], self.time(s, key))
                 cpu[key] = min(cpu[key], time.process_time() - c0)
-                wall[key] = min(wall[key], (ev.profile.end - ev.profile.start) * 1e-9)
-        prim = np.empty(n, np.int32)
-        cl.enqueue_copy(q, prim, b_p).wait()
+        _, prim, _ = self.results(s)
+        n = len(org)
         mr = {k: n / v / 1e6 for k, v in wall.items()}
         mc = {k: n / v / 1e6 for k, v in cpu.items()}
-        return mr["c"], mr["a"], mc["c"], mc["a"], float((prim >= 0).mean())
+        return mr["closest"], mr["any"], mc["closest"], mc["any"], float((prim >= 0).mean())
 
 
 def main() -> None:

@@ -102,11 +102,11 @@ def load_scene(name: str):
 class Tracer:
     """The bench kernels compiled for every node width; traces one width's BVH."""
 
-    def __init__(self) -> None:
-        from pyclpt.device.context import default_device
+    def __init__(self, device: str | None = None) -> None:
+        from pyclpt.device.context import get_device
         from pyclpt.device.program import build_program
 
-        self.dev = default_device()
+        self.dev = get_device(device)
         self.ctx, self.queue = self.dev.context, self.dev.queue
         self.progs = {w: build_program(self.dev, source=KERNELS, name=f"bench_bvh_w{w}",
                                        defines={"BVH_WIDTH": w, "BVH_LEAF_PACKETS": self.packets(w)})
@@ -122,15 +122,20 @@ class Tracer:
                          hostbuf=np.ascontiguousarray(a))
 
     def setup(self, width: int, bvh, org, dirs, tmax) -> dict:
-        n = len(org)
+        """The kernels of this width (with leaf packets where the renderer uses them) on these rays."""
         nodes = leaf_packet_buffer(bvh) if self.packets(width) else bvh.nodes
-        s = {"n": n, "nodes": self.buf(nodes), "tris": self.buf(bvh.tris), "org": self.buf(org),
+        return self.kernels(self.progs[width], nodes, bvh.tris, org, dirs, tmax)
+
+    def kernels(self, prog: cl.Program, nodes, tris, org, dirs, tmax) -> dict:
+        """``prog``'s closest and any_hit kernels set up on these buffers and rays (for :meth:`time`)."""
+        n = len(org)
+        s = {"n": n, "nodes": self.buf(nodes), "tris": self.buf(tris), "org": self.buf(org),
              "dir": self.buf(dirs), "tmax": self.buf(tmax.astype(np.float32)),
              "t": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n),
              "p": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n),
              "a": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n)}
-        kc = cl.Kernel(self.progs[width], "closest")
-        ka = cl.Kernel(self.progs[width], "any_hit")
+        kc = cl.Kernel(prog, "closest")
+        ka = cl.Kernel(prog, "any_hit")
         kc.set_args(s["nodes"], s["tris"], s["org"], s["dir"], s["t"], s["p"])
         ka.set_args(s["nodes"], s["tris"], s["org"], s["dir"], s["tmax"], s["a"])
         s["kernels"] = {"closest": kc, "any": ka}

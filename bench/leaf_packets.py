@@ -18,71 +18,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import pyopencl as cl  # noqa: E402
 
-from bench.bvh_traversal import KERNELS, cpu_model, load_scene, make_rays  # noqa: E402
+from bench.bvh_traversal import KERNELS, Tracer, cpu_model, load_scene, make_rays  # noqa: E402
 from pyclpt.accel import bvh as bvh_mod  # noqa: E402
 from pyclpt.accel.bvh import build_bvh, leaf_packet_buffer  # noqa: E402
-
-
-class Tracer:
-    def __init__(self, width: int, device: str | None) -> None:
-        from pyclpt.device.context import get_device
-        from pyclpt.device.program import build_program
-
-        self.dev = get_device(device)
-        self.ctx, self.queue = self.dev.context, self.dev.queue
-        self.progs = {v: build_program(self.dev, source=KERNELS, name=f"bench_leaf_w{width}_{v}",
-                                       defines={"BVH_WIDTH": width, "BVH_LEAF_PACKETS": v})
-                      for v in (0, 1)}
-        # make_rays traces with width 2
-        self.progs2 = build_program(self.dev, source=KERNELS, name="bench_leaf_w2", defines={"BVH_WIDTH": 2})
-
-    def buf(self, a):
-        return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
-
-    def setup(self, variant, nodes, tris, org, dirs, tmax):
-        n = len(org)
-        s = {"n": n, "t": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n),
-             "p": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n),
-             "a": cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY, 4 * n)}
-        prog = self.progs2 if variant == "w2" else self.progs[variant]
-        b = [self.buf(x) for x in (nodes, tris, org, dirs, tmax.astype(np.float32))]
-        s["keep"] = b
-        kc, ka = cl.Kernel(prog, "closest"), cl.Kernel(prog, "any_hit")
-        kc.set_args(b[0], b[1], b[2], b[3], s["t"], s["p"])
-        ka.set_args(b[0], b[1], b[2], b[3], b[4], s["a"])
-        s["kernels"] = {"closest": kc, "any": ka}
-        return s
-
-    def time(self, s, which):
-        ev = cl.enqueue_nd_range_kernel(self.queue, s["kernels"][which], (s["n"],), None)
-        ev.wait()
-        return (ev.profile.end - ev.profile.start) * 1e-9
-
-    def results(self, s):
-        n = s["n"]
-        t, p, a = np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.int32)
-        cl.enqueue_copy(self.queue, t, s["t"])
-        cl.enqueue_copy(self.queue, p, s["p"])
-        cl.enqueue_copy(self.queue, a, s["a"]).wait()
-        return t, p, a
-
-
-class _RayTracer:
-    """make_rays' interface (setup(width, bvh, ...), time, results) on the width-2 program."""
-
-    def __init__(self, tr: Tracer) -> None:
-        self.tr = tr
-
-    def setup(self, width, bvh, org, dirs, tmax):
-        return self.tr.setup("w2", bvh.nodes, bvh.tris, org, dirs, tmax)
-
-    def time(self, s, which):
-        return self.tr.time(s, which)
-
-    def results(self, s):
-        return self.tr.results(s)
 
 
 def main() -> None:
@@ -97,7 +36,11 @@ def main() -> None:
                     help="also packets on a BVH built with MIN,MAX,INTERSECTION_COST leaves "
                          "(repeatable; s:MIN,MAX,COST: the scalar loop)")
     a = ap.parse_args()
-    tr = Tracer(a.width, a.device)
+    tr = Tracer(a.device)
+    from pyclpt.device.program import build_program
+
+    progs = {v: build_program(tr.dev, source=KERNELS, name=f"bench_leaf_w{a.width}_{v}",
+                              defines={"BVH_WIDTH": a.width, "BVH_LEAF_PACKETS": v}) for v in (0, 1)}
     print(f"# {cpu_model()}, {tr.dev.name}, width {a.width}, "
           f"{a.size}^2 rays, medians of {a.repeats}")
     print("| scene | variant | closest Mrays/s | vs scalar | any Mrays/s | vs scalar |")
@@ -106,7 +49,7 @@ def main() -> None:
         scene = load_scene(name)
         if scene is None:
             continue
-        pos, idx, bounds, p, bounce, shadow, smax, _ = make_rays(_RayTracer(tr), scene, a.size, 1)
+        pos, idx, bounds, p, bounce, shadow, smax, _ = make_rays(tr, scene, a.size, 1)
         bvh = build_bvh(pos, idx, settings=bvh_mod.BuildSettings(width=a.width))
         inf = np.full(len(p), np.inf, np.float32)
         variants = {"scalar": (0, bvh, bvh.nodes), "packets": (1, bvh, leaf_packet_buffer(bvh))}
@@ -117,7 +60,7 @@ def main() -> None:
                                                                    intersection_cost=float(ic)))
             variants[f"{'scalar' if scalar else 'packets'} {lo}-{hi} {ic} ({b.node_count} nodes)"] = \
                 (0, b, b.nodes) if scalar else (1, b, leaf_packet_buffer(b))
-        sets = {k: (tr.setup(v, nb, b.tris, p, bounce, inf), tr.setup(v, nb, b.tris, p, shadow, smax))
+        sets = {k: (tr.kernels(progs[v], nb, b.tris, p, bounce, inf), tr.kernels(progs[v], nb, b.tris, p, shadow, smax))
                 for k, (v, b, nb) in variants.items()}
         for k in variants:
             tr.time(sets[k][0], "closest")

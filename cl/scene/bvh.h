@@ -167,6 +167,35 @@ static inline bool bvh_triangle(__global const float* tris, int i, const BvhRay*
     return true;
 }
 
+/* The leaf `cur` (LEAF_BIT | start << 5 | count), its triangles one at a time in leaf order:
+ * a strictly nearer hit that passes the opacity test replaces the best one. */
+static inline void bvh_leaf_closest(__global const float* tris, int cur, const BvhRay* r, float* best, float* bu,
+                                    float* bv, int* prim, const AlphaTest* alpha) {
+    int start = (cur & 0x7fffffff) >> 5;
+    int end = start + (cur & 31);
+    for (int i = start; i < end; ++i) {
+        float t, u, v;
+        if (bvh_triangle(tris, i, r, *best, &t, &u, &v) && alpha_accept(alpha, i, u, v)) {
+            *best = t;
+            *bu = u;
+            *bv = v;
+            *prim = i;
+        }
+    }
+}
+
+/* True if a triangle of the leaf `cur` that passes the opacity test is hit with 0 < t < tmax. */
+static inline bool bvh_leaf_any(__global const float* tris, int cur, const BvhRay* r, float tmax,
+                                const AlphaTest* alpha) {
+    int start = (cur & 0x7fffffff) >> 5;
+    int end = start + (cur & 31);
+    for (int i = start; i < end; ++i) {
+        float t, u, v;
+        if (bvh_triangle(tris, i, r, tmax, &t, &u, &v) && alpha_accept(alpha, i, u, v)) return true;
+    }
+    return false;
+}
+
 #if BVH_WIDTH == 2
 /* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
  * On a miss hit->prim = -1 and hit->t = tmax. */
@@ -198,17 +227,7 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
             if (hl) { cur = ll; continue; }
             if (hr) { cur = lr; continue; }
         } else {
-            int start = (cur & 0x7fffffff) >> 5;
-            int end = start + (cur & 31);
-            for (int i = start; i < end; ++i) {
-                float t, u, v;
-                if (bvh_triangle(tris, i, &r, best, &t, &u, &v) && alpha_accept(alpha, i, u, v)) {
-                    best = t;
-                    bu = u;
-                    bv = v;
-                    prim = i;
-                }
-            }
+            bvh_leaf_closest(tris, cur, &r, &best, &bu, &bv, &prim, alpha);
         }
         /* Pop the next subtree that may still hold something nearer. */
         while (sp > 0 && !(stack_t[sp - 1] < best)) --sp;
@@ -244,12 +263,7 @@ static inline bool bvh_any_alpha(__global const float* nodes, __global const flo
             if (hl) { cur = ll; continue; }
             if (hr) { cur = lr; continue; }
         } else {
-            int start = (cur & 0x7fffffff) >> 5;
-            int end = start + (cur & 31);
-            for (int i = start; i < end; ++i) {
-                float t, u, v;
-                if (bvh_triangle(tris, i, &r, tmax, &t, &u, &v) && alpha_accept(alpha, i, u, v)) return true;
-            }
+            if (bvh_leaf_any(tris, cur, &r, tmax, alpha)) return true;
         }
         if (sp == 0) return false;
         cur = stack_node[--sp];
@@ -442,17 +456,7 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
 #if BVH_LEAF_PACKETS
             bvh_packet_leaf_closest(nodes, cur, &r, &best, &bu, &bv, &prim, alpha);
 #else
-            int start = (cur & 0x7fffffff) >> 5;
-            int end = start + (cur & 31);
-            for (int i = start; i < end; ++i) {
-                float t, u, v;
-                if (bvh_triangle(tris, i, &r, best, &t, &u, &v) && alpha_accept(alpha, i, u, v)) {
-                    best = t;
-                    bu = u;
-                    bv = v;
-                    prim = i;
-                }
-            }
+            bvh_leaf_closest(tris, cur, &r, &best, &bu, &bv, &prim, alpha);
 #endif
         }
         /* Pop the next subtree that may still hold something nearer. */
@@ -484,12 +488,7 @@ static inline bool bvh_any_alpha(__global const float* nodes, __global const flo
 #if BVH_LEAF_PACKETS
             if (bvh_packet_leaf_any(nodes, cur, &r, tmax, alpha)) return true;
 #else
-            int start = (cur & 0x7fffffff) >> 5;
-            int end = start + (cur & 31);
-            for (int i = start; i < end; ++i) {
-                float t, u, v;
-                if (bvh_triangle(tris, i, &r, tmax, &t, &u, &v) && alpha_accept(alpha, i, u, v)) return true;
-            }
+            if (bvh_leaf_any(tris, cur, &r, tmax, alpha)) return true;
 #endif
         }
         if (sp == 0) return false;
