@@ -50,6 +50,7 @@ import pyopencl as cl  # noqa: E402
 
 import pyclpt  # noqa: E402
 from bench.embree_ceiling import _cosine_directions, camera_rays, scene_triangles  # noqa: E402
+from bench.machine import cpu_model  # noqa: E402
 from pyclpt.accel import bvh as bvh_mod  # noqa: E402
 from pyclpt.accel.bvh import DEFAULT_SETTINGS, DEFAULT_WIDTH, build_bvh, leaf_packet_buffer  # noqa: E402
 from pyclpt.buffers import scene as scene_mod  # noqa: E402
@@ -77,16 +78,6 @@ __kernel void any_hit(__global const float* nodes, __global const float* tris,
 DEFAULT_SCENES = ("cornell-box", "shared/cornell-box", "shared/staircase2", "shared/living-room",
                   "shared/staircase", "shared/classroom")
 WIDTHS = bvh_mod.WIDTHS
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def load_scene(name: str):

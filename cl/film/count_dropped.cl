@@ -7,7 +7,9 @@
  * Consumes: marks[0 .. pixels-1] (uchar, dropped samples per pixel since the last count).
  * Produces: dropped[0] += their sum; marks zeroed. */
 
-#define COUNT_CHUNK 1024
+#ifndef COUNT_CHUNK /* -DCOUNT_CHUNK from pyclpt/film/film.py, which sizes the launch by it */
+#error "COUNT_CHUNK must be defined (-DCOUNT_CHUNK=...)"
+#endif
 
 __kernel void count_dropped(__global uchar* marks, int pixels, volatile __global int* dropped) {
     int begin = (int)get_global_id(0) * COUNT_CHUNK;

@@ -167,6 +167,15 @@ static inline bool bvh_triangle(__global const float* tris, int i, const BvhRay*
     return true;
 }
 
+/* The result of a closest-hit traversal: true when something was hit. */
+static inline bool bvh_hit_out(Hit* hit, float t, float u, float v, int prim) {
+    hit->t = t;
+    hit->u = u;
+    hit->v = v;
+    hit->prim = prim;
+    return prim >= 0;
+}
+
 /* The leaf `cur` (LEAF_BIT | start << 5 | count), its triangles one at a time in leaf order:
  * a strictly nearer hit that passes the opacity test replaces the best one. */
 static inline void bvh_leaf_closest(__global const float* tris, int cur, const BvhRay* r, float* best, float* bu,
@@ -234,11 +243,7 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
         if (sp == 0) break;
         cur = stack_node[--sp];
     }
-    hit->t = best;
-    hit->u = bu;
-    hit->v = bv;
-    hit->prim = prim;
-    return prim >= 0;
+    return bvh_hit_out(hit, best, bu, bv, prim);
 }
 
 /* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */
@@ -464,11 +469,7 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
         if (sp == 0) break;
         cur = stack_node[--sp];
     }
-    hit->t = best;
-    hit->u = bu;
-    hit->v = bv;
-    hit->prim = prim;
-    return prim >= 0;
+    return bvh_hit_out(hit, best, bu, bv, prim);
 }
 
 /* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */

@@ -187,10 +187,10 @@ static inline float3 env_eval(const Scene* sc, float3 dir, bool want_pdf, float*
     *pdf = 0.0f;
     int env = (int)sc->consts[CONST_ENV_LIGHT];
     if (env < 0) return (float3)(0.0f);
-    /* max(env, 0) is env here; it keeps the record's address in the buffer even where a compiler
+    /* (env > 0 ? env : 0) is env here; it keeps the record's address in the buffer even where a compiler
      * hoists the loads below above the test (Intel's CPU OpenCL vectoriser does, in the megakernel,
      * and read lights[-8] as an address 16 GiB past the buffer: docs/devices.md). */
-    __global const float* l = sc->lights + LIGHT_STRIDE * max(env, 0);
+    __global const float* l = sc->lights + LIGHT_STRIDE * (env > 0 ? env : 0);
     if ((int)l[LIGHT_TYPE] == LIGHT_CONSTANT) {
         if (want_pdf) *pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;
         return (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);

@@ -21,7 +21,7 @@ from pyclpt.film.accumulator import Accumulator
 # without cl_khr_fp64), so a long render's mean is as exact as its float samples allow; the
 # accumulation is one add per pixel per frame, negligible next to the paths.
 DEFAULT_PRECISION = "double"
-COUNT_CHUNK = 1024  # marks summed per work-item, as in cl/film/count_dropped.cl
+COUNT_CHUNK = 1024  # marks summed per work-item of cl/film/count_dropped.cl (-DCOUNT_CHUNK)
 
 
 class Film:
@@ -33,7 +33,8 @@ class Film:
         self.frame = alloc(device, 4 * self.pixels * 3, f"frame buffer {width}x{height}")
         self.dropped = alloc(device, 4, "dropped-sample counter")
         self.drop_marks = alloc(device, self.pixels, "dropped-sample marks")
-        self._count_kernel = cl.Kernel(build_program(device, ["film/count_dropped.cl"]), "count_dropped")
+        program = build_program(device, ["film/count_dropped.cl"], defines={"COUNT_CHUNK": COUNT_CHUNK})
+        self._count_kernel = cl.Kernel(program, "count_dropped")
         self.accumulator = Accumulator(device, width, height, channels=3, precision=precision,
                                        input_type="float", **accumulator_options)
         self.clear()

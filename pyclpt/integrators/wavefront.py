@@ -34,7 +34,7 @@ STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light
 QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")
 Q_COUNT = len(QUEUES)
 Q_RAY, Q_HIT, Q_MISS, Q_SHADOW, Q_LIGHT = range(Q_COUNT)
-COMPACT_BLOCK = 1024  # queue entries per work-item of the compaction, as in wavefront.h
+COMPACT_BLOCK = 1024  # queue entries per work-item of the compaction (-DCOMPACT_BLOCK for the stages)
 # six int queues and one flag byte per path
 QUEUE_BYTES_PER_PATH = 6 * 4 + 1
 SCHEDULES = ("readback", "capacity")
@@ -69,8 +69,9 @@ class Wavefront:
         self.block_counts = alloc(device, 4 * -(-self.capacity // COMPACT_BLOCK), "compaction block counts")
         self.counters = alloc(device, 4 * Q_COUNT * (max_depth + 2), "queue counters")
         generated = {"path_state.h": opencl_header(layout)}
+        defines = {**scene.defines, "COMPACT_BLOCK": COMPACT_BLOCK}
         self.kernels = {s: cl.Kernel(build_program(device, [f"integrators/wavefront/{s}.cl"], generated=generated,
-                                                   defines=scene.defines), s) for s in STAGES}
+                                                   defines=defines), s) for s in STAGES}
         self.profile = KernelProfile()
         self._bounce_totals = np.zeros((max_depth + 2, Q_COUNT), np.int64)
         self._counts = np.zeros((max_depth + 2, Q_COUNT), np.int32)

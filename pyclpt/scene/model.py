@@ -16,6 +16,7 @@ it runs before a scene is put on a device, so no negative or NaN value reaches t
 """
 from __future__ import annotations
 
+import abc
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, get_args
@@ -86,7 +87,7 @@ def bad_texel(pixels: np.ndarray, *, negative: bool) -> str | None:
 _CHECKING: set[int] = set()
 
 
-class Checked:
+class Checked(abc.ABC):
     """Base of the model's dataclasses: ``_check()`` checks and normalises the fields (ValueError or
     TypeError naming the element and the value); it runs when the element is made and again when a
     field is assigned later, and a refused assignment leaves the old value."""
@@ -94,8 +95,9 @@ class Checked:
     def __post_init__(self) -> None:
         self._run_check()
 
+    @abc.abstractmethod
     def _check(self) -> None:
-        raise NotImplementedError
+        """Check and normalise this element's fields."""
 
     def validate(self) -> None:
         """Check every field again (after numpy arrays were changed in place, say)."""

@@ -27,8 +27,11 @@ static inline int queue_count(__global const int* counters, int bounce, int q) {
     return counters[bounce * Q_COUNT + q];
 }
 
-/* Entries of a queue that one work-item of the compaction stages handles. */
-#define COMPACT_BLOCK 1024
+/* Entries of a queue that one work-item of the compaction stages handles: -DCOMPACT_BLOCK from
+ * pyclpt/integrators/wavefront.py, which sizes the block-count buffer by it. */
+#ifndef COMPACT_BLOCK
+#error "COMPACT_BLOCK must be defined (-DCOMPACT_BLOCK=...)"
+#endif
 
 /* The random-number key of the path in a slot: (seed, pixel, sample). */
 static inline RngKey path_key(const PathStore* P, int slot, uint seed, uint sample) {
