@@ -47,22 +47,22 @@ __kernel void light_sample_k(SCENE_PARAMS, __global const float* p, __global con
     int i = get_global_id(0);
     Scene sc = SCENE_INIT;
     LightSample ls;
-    ls.wi = (float3)(0.0f);
+    ls.wi = v3_splat(0.0f);
     ls.dist = 0.0f;
-    ls.radiance = (float3)(0.0f);
+    ls.radiance = v3_splat(0.0f);
     ls.pdf = 0.0f;
     ls.delta = false;
-    bool ok = light_sample(&sc, vload3(0, p), u[3 * i], (float2)(u[3 * i + 1], u[3 * i + 2]), &ls);
+    bool ok = light_sample(&sc, load3(p, 0), u[3 * i], v2(u[3 * i + 1], u[3 * i + 2]), &ls);
     float eval_pdf;
-    float3 le = env_eval(&sc, ls.wi, true, &eval_pdf);
+    vec3 le = env_eval(&sc, ls.wi, true, &eval_pdf);
     __global float* o = out + 16 * i;
-    vstore3(ls.wi, 0, o);
+    store3(o, 0, ls.wi);
     o[3] = ls.dist;
-    vstore3(ls.radiance, 0, o + 4);
+    store3(o + 4, 0, ls.radiance);
     o[7] = ls.pdf;
     o[8] = ls.delta ? 1.0f : 0.0f;
     o[9] = ok ? 1.0f : 0.0f;
-    vstore3(le, 0, o + 10);
+    store3(o + 10, 0, le);
     o[13] = eval_pdf;
     o[14] = 0.0f;
     o[15] = 0.0f;
@@ -73,8 +73,9 @@ __kernel void env_eval_k(SCENE_PARAMS, __global const float* dirs, __global floa
     int i = get_global_id(0);
     Scene sc = SCENE_INIT;
     float pdf;
-    float3 le = env_eval(&sc, vload3(i, dirs), true, &pdf);
-    vstore4((float4)(le, pdf), i, out);
+    vec3 le = env_eval(&sc, load3(dirs, i), true, &pdf);
+    store3(out + 4 * i, 0, le);
+    out[4 * i + 3] = pdf;
 }
 """
 

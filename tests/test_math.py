@@ -27,8 +27,8 @@ __kernel void k_m_clamp(__global const float* a, __global const float* b, __glob
     int i = get_global_id(0); y[i] = m_clamp(a[i], b[i], c[i]); }
 __kernel void k_vec(__global const float* a, __global const float* b, __global float* y) {
     int i = get_global_id(0);
-    float3 u = (float3)(a[3 * i], a[3 * i + 1], a[3 * i + 2]), v = (float3)(b[3 * i], b[3 * i + 1], b[3 * i + 2]);
-    float3 c = m_cross(u, v), n = m_normalize(u);
+    vec3 u = v3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), v = v3(b[3 * i], b[3 * i + 1], b[3 * i + 2]);
+    vec3 c = m_cross(u, v), n = m_normalize(u);
     y[8 * i + 0] = m_dot(u, v); y[8 * i + 1] = m_length(u);
     y[8 * i + 2] = c.x; y[8 * i + 3] = c.y; y[8 * i + 4] = c.z;
     y[8 * i + 5] = n.x; y[8 * i + 6] = n.y; y[8 * i + 7] = n.z; }

@@ -39,7 +39,7 @@ def test_every_device_material_has_its_header_type_id_loader_and_dispatch(name):
     assert source.startswith(f"/* {name}.h: "), f"{header}: starts with a comment saying what it holds"
     assert re.search(rf"static inline bool {name}_sample\(", source), f"{header}: {name}_sample"
     assert f"{name}_sample(" in _function_body(text, "bsdf_sample")
-    if re.search(rf"static inline float3 {name}_eval\(", source):  # a material with non-delta lobes
+    if re.search(rf"static inline vec3 {name}_eval\(", source):  # a material with non-delta lobes
         assert f"{name}_eval(" in _function_body(text, "bsdf_eval")
     assert name in BSDFS, f"the dict loader's BSDFS has no {name!r}"
 

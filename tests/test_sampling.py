@@ -34,24 +34,31 @@ __kernel void rng_eval(__global const uint* keys, __global float* out1, __global
     __global const uint* k = keys + 5 * i;
     RngKey key = rng_key(k[0], k[1], k[2]);
     out1[i] = rng_1d(key, k[3], k[4]);
-    vstore2(rng_2d(key, k[3], k[4]), i, out2);
+    vec2 r = rng_2d(key, k[3], k[4]);
+    out2[2 * i] = r.x;
+    out2[2 * i + 1] = r.y;
 }
 
 __kernel void warp_eval(__global const float* u, __global float* hemi, __global float* sphere,
                         __global float* tri) {
     int i = get_global_id(0);
-    float2 uu = vload2(i, u);
-    float3 h = square_to_cosine_hemisphere(uu);
-    vstore4((float4)(h, cosine_hemisphere_pdf(h)), i, hemi);
-    float3 s = square_to_uniform_sphere(uu);
-    vstore4((float4)(s, UNIFORM_SPHERE_PDF), i, sphere);
-    vstore2(square_to_triangle(uu), i, tri);
+    vec2 uu = v2(u[2 * i], u[2 * i + 1]);
+    vec3 h = square_to_cosine_hemisphere(uu);
+    store3(hemi + 4 * i, 0, h);
+    hemi[4 * i + 3] = cosine_hemisphere_pdf(h);
+    vec3 s = square_to_uniform_sphere(uu);
+    store3(sphere + 4 * i, 0, s);
+    sphere[4 * i + 3] = UNIFORM_SPHERE_PDF;
+    vec2 t = square_to_triangle(uu);
+    tri[2 * i] = t.x;
+    tri[2 * i + 1] = t.y;
 }
 
 __kernel void warp_pdf(__global const float* w, __global float* out) {
     int i = get_global_id(0);
-    float3 v = vload3(i, w);
-    vstore2((float2)(cosine_hemisphere_pdf(v), UNIFORM_SPHERE_PDF), i, out);
+    vec3 v = load3(w, i);
+    out[2 * i] = cosine_hemisphere_pdf(v);
+    out[2 * i + 1] = UNIFORM_SPHERE_PDF;
 }
 
 /* wi_stride 0: one wi for every item */
@@ -60,33 +67,34 @@ __kernel void bsdf_eval_k(__global const float* mat, __global const float* wi, i
     int i = get_global_id(0);
     float pdf = -1.0f;
     Bsdf b = bsdf_from(mat);
-    float3 v = bsdf_eval(&b, vload3(i * wi_stride, wi), vload3(i, wo), &pdf);
-    vstore4((float4)(v, pdf), i, out);
+    vec3 v = bsdf_eval(&b, load3(wi, i * wi_stride), load3(wo, i), &pdf);
+    store3(out + 4 * i, 0, v);
+    out[4 * i + 3] = pdf;
 }
 
 /* out per item: wo[3] weight[3] pdf eta delta ok eval_value[3] eval_pdf is_delta pad */
 __kernel void bsdf_sample_k(__global const float* mat, __global const float* wi, int wi_stride,
                             __global const float* u, __global float* out) {
     int i = get_global_id(0);
-    float3 w = vload3(i * wi_stride, wi);
+    vec3 w = load3(wi, i * wi_stride);
     BsdfSample s;
-    s.wo = (float3)(0.0f);
-    s.weight = (float3)(0.0f);
+    s.wo = v3_splat(0.0f);
+    s.weight = v3_splat(0.0f);
     s.pdf = 0.0f;
     s.eta = 0.0f;
     s.delta = false;
     Bsdf b = bsdf_from(mat);
-    bool ok = bsdf_sample(&b, w, u[3 * i], (float2)(u[3 * i + 1], u[3 * i + 2]), &s);
+    bool ok = bsdf_sample(&b, w, u[3 * i], v2(u[3 * i + 1], u[3 * i + 2]), &s);
     float pdf = -1.0f;
-    float3 v = bsdf_eval(&b, w, s.wo, &pdf);
+    vec3 v = bsdf_eval(&b, w, s.wo, &pdf);
     __global float* o = out + 16 * i;
-    vstore3(s.wo, 0, o);
-    vstore3(s.weight, 1, o);
+    store3(o, 0, s.wo);
+    store3(o, 1, s.weight);
     o[6] = s.pdf;
     o[7] = s.eta;
     o[8] = s.delta ? 1.0f : 0.0f;
     o[9] = ok ? 1.0f : 0.0f;
-    vstore3(v, 0, o + 10);
+    store3(o + 10, 0, v);
     o[13] = pdf;
     o[14] = bsdf_is_delta(&b) ? 1.0f : 0.0f;
     o[15] = 0.0f;
@@ -99,17 +107,17 @@ __kernel void bsdf_cells_k(__global const float* mat, __global const float* wi_p
                            __global const int* cells, __global float* out) {
     int cell = cells[get_global_id(0)];
     int i = cell / n_phi, j = cell % n_phi;
-    float3 wi = vload3(0, wi_p);
+    vec3 wi = load3(wi_p, 0);
     Bsdf bsdf = bsdf_from(mat);
     float4 acc = (float4)(0.0f);
     for (int a = 0; a < q_t; ++a) {
-        float3 t = vload3(i * q_t + a, tnodes);
+        vec3 t = load3(tnodes, i * q_t + a);
         float4 row = (float4)(0.0f);
         for (int b = 0; b < q_p; ++b) {
-            float3 p = vload3(j * q_p + b, pnodes);
+            vec3 p = load3(pnodes, j * q_p + b);
             float pdf;
-            float3 v = bsdf_eval(&bsdf, wi, (float3)(t.x * p.x, t.x * p.y, t.y), &pdf);
-            row += p.z * (float4)(v, pdf);
+            vec3 v = bsdf_eval(&bsdf, wi, v3(t.x * p.x, t.x * p.y, t.y), &pdf);
+            row += p.z * (float4)(v.x, v.y, v.z, pdf);
         }
         acc += t.z * row;
     }
@@ -131,7 +139,7 @@ __kernel void microfacet_k(__global const float* in, __global float* out) {
     Microfacet d;
     d.alpha = p[6];
     d.beckmann = p[7] != 0.0f;
-    float3 m = vload3(0, p), v = vload3(1, p);
+    vec3 m = load3(p, 0), v = load3(p, 1);
     vstore3((float3)(mf_d(d, m), mf_g1(d, v, m), mf_pdf_visible(d, v, m)), i, out);
 }
 
@@ -142,7 +150,7 @@ __kernel void microfacet_sample_k(__global const float* in, __global float* out)
     Microfacet d;
     d.alpha = p[3];
     d.beckmann = p[4] != 0.0f;
-    vstore3(mf_sample_visible(d, vload3(0, p), (float2)(p[5], p[6])), i, out);
+    store3(out, i, mf_sample_visible(d, load3(p, 0), v2(p[5], p[6])));
 }
 
 __kernel void erfinv_k(__global const float* x, __global float* out) {
@@ -153,7 +161,7 @@ __kernel void erfinv_k(__global const float* x, __global float* out) {
 __kernel void fresnel_conductor_k(__global const float* cos_i, __global const float* ek,
                                   __global float* out) {
     int i = get_global_id(0);
-    vstore3(fresnel_conductor(cos_i[i], vload3(2 * i, ek), vload3(2 * i + 1, ek)), i, out);
+    store3(out, i, fresnel_conductor(cos_i[i], load3(ek, 2 * i), load3(ek, 2 * i + 1)));
 }
 """
 

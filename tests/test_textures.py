@@ -20,9 +20,10 @@ __kernel void tex_lookup(__global const float* info, __global const uchar* t8, _
                          int id, __global const float* uv, __global float* out) {
     int i = get_global_id(0);
     Textures tx = {info, t8, t32};
-    float4 c = tex_eval4(&tx, id, vload2(i, uv));
-    vstore4(c, i, out);
-    out[4 * get_global_size(0) + i] = tex_opacity(&tx, id, vload2(i, uv));
+    vec2 st = v2(uv[2 * i], uv[2 * i + 1]);
+    vec4 c = tex_eval4(&tx, id, st);
+    vstore4((float4)(c.x, c.y, c.z, c.w), i, out);
+    out[4 * get_global_size(0) + i] = tex_opacity(&tx, id, st);
 }
 """
 

@@ -1,4 +1,4 @@
-/* math.h: the scalar and float3 math of the kernels, in a form PoCL can inline.
+/* math.h: the scalar and vector math of the kernels, in a form PoCL can inline.
  *
  * PoCL 3.0 (LLVM 14) calls every OpenCL math builtin (sqrt, fabs, fmin, dot, normalize, sin, ...)
  * out of line, and one call stops LLVM from vectorizing a kernel's work-item loop. Clang's
@@ -14,8 +14,8 @@
  * m_isinf test the exponent bits, so they stay right whatever the compiler assumes about NaN
  * (pyclpt never passes -cl-finite-math-only or -cl-fast-relaxed-math).
  *
- * Float3 helpers (m_dot, m_cross, m_length, m_normalize) are written out on components.
- * m_normalize of a zero vector returns it unchanged (no NaN).
+ * Vectors are vec3/vec2/vec4 structs of floats (below), not float3: m_dot, m_cross, m_length,
+ * m_normalize are written out on components. m_normalize of a zero vector returns it unchanged (no NaN).
  *
  * Own approximations, arithmetic only (Cephes-style range reduction and minimax polynomials),
  * the same on every device. Max error over the stated range, measured against numpy float64 by
@@ -33,7 +33,7 @@
  *
  * (max over 200k-400k uniform samples of the range, this header in INLINE_MATH mode on PoCL 3.0;
  * the standard mode gives the same figures.) These errors are harmless where the functions are used:
- * an angle off by 3e-7 rad moves a sampled direction by less than float3 rounding does, the
+ * an angle off by 3e-7 rad moves a sampled direction by less than float rounding does, the
  * sampling routines' pdfs are evaluated from the direction actually produced, and D, G1, erfinv
  * and the env-map texel coordinates tolerate relative errors of 1e-6.
  *
@@ -72,20 +72,72 @@ static inline bool m_isfinite(float x) { return (as_uint(x) & 0x7f800000u) != 0x
 static inline bool m_isnan(float x) { return (as_uint(x) & 0x7fffffffu) > 0x7f800000u; }
 static inline bool m_isinf(float x) { return (as_uint(x) & 0x7fffffffu) == 0x7f800000u; }
 
-/* ---- float3, on components ---------------------------------------------------- */
+/* ---- 3-vectors on scalars -------------------------------------------------------- */
 
-static inline float m_dot(float3 a, float3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-static inline float3 m_cross(float3 a, float3 b) {
-    return (float3)(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+/* vec3, vec2 and vec4 are structs of floats, not OpenCL's float3/float2/float4: LLVM's loop vectorizer,
+ * which PoCL uses to run a kernel's work-items 8 or 16 at a time, refuses any instruction of vector type
+ * ("instruction return type cannot be vectorized"), while a struct of scalars becomes plain scalars once
+ * inlined. The operations are componentwise IEEE arithmetic, as on float3: v3_add(v3_mul(a, b), c) is
+ * a * b + c rounded the same way (FP_CONTRACT is off, core/common.h). Buffers hold scalar fields. */
+typedef struct {
+    float x, y, z;
+} vec3;
+typedef struct {
+    float x, y;
+} vec2;
+typedef struct {
+    float x, y, z, w;
+} vec4;
+
+static inline vec3 v3(float x, float y, float z) {
+    vec3 r;
+    r.x = x;
+    r.y = y;
+    r.z = z;
+    return r;
 }
-static inline float m_length(float3 v) { return m_sqrt(m_dot(v, v)); }
-static inline float3 m_normalize(float3 v) {
+static inline vec2 v2(float x, float y) {
+    vec2 r;
+    r.x = x;
+    r.y = y;
+    return r;
+}
+static inline vec4 v4(float x, float y, float z, float w) {
+    vec4 r;
+    r.x = x;
+    r.y = y;
+    r.z = z;
+    r.w = w;
+    return r;
+}
+static inline vec3 v3_splat(float s) { return v3(s, s, s); }
+static inline vec3 v3_add(vec3 a, vec3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+static inline vec3 v3_sub(vec3 a, vec3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+static inline vec3 v3_mul(vec3 a, vec3 b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
+static inline vec3 v3_div(vec3 a, vec3 b) { return v3(a.x / b.x, a.y / b.y, a.z / b.z); }
+static inline vec3 v3_scale(vec3 a, float s) { return v3(a.x * s, a.y * s, a.z * s); }
+static inline vec3 v3_divs(vec3 a, float s) { return v3(a.x / s, a.y / s, a.z / s); }
+static inline vec3 v3_adds(vec3 a, float s) { return v3(a.x + s, a.y + s, a.z + s); }
+static inline vec3 v3_rsubs(float s, vec3 a) { return v3(s - a.x, s - a.y, s - a.z); } /* s - a */
+static inline vec3 v3_neg(vec3 a) { return v3(-a.x, -a.y, -a.z); }
+static inline vec3 v3_select(bool c, vec3 a, vec3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z); }
+static inline bool v3_is_zero(vec3 v) { return v.x == 0.0f && v.y == 0.0f && v.z == 0.0f; }
+static inline vec4 v4_add(vec4 a, vec4 b) { return v4(a.x + b.x, a.y + b.y, a.z + b.z, a.w + b.w); }
+static inline vec4 v4_scale(vec4 a, float s) { return v4(a.x * s, a.y * s, a.z * s, a.w * s); }
+static inline vec3 v4_xyz(vec4 a) { return v3(a.x, a.y, a.z); }
+
+static inline float m_dot(vec3 a, vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static inline vec3 m_cross(vec3 a, vec3 b) {
+    return v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+static inline float m_length(vec3 v) { return m_sqrt(m_dot(v, v)); }
+static inline vec3 m_normalize(vec3 v) {
     float l2 = m_dot(v, v);
     float inv = 1.0f / m_sqrt(l2);
-    return l2 > 0.0f ? v * inv : v;
+    return v3_scale(v, l2 > 0.0f ? inv : 1.0f); /* one select, not one per component */
 }
-static inline float3 m_sqrt3(float3 v) { return (float3)(m_sqrt(v.x), m_sqrt(v.y), m_sqrt(v.z)); }
-static inline float3 m_max3s(float3 v, float s) { return (float3)(m_max(v.x, s), m_max(v.y, s), m_max(v.z, s)); }
+static inline vec3 m_sqrt3(vec3 v) { return v3(m_sqrt(v.x), m_sqrt(v.y), m_sqrt(v.z)); }
+static inline vec3 m_max3s(vec3 v, float s) { return v3(m_max(v.x, s), m_max(v.y, s), m_max(v.z, s)); }
 
 /* A half float's bits to float, exactly, for finite halves (vload_half is a call on PoCL): the
  * exponent rebiased by 127 - 15, denormal halves (exponent 0) as mantissa * 2^-24. */

@@ -7,6 +7,8 @@
 #ifndef PYCLPT_RNG_H
 #define PYCLPT_RNG_H
 
+#include "core/math.h"
+
 /* Dimensions used at each bounce (the camera's at bounce 0 only). */
 #define DIM_LIGHT_SELECT 0
 #define DIM_LIGHT_U 1
@@ -89,10 +91,10 @@ static inline float rng_1d_at(RngKey key, uint bounce, uint dim, uint extra) {
     return rng_unit(r0);
 }
 
-static inline float2 rng_2d(RngKey key, uint bounce, uint dim) {
+static inline vec2 rng_2d(RngKey key, uint bounce, uint dim) {
     uint r0, r1;
     rng_words(key, bounce, dim, 0u, &r0, &r1);
-    return (float2)(rng_unit(r0), rng_unit(r1));
+    return v2(rng_unit(r0), rng_unit(r1));
 }
 
 #endif

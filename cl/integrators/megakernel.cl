@@ -30,7 +30,7 @@ __kernel void megakernel(SCENE_PARAMS, __global float* frame, __global uchar* dr
             ShadowRay sr;
             if (path_sample_light(&sc, key, &s, &b, &ps, &sr) &&
                 !scene_occluded(&sc, key, ps.depth, sr.org, sr.dir, sr.tmax))
-                ps.L += sr.contrib;
+                ps.L = v3_add(ps.L, sr.contrib);
             if (!path_sample_bsdf(key, &s, &b, &ps, max_depth)) break;
         }
     }

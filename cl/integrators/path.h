@@ -26,9 +26,9 @@
 #define PATH_PREV_DELTA 1
 
 typedef struct {
-    float3 org, dir;  /* current ray; dir is unit length */
-    float3 beta;      /* throughput */
-    float3 L;         /* radiance gathered so far */
+    vec3 org, dir;    /* current ray; dir is unit length */
+    vec3 beta;        /* throughput */
+    vec3 L;           /* radiance gathered so far */
     float prev_pdf;   /* solid-angle pdf of the BSDF sample that made the ray */
     float eta_scale;  /* product of the relative IORs crossed (for roulette) */
     int depth;        /* bounce index of the current ray */
@@ -36,9 +36,9 @@ typedef struct {
 } PathState;
 
 typedef struct {
-    float3 org, dir;
+    vec3 org, dir;
     float tmax;
-    float3 contrib;   /* radiance added if the ray is unoccluded */
+    vec3 contrib;     /* radiance added if the ray is unoccluded */
 } ShadowRay;
 
 static inline bool depth_allows(int depth, int max_depth) { return max_depth < 0 || depth < max_depth; }
@@ -48,16 +48,14 @@ static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState
     __global const float* c = sc->consts;
     int width = (int)c[CONST_WIDTH], height = (int)c[CONST_HEIGHT];
     int px = pixel % width, py = pixel / width;
-    float2 j = rng_2d(key, 0, DIM_CAMERA_X);
+    vec2 j = rng_2d(key, 0, DIM_CAMERA_X);
     float sx = 2.0f * (((float)px + j.x) / (float)width) - 1.0f;
     float sy = 1.0f - 2.0f * (((float)py + j.y) / (float)height);
-    float3 forward = (float3)(c[CONST_CAM_FORWARD], c[CONST_CAM_FORWARD + 1], c[CONST_CAM_FORWARD + 2]);
-    float3 right = (float3)(c[CONST_CAM_RIGHT], c[CONST_CAM_RIGHT + 1], c[CONST_CAM_RIGHT + 2]);
-    float3 up = (float3)(c[CONST_CAM_UP], c[CONST_CAM_UP + 1], c[CONST_CAM_UP + 2]);
-    ps->org = (float3)(c[CONST_CAM_ORIGIN], c[CONST_CAM_ORIGIN + 1], c[CONST_CAM_ORIGIN + 2]);
-    ps->dir = m_normalize(forward + sx * right + sy * up);
-    ps->beta = (float3)(1.0f);
-    ps->L = (float3)(0.0f);
+    vec3 forward = rgb_at(c + CONST_CAM_FORWARD), right = rgb_at(c + CONST_CAM_RIGHT), up = rgb_at(c + CONST_CAM_UP);
+    ps->org = rgb_at(c + CONST_CAM_ORIGIN);
+    ps->dir = m_normalize(v3_add(v3_add(forward, v3_scale(right, sx)), v3_scale(up, sy)));
+    ps->beta = v3_splat(1.0f);
+    ps->L = v3_splat(0.0f);
     ps->prev_pdf = 0.0f;
     ps->eta_scale = 1.0f;
     ps->depth = 0;
@@ -68,23 +66,23 @@ static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState
 static inline void path_miss(const Scene* sc, PathState* ps) {
     bool mis = !(ps->flags & PATH_PREV_DELTA);
     float light_pdf;
-    float3 le = env_eval(sc, ps->dir, mis, &light_pdf);
-    if (le.x == 0.0f && le.y == 0.0f && le.z == 0.0f) return;
+    vec3 le = env_eval(sc, ps->dir, mis, &light_pdf);
+    if (v3_is_zero(le)) return;
     float w = 1.0f;
     if (mis) w = power_heuristic(ps->prev_pdf, light_pdf);
-    ps->L += ps->beta * le * w;
+    ps->L = v3_add(ps->L, v3_scale(v3_mul(ps->beta, le), w));
 }
 
 /* hit processing, part 1: emission at the hit, MIS-weighted against light sampling. */
 static inline void path_hit_emission(const Scene* sc, const Surface* s, float t, PathState* ps) {
-    float3 le = light_emitted(sc, s->light, s->ng, ps->dir);
-    if (le.x == 0.0f && le.y == 0.0f && le.z == 0.0f) return;
+    vec3 le = light_emitted(sc, s->light, s->ng, ps->dir);
+    if (v3_is_zero(le)) return;
     float w = 1.0f;
     if (!(ps->flags & PATH_PREV_DELTA)) {
         float light_pdf = light_pdf_area(sc, s->light, t, -m_dot(s->ng, ps->dir));
         w = power_heuristic(ps->prev_pdf, light_pdf);
     }
-    ps->L += ps->beta * le * w;
+    ps->L = v3_add(ps->L, v3_scale(v3_mul(ps->beta, le), w));
 }
 
 /* hit processing, part 2: next-event estimation. Writes a shadow ray only for a
@@ -94,21 +92,21 @@ static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface*
     if (bsdf_is_delta(b)) return false;
     LightSample ls;
     float u_sel = rng_1d(key, ps->depth, DIM_LIGHT_SELECT);
-    float2 u = rng_2d(key, ps->depth, DIM_LIGHT_U);
+    vec2 u = rng_2d(key, ps->depth, DIM_LIGHT_U);
     if (!light_sample(sc, s->p, u_sel, u, &ls)) return false;
-    float3 wi = to_local(s->sh, -ps->dir);
-    float3 wo = to_local(s->sh, ls.wi);
+    vec3 wi = to_local(s->sh, v3_neg(ps->dir));
+    vec3 wo = to_local(s->sh, ls.wi);
     float bsdf_pdf;
-    float3 f = bsdf_eval(b, wi, wo, &bsdf_pdf);
+    vec3 f = bsdf_eval(b, wi, wo, &bsdf_pdf);
     /* the geometric normal must agree with the shading frame about the side */
     if (m_dot(ls.wi, s->ng) * wo.z <= 0.0f) return false;
     /* a delta light (point) cannot be hit by BSDF sampling: its sample takes the whole weight */
     float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf);
-    float3 contrib = ps->beta * f * ls.radiance * (w / ls.pdf);
+    vec3 contrib = v3_scale(v3_mul(v3_mul(ps->beta, f), ls.radiance), w / ls.pdf);
     if (!(max3(contrib) > 0.0f)) return false;
     sr->org = spawn_origin(s, ls.wi);
     sr->dir = ls.wi;
-    sr->tmax = m_isinf(ls.dist) ? INF_F : ls.dist * (1.0f - 1e-4f) - m_length(sr->org - s->p);
+    sr->tmax = m_isinf(ls.dist) ? INF_F : ls.dist * (1.0f - 1e-4f) - m_length(v3_sub(sr->org, s->p));
     sr->contrib = contrib;
     return sr->tmax > 0.0f;
 }
@@ -117,15 +115,15 @@ static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface*
  * Returns false when the path ends (depth limit, no valid sample, roulette). */
 static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b, PathState* ps, int max_depth) {
     if (!depth_allows(ps->depth + 1, max_depth)) return false;
-    float3 wi = to_local(s->sh, -ps->dir);
+    vec3 wi = to_local(s->sh, v3_neg(ps->dir));
     BsdfSample bs;
     float u_lobe = rng_1d(key, ps->depth, DIM_BSDF_LOBE);
-    float2 u = rng_2d(key, ps->depth, DIM_BSDF_U);
+    vec2 u = rng_2d(key, ps->depth, DIM_BSDF_U);
     if (!bsdf_sample(b, wi, u_lobe, u, &bs)) return false;
-    float3 dir = to_world(s->sh, bs.wo);
+    vec3 dir = to_world(s->sh, bs.wo);
     /* reject samples whose side disagrees between shading and geometric normals */
     if (m_dot(dir, s->ng) * bs.wo.z <= 0.0f) return false;
-    ps->beta *= bs.weight;
+    ps->beta = v3_mul(ps->beta, bs.weight);
     ps->eta_scale *= bs.eta;
     ps->prev_pdf = bs.pdf;
     ps->flags = bs.delta ? PATH_PREV_DELTA : 0;
@@ -137,7 +135,7 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     if (ps->depth >= RR_DEPTH) {
         float q = m_min(beta_max * ps->eta_scale * ps->eta_scale, 0.95f);
         if (rng_1d(key, ps->depth - 1, DIM_ROULETTE) >= q) return false;
-        ps->beta /= q;
+        ps->beta = v3_divs(ps->beta, q);
     }
     return true;
 }
@@ -146,7 +144,7 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
  * written) and marked in drop_marks[pixel], which the film counts after the frame
  * (cl/film/count_dropped.cl). A plain add, not an atomic: one path owns its pixel in a frame,
  * so the stages that commit can vectorize; a path committed twice would count twice. */
-static inline void film_commit(__global float* frame, __global uchar* drop_marks, int pixel, float3 L) {
+static inline void film_commit(__global float* frame, __global uchar* drop_marks, int pixel, vec3 L) {
     bool bad = !all_finite3(L);
     drop_marks[pixel] += bad ? (uchar)1 : (uchar)0;
     frame[3 * pixel + 0] = bad ? 0.0f : L.x;

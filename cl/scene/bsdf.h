@@ -90,10 +90,10 @@ typedef __global const float* Material;
 typedef struct {
     int type;
     int flags;
-    float3 color;  /* diffuse reflectance */
-    float3 spec;   /* specular reflectance */
-    float3 trans;  /* specular transmittance */
-    float3 eta, k; /* conductor */
+    vec3 color;    /* diffuse reflectance */
+    vec3 spec;     /* specular reflectance */
+    vec3 trans;    /* specular transmittance */
+    vec3 eta, k;   /* conductor */
     float ior;     /* interior / exterior */
     float alpha;   /* roughness */
     float fdr_int; /* plastic: internal diffuse reflectance of the coating */
@@ -101,8 +101,8 @@ typedef struct {
 } Bsdf;
 
 typedef struct {
-    float3 wo;      /* sampled direction, local frame */
-    float3 weight;  /* value * |cos(wo)| / pdf, with the radiance-scaling factor of refraction */
+    vec3 wo;        /* sampled direction, local frame */
+    vec3 weight;    /* value * |cos(wo)| / pdf, with the radiance-scaling factor of refraction */
     float pdf;      /* solid-angle pdf (the discrete probability for delta lobes) */
     float eta;      /* relative IOR crossed (1 for reflection) */
     bool delta;
@@ -110,7 +110,7 @@ typedef struct {
 
 static inline int mat_type(Material m) { return (int)m[MAT_TYPE]; }
 static inline int mat_flags(Material m) { return (int)m[MAT_FLAGS]; }
-static inline float3 mat_rgb(Material m, int at) { return (float3)(m[at], m[at + 1], m[at + 2]); }
+static inline vec3 mat_rgb(Material m, int at) { return rgb_at(m + at); }
 
 /* The material's constant parameters (textures not applied: see bsdf_at in scene.h). */
 static inline Bsdf bsdf_from(Material m) {
@@ -142,9 +142,9 @@ static inline Microfacet microfacet_of(const Bsdf* b) {
     return d;
 }
 
-static inline float3 reflect_local(float3 w) { return (float3)(-w.x, -w.y, w.z); }
+static inline vec3 reflect_local(vec3 w) { return v3(-w.x, -w.y, w.z); }
 
-static inline float mean3(float3 v) { return (v.x + v.y + v.z) * (1.0f / 3.0f); }
+static inline float mean3(vec3 v) { return (v.x + v.y + v.z) * (1.0f / 3.0f); }
 
 /* ---- the materials, one Mitsuba plug-in each ---- */
 
@@ -167,7 +167,7 @@ static inline bool bsdf_is_delta(const Bsdf* b) {
 }
 
 /* Flip both directions to the front side for two-sided materials. */
-static inline void bsdf_orient(const Bsdf* b, float3* wi, float3* wo) {
+static inline void bsdf_orient(const Bsdf* b, vec3* wi, vec3* wo) {
     if (bsdf_twosided(b) && wi->z < 0.0f) {
         wi->z = -wi->z;
         wo->z = -wo->z;
@@ -176,23 +176,23 @@ static inline void bsdf_orient(const Bsdf* b, float3* wi, float3* wo) {
 
 /* f(wi, wo) |cos wo| and the solid-angle pdf of bsdf_sample producing wo, both of the
  * non-delta lobes only (zero for delta materials). */
-static inline float3 bsdf_eval(const Bsdf* b, float3 wi, float3 wo, float* pdf) {
+static inline vec3 bsdf_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
     *pdf = 0.0f;
     int type = b->type;
     /* two-sided by nature: both directions as they are */
     if (type == MAT_ROUGHDIELECTRIC) return roughdielectric_eval(b, wi, wo, pdf);
     /* one-sided: on the front side (two-sided ones flipped there) */
     bsdf_orient(b, &wi, &wo);
-    if (wi.z <= 0.0f || wo.z <= 0.0f) return (float3)(0.0f);
+    if (wi.z <= 0.0f || wo.z <= 0.0f) return v3_splat(0.0f);
     if (type == MAT_DIFFUSE) return diffuse_eval(b, wi, wo, pdf);
     if (type == MAT_ROUGHCONDUCTOR) return roughconductor_eval(b, wi, wo, pdf);
     if (type == MAT_PLASTIC) return plastic_eval(b, wi, wo, pdf);
     if (type == MAT_ROUGHPLASTIC) return roughplastic_eval(b, wi, wo, pdf);
-    return (float3)(0.0f); /* conductor, dielectric, thindielectric: delta lobes only */
+    return v3_splat(0.0f); /* conductor, dielectric, thindielectric: delta lobes only */
 }
 
 /* Sample wo given wi; false when no direction could be sampled. */
-static inline bool bsdf_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+static inline bool bsdf_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     int type = b->type;
     s->eta = 1.0f;
     s->delta = false;

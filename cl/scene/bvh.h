@@ -89,7 +89,7 @@ static inline float bvh_safe_rcp(float d) {
     return (d >= tiny || d <= -tiny) ? 1.0f / d : (d < 0.0f ? -1e18f : 1e18f);
 }
 
-static inline BvhRay bvh_make_ray(float3 org, float3 dir) {
+static inline BvhRay bvh_make_ray(vec3 org, vec3 dir) {
     BvhRay r;
     r.org = (float4)(org.x, org.y, org.z, 0.0f);
     r.inv = (float4)(bvh_safe_rcp(dir.x), bvh_safe_rcp(dir.y), bvh_safe_rcp(dir.z), 1.0f);
@@ -208,8 +208,8 @@ static inline bool bvh_leaf_any(__global const float* tris, int cur, const BvhRa
 #if BVH_WIDTH == 2
 /* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
  * On a miss hit->prim = -1 and hit->t = tmax. */
-static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, float3 org,
-                                     float3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
+static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, vec3 org,
+                                     vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
@@ -247,8 +247,8 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
 }
 
 /* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */
-static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, float3 org,
-                                 float3 dir, float tmax, const AlphaTest* alpha) {
+static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, vec3 org,
+                                 vec3 dir, float tmax, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     int sp = 0;
@@ -436,8 +436,8 @@ static inline bool bvh_packet_leaf_any(__global const float* nodes, int cur, con
 
 /* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
  * On a miss hit->prim = -1 and hit->t = tmax. */
-static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, float3 org,
-                                     float3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
+static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, vec3 org,
+                                     vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
@@ -473,8 +473,8 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
 }
 
 /* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */
-static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, float3 org,
-                                 float3 dir, float tmax, const AlphaTest* alpha) {
+static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, vec3 org,
+                                 vec3 dir, float tmax, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
@@ -500,13 +500,13 @@ static inline bool bvh_any_alpha(__global const float* nodes, __global const flo
 #endif /* BVH_WIDTH */
 
 /* The queries without opacity (every triangle opaque). */
-static inline bool bvh_closest(__global const float* nodes, __global const float* tris, float3 org,
-                               float3 dir, float tmax, Hit* hit) {
+static inline bool bvh_closest(__global const float* nodes, __global const float* tris, vec3 org,
+                               vec3 dir, float tmax, Hit* hit) {
     return bvh_closest_alpha(nodes, tris, org, dir, tmax, hit, 0);
 }
 
-static inline bool bvh_any(__global const float* nodes, __global const float* tris, float3 org,
-                           float3 dir, float tmax) {
+static inline bool bvh_any(__global const float* nodes, __global const float* tris, vec3 org,
+                           vec3 dir, float tmax) {
     return bvh_any_alpha(nodes, tris, org, dir, tmax, 0);
 }
 

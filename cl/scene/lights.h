@@ -59,9 +59,9 @@
 #define ENV_HEADER 16
 
 typedef struct {
-    float3 wi;       /* unit direction from the shading point to the emitter */
+    vec3 wi;         /* unit direction from the shading point to the emitter */
     float dist;      /* distance to the sampled point (INF for the environment) */
-    float3 radiance; /* radiance arriving at the shading point (point light: I / dist^2) */
+    vec3 radiance;   /* radiance arriving at the shading point (point light: I / dist^2) */
     float pdf;       /* solid-angle pdf, emitter choice included; for a delta light the choice alone */
     bool delta;      /* a delta light (point): no BSDF sample can hit it, so no MIS */
 } LightSample;
@@ -101,18 +101,18 @@ static inline float light_pdf_area(const Scene* sc, int light, float dist, float
 
 /* ---- environment map -------------------------------------------------------- */
 
-static inline float3 env_to_local(__global const float* e, float3 d) {
-    return (float3)(e[0] * d.x + e[3] * d.y + e[6] * d.z, e[1] * d.x + e[4] * d.y + e[7] * d.z,
-                    e[2] * d.x + e[5] * d.y + e[8] * d.z);
+static inline vec3 env_to_local(__global const float* e, vec3 d) {
+    return v3(e[0] * d.x + e[3] * d.y + e[6] * d.z, e[1] * d.x + e[4] * d.y + e[7] * d.z,
+              e[2] * d.x + e[5] * d.y + e[8] * d.z);
 }
 
-static inline float3 env_to_world(__global const float* e, float3 v) {
-    return (float3)(e[0] * v.x + e[1] * v.y + e[2] * v.z, e[3] * v.x + e[4] * v.y + e[5] * v.z,
-                    e[6] * v.x + e[7] * v.y + e[8] * v.z);
+static inline vec3 env_to_world(__global const float* e, vec3 v) {
+    return v3(e[0] * v.x + e[1] * v.y + e[2] * v.z, e[3] * v.x + e[4] * v.y + e[5] * v.z,
+              e[6] * v.x + e[7] * v.y + e[8] * v.z);
 }
 
 /* Continuous texel coordinates (x in [0, W), y in [0, H - 1]) of a unit direction in the map's frame. */
-static inline float2 env_texel_coords(__global const float* e, float3 d) {
+static inline vec2 env_texel_coords(__global const float* e, vec3 d) {
     float w = e[ENV_WIDTH], h = e[ENV_HEIGHT];
     float u = m_atan2(d.x, -d.z) * INV_2PI_F;
     float v = m_acos(m_clamp(d.y, -1.0f, 1.0f)) * INV_PI_F;
@@ -121,24 +121,23 @@ static inline float2 env_texel_coords(__global const float* e, float3 d) {
     if (!(x >= 0.0f && x < w)) x = 0.0f; /* rounding onto w, or NaN */
     float y = m_clamp(v * (h - 1.0f), 0.0f, h - 1.0f);
     if (!(y >= 0.0f)) y = 0.0f;
-    return (float2)(x, y);
+    return v2(x, y);
 }
 
 /* The map's radiance (scale applied) at texel coordinates xy: bilinear, periodic in x. */
-static inline float3 env_lookup(const Scene* sc, __global const float* e, float2 xy) {
+static inline vec3 env_lookup(const Scene* sc, __global const float* e, vec2 xy) {
     int w = (int)e[ENV_WIDTH], h = (int)e[ENV_HEIGHT];
     int i0 = m_imin((int)xy.x, w - 1), j0 = m_imin((int)xy.y, h - 2);
     float fx = xy.x - (float)i0, fy = xy.y - (float)j0;
     int i1 = i0 + 1 == w ? 0 : i0 + 1;
     __global const float* t = sc->tex.info + TEX_STRIDE * (int)e[ENV_TEXTURE];
-    float4 c00 = tex_texel(&sc->tex, t, i0, j0), c10 = tex_texel(&sc->tex, t, i1, j0);
-    float4 c01 = tex_texel(&sc->tex, t, i0, j0 + 1), c11 = tex_texel(&sc->tex, t, i1, j0 + 1);
-    float4 c = (1.0f - fy) * ((1.0f - fx) * c00 + fx * c10) + fy * ((1.0f - fx) * c01 + fx * c11);
-    return (float3)(c.x, c.y, c.z) * e[ENV_SCALE];
+    vec4 c00 = tex_texel(&sc->tex, t, i0, j0), c10 = tex_texel(&sc->tex, t, i1, j0);
+    vec4 c01 = tex_texel(&sc->tex, t, i0, j0 + 1), c11 = tex_texel(&sc->tex, t, i1, j0 + 1);
+    return v3_scale(v4_xyz(tex_bilerp(c00, c10, c01, c11, fx, fy)), e[ENV_SCALE]);
 }
 
 /* Solid-angle density with which env_sample produces the map-frame direction at xy. */
-static inline float env_pdf_at(__global const float* e, float2 xy) {
+static inline float env_pdf_at(__global const float* e, vec2 xy) {
     int w = (int)e[ENV_WIDTH], rows = (int)e[ENV_HEIGHT] - 1;
     __global const float* marginal = e + ENV_HEADER;
     __global const float* conditional = marginal + rows;
@@ -158,7 +157,7 @@ static inline float cdf_remap(__global const float* cdf, int i, float u) {
 }
 
 /* Sample a world direction from the map: returns it with its radiance and solid-angle pdf. */
-static inline float3 env_sample(const Scene* sc, __global const float* e, float2 u, float3* radiance,
+static inline vec3 env_sample(const Scene* sc, __global const float* e, vec2 u, vec3* radiance,
                                 float* pdf) {
     int w = (int)e[ENV_WIDTH], rows = (int)e[ENV_HEIGHT] - 1;
     __global const float* marginal = e + ENV_HEADER;
@@ -174,7 +173,7 @@ static inline float3 env_sample(const Scene* sc, __global const float* e, float2
     float sin_t = m_sqrt(m_max(0.0f, 1.0f - cos_t * cos_t));
     float phi = (2.0f * PI_F) * (((float)c + 0.5f + uc) / (float)w);
     float cos_phi, sin_phi = m_sincos(phi, &cos_phi);
-    float3 d = (float3)(sin_phi * sin_t, cos_t, -cos_phi * sin_t);
+    vec3 d = v3(sin_phi * sin_t, cos_t, -cos_phi * sin_t);
     float omega = cell_omega[r];
     *pdf = omega > 0.0f ? cdf_pmf(marginal, r) * cdf_pmf(cond, c) / omega : 0.0f;
     *radiance = env_lookup(sc, e, env_texel_coords(e, d));
@@ -183,20 +182,20 @@ static inline float3 env_sample(const Scene* sc, __global const float* e, float2
 
 /* Radiance of the environment along the world direction dir (zero without one); with want_pdf,
  * *pdf is the solid-angle density with which light_sample produces dir, emitter choice included. */
-static inline float3 env_eval(const Scene* sc, float3 dir, bool want_pdf, float* pdf) {
+static inline vec3 env_eval(const Scene* sc, vec3 dir, bool want_pdf, float* pdf) {
     *pdf = 0.0f;
     int env = (int)sc->consts[CONST_ENV_LIGHT];
-    if (env < 0) return (float3)(0.0f);
+    if (env < 0) return v3_splat(0.0f);
     /* (env > 0 ? env : 0) is env here; it keeps the record's address in the buffer even where a compiler
      * hoists the loads below above the test (Intel's CPU OpenCL vectoriser does, in the megakernel,
      * and read lights[-8] as an address 16 GiB past the buffer: docs/devices.md). */
     __global const float* l = sc->lights + LIGHT_STRIDE * (env > 0 ? env : 0);
     if ((int)l[LIGHT_TYPE] == LIGHT_CONSTANT) {
         if (want_pdf) *pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;
-        return (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
+        return rgb_at(l + LIGHT_RADIANCE);
     }
     __global const float* e = sc->light_data + as_int(l[LIGHT_PRIM]);
-    float2 xy = env_texel_coords(e, env_to_local(e, dir));
+    vec2 xy = env_texel_coords(e, env_to_local(e, dir));
     if (want_pdf) *pdf = l[LIGHT_PMF] * env_pdf_at(e, xy);
     return env_lookup(sc, e, xy);
 }
@@ -204,7 +203,7 @@ static inline float3 env_eval(const Scene* sc, float3 dir, bool want_pdf, float*
 /* ---- sampling any emitter ----------------------------------------------------- */
 
 /* Sample an emitter and a point on it as seen from p; false when the sample carries nothing. */
-static inline bool light_sample(const Scene* sc, float3 p, float u_select, float2 u, LightSample* ls) {
+static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u, LightSample* ls) {
     int n = num_lights(sc);
     if (n == 0) return false;
     int id = light_choose(sc, u_select);
@@ -214,7 +213,7 @@ static inline bool light_sample(const Scene* sc, float3 p, float u_select, float
     if (type == LIGHT_CONSTANT) {
         ls->wi = square_to_uniform_sphere(u);
         ls->dist = INF_F;
-        ls->radiance = (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
+        ls->radiance = rgb_at(l + LIGHT_RADIANCE);
         ls->pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;
         return ls->pdf > 0.0f;
     }
@@ -227,40 +226,38 @@ static inline bool light_sample(const Scene* sc, float3 p, float u_select, float
     }
     if (type == LIGHT_POINT) {
         __global const float* pos = sc->light_data + as_int(l[LIGHT_PRIM]);
-        float3 d = (float3)(pos[0], pos[1], pos[2]) - p;
+        vec3 d = v3_sub(rgb_at(pos), p);
         float dist2 = m_dot(d, d);
         if (!(dist2 > 0.0f)) return false;
         ls->dist = m_sqrt(dist2);
-        ls->wi = d / ls->dist;
-        ls->radiance = (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]) / dist2;
+        ls->wi = v3_divs(d, ls->dist);
+        ls->radiance = v3_divs(rgb_at(l + LIGHT_RADIANCE), dist2);
         ls->pdf = l[LIGHT_PMF];
         ls->delta = true;
         return ls->pdf > 0.0f;
     }
     int prim = as_int(l[LIGHT_PRIM]);
     __global const float* t = sc->tris + 9 * prim;
-    float3 v0 = (float3)(t[0], t[1], t[2]);
-    float3 e1 = (float3)(t[3], t[4], t[5]);
-    float3 e2 = (float3)(t[6], t[7], t[8]);
-    float2 b = square_to_triangle(u);
-    float3 y = v0 + b.x * e1 + b.y * e2;
-    float3 ng = m_normalize(m_cross(e1, e2));
-    float3 d = y - p;
+    vec3 v0 = rgb_at(t), e1 = rgb_at(t + 3), e2 = rgb_at(t + 6);
+    vec2 b = square_to_triangle(u);
+    vec3 y = v3_add(v3_add(v0, v3_scale(e1, b.x)), v3_scale(e2, b.y));
+    vec3 ng = m_normalize(m_cross(e1, e2));
+    vec3 d = v3_sub(y, p);
     float dist2 = m_dot(d, d);
     if (!(dist2 > 0.0f)) return false;
     ls->dist = m_sqrt(dist2);
-    ls->wi = d / ls->dist;
+    ls->wi = v3_divs(d, ls->dist);
     float cos_l = -m_dot(ls->wi, ng);
     ls->pdf = light_pdf_area(sc, id, ls->dist, cos_l);
-    ls->radiance = (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
+    ls->radiance = rgb_at(l + LIGHT_RADIANCE);
     return ls->pdf > 0.0f;
 }
 
 /* Radiance an emissive triangle sends along -dir (one-sided: front faces only). */
-static inline float3 light_emitted(const Scene* sc, int light, float3 ng, float3 dir) {
-    if (light < 0 || m_dot(ng, dir) >= 0.0f) return (float3)(0.0f);
+static inline vec3 light_emitted(const Scene* sc, int light, vec3 ng, vec3 dir) {
+    if (light < 0 || m_dot(ng, dir) >= 0.0f) return v3_splat(0.0f);
     __global const float* l = sc->lights + LIGHT_STRIDE * light;
-    return (float3)(l[LIGHT_RADIANCE], l[LIGHT_RADIANCE + 1], l[LIGHT_RADIANCE + 2]);
+    return rgb_at(l + LIGHT_RADIANCE);
 }
 
 #endif

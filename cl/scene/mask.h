@@ -35,19 +35,19 @@ typedef struct {
 
 /* Texture coordinates of barycentrics (u, v) on leaf-order triangle prim
  * (the barycentrics themselves where the mesh has none). */
-static inline float2 tri_uv(__global const int* tri_vidx, __global const float* vuvs, int prim, int info,
+static inline vec2 tri_uv(__global const int* tri_vidx, __global const float* vuvs, int prim, int info,
                             float u, float v) {
-    if (!(info & TRI_HAS_UVS)) return (float2)(u, v);
+    if (!(info & TRI_HAS_UVS)) return v2(u, v);
     __global const int* vi = tri_vidx + 3 * prim;
     __global const float* t0 = vuvs + 2 * vi[0];
     __global const float* t1 = vuvs + 2 * vi[1];
     __global const float* t2 = vuvs + 2 * vi[2];
     float w = 1.0f - u - v;
-    return (float2)(w * t0[0] + u * t1[0] + v * t2[0], w * t0[1] + u * t1[1] + v * t2[1]);
+    return v2(w * t0[0] + u * t1[0] + v * t2[0], w * t0[1] + u * t1[1] + v * t2[1]);
 }
 
 /* Opacity of a material at uv (1 = opaque). */
-static inline float material_opacity(const Textures* tx, Material m, float2 uv) {
+static inline float material_opacity(const Textures* tx, Material m, vec2 uv) {
     int t = (int)m[MAT_OPACITY_TEX];
     float o = t >= 0 ? m[MAT_OPACITY] * tex_opacity(tx, t, uv) : m[MAT_OPACITY];
     return m_clamp(o, 0.0f, 1.0f);

@@ -64,10 +64,10 @@ typedef struct {
 
 /* What a path needs to know about the point it hit. */
 typedef struct {
-    float3 p;     /* position */
-    float3 ng;    /* geometric normal (winding order), unit */
+    vec3 p;       /* position */
+    vec3 ng;      /* geometric normal (winding order), unit */
     Frame sh;     /* shading frame */
-    float2 uv;    /* texture coordinates (barycentrics where the mesh has none) */
+    vec2 uv;      /* texture coordinates (barycentrics where the mesh has none) */
     int material;
     int light;    /* emitter index of the triangle, or -1 */
 } Surface;
@@ -79,11 +79,11 @@ static inline Bsdf bsdf_at(const Scene* sc, const Surface* s) {
     Material m = scene_material(sc, s->material);
     Bsdf b = bsdf_from(m);
     int t = (int)m[MAT_COLOR_TEX];
-    if (t >= 0) b.color *= tex_eval(&sc->tex, t, s->uv);
+    if (t >= 0) b.color = v3_mul(b.color, tex_eval(&sc->tex, t, s->uv));
     t = (int)m[MAT_SPEC_TEX];
-    if (t >= 0) b.spec *= tex_eval(&sc->tex, t, s->uv);
+    if (t >= 0) b.spec = v3_mul(b.spec, tex_eval(&sc->tex, t, s->uv));
     t = (int)m[MAT_TRANS_TEX];
-    if (t >= 0) b.trans *= tex_eval(&sc->tex, t, s->uv);
+    if (t >= 0) b.trans = v3_mul(b.trans, tex_eval(&sc->tex, t, s->uv));
     return b;
 }
 
@@ -91,58 +91,56 @@ static inline Bsdf bsdf_at(const Scene* sc, const Surface* s) {
  * by scale * height(uv) and take the normal of the displaced surface; the height
  * gradient is a forward difference over one texel (one hundredth of the unit
  * square for procedural textures). Needs the mesh's uv parameterisation. */
-static inline float3 bump_normal(const Scene* sc, Material m, int prim, int info, float2 uv, float3 ns) {
+static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, vec2 uv, vec3 ns) {
     int t = (int)m[MAT_BUMP_TEX];
     if (t < 0 || !(info & TRI_HAS_UVS)) return ns;
     __global const int* vi = sc->tri_vidx + 3 * prim;
     __global const float* tri = sc->tris + 9 * prim;
-    float3 e1 = (float3)(tri[3], tri[4], tri[5]), e2 = (float3)(tri[6], tri[7], tri[8]);
-    float2 t0 = (float2)(sc->vuvs[2 * vi[0]], sc->vuvs[2 * vi[0] + 1]);
-    float2 d1 = (float2)(sc->vuvs[2 * vi[1]], sc->vuvs[2 * vi[1] + 1]) - t0;
-    float2 d2 = (float2)(sc->vuvs[2 * vi[2]], sc->vuvs[2 * vi[2] + 1]) - t0;
+    vec3 e1 = rgb_at(tri + 3), e2 = rgb_at(tri + 6);
+    vec2 t0 = v2(sc->vuvs[2 * vi[0]], sc->vuvs[2 * vi[0] + 1]);
+    vec2 d1 = v2(sc->vuvs[2 * vi[1]] - t0.x, sc->vuvs[2 * vi[1] + 1] - t0.y);
+    vec2 d2 = v2(sc->vuvs[2 * vi[2]] - t0.x, sc->vuvs[2 * vi[2] + 1] - t0.y);
     float det = d1.x * d2.y - d1.y * d2.x;
     if (!(m_abs(det) > 1e-12f)) return ns;
     float inv = 1.0f / det;
-    float3 dpdu = (d2.y * e1 - d1.y * e2) * inv;
-    float3 dpdv = (d1.x * e2 - d2.x * e1) * inv;
+    vec3 dpdu = v3_scale(v3_sub(v3_scale(e1, d2.y), v3_scale(e2, d1.y)), inv);
+    vec3 dpdv = v3_scale(v3_sub(v3_scale(e2, d1.x), v3_scale(e1, d2.x)), inv);
     __global const float* rec = sc->tex.info + TEX_STRIDE * t;
     bool bitmap = (int)rec[TEX_KIND] == TEX_BITMAP;
     float du = bitmap ? 1.0f / (rec[TEX_WIDTH] * rec[TEX_UV_SCALE]) : 0.01f;
     float dv = bitmap ? 1.0f / (rec[TEX_HEIGHT] * rec[TEX_UV_SCALE + 1]) : 0.01f;
     float scale = m[MAT_BUMP_SCALE];
     float h = tex_eval1(&sc->tex, t, uv);
-    float dhdu = scale * (tex_eval1(&sc->tex, t, uv + (float2)(du, 0.0f)) - h) / du;
-    float dhdv = scale * (tex_eval1(&sc->tex, t, uv + (float2)(0.0f, dv)) - h) / dv;
+    float dhdu = scale * (tex_eval1(&sc->tex, t, v2(uv.x + du, uv.y + 0.0f)) - h) / du;
+    float dhdv = scale * (tex_eval1(&sc->tex, t, v2(uv.x + 0.0f, uv.y + dv)) - h) / dv;
     /* tangents made orthogonal to the shading normal, then displaced */
-    float3 pu = dpdu - ns * m_dot(ns, dpdu) + ns * dhdu;
-    float3 pv = dpdv - ns * m_dot(ns, dpdv) + ns * dhdv;
-    float3 n = m_cross(pu, pv);
+    vec3 pu = v3_add(v3_sub(dpdu, v3_scale(ns, m_dot(ns, dpdu))), v3_scale(ns, dhdu));
+    vec3 pv = v3_add(v3_sub(dpdv, v3_scale(ns, m_dot(ns, dpdv))), v3_scale(ns, dhdv));
+    vec3 n = m_cross(pu, pv);
     float len = m_length(n);
     if (!(len > 0.0f) || !m_isfinite(len)) return ns;
-    n /= len;
-    return m_dot(n, ns) < 0.0f ? -n : n;
+    n = v3_divs(n, len);
+    return m_dot(n, ns) < 0.0f ? v3_neg(n) : n;
 }
 
 /* Rebuild the surface from a hit record (leaf-order triangle, barycentrics u, v). */
 static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
     Surface s;
     __global const float* t = sc->tris + 9 * prim;
-    float3 v0 = (float3)(t[0], t[1], t[2]);
-    float3 e1 = (float3)(t[3], t[4], t[5]);
-    float3 e2 = (float3)(t[6], t[7], t[8]);
-    s.p = v0 + u * e1 + v * e2;
+    vec3 v0 = rgb_at(t), e1 = rgb_at(t + 3), e2 = rgb_at(t + 6);
+    s.p = v3_add(v3_add(v0, v3_scale(e1, u)), v3_scale(e2, v));
     s.ng = m_normalize(m_cross(e1, e2));
     int info = sc->tri_info[2 * prim];
     s.material = info & TRI_MAT_MASK;
     s.light = sc->tri_info[2 * prim + 1];
     s.uv = tri_uv(sc->tri_vidx, sc->vuvs, prim, info, u, v);
-    float3 ns = s.ng;
+    vec3 ns = s.ng;
     if (info & TRI_HAS_NORMALS) {
         int i0 = sc->tri_vidx[3 * prim], i1 = sc->tri_vidx[3 * prim + 1], i2 = sc->tri_vidx[3 * prim + 2];
-        float3 n = (1.0f - u - v) * load3(sc->vnormals, i0) + u * load3(sc->vnormals, i1) +
-                   v * load3(sc->vnormals, i2);
+        vec3 n = v3_add(v3_add(v3_scale(load3(sc->vnormals, i0), 1.0f - u - v), v3_scale(load3(sc->vnormals, i1), u)),
+                        v3_scale(load3(sc->vnormals, i2), v));
         float len = m_length(n);
-        if (len > 0.0f && m_isfinite(len)) ns = n / len;
+        if (len > 0.0f && m_isfinite(len)) ns = v3_divs(n, len);
     }
 #ifdef SCENE_HAS_BUMPMAPS
     ns = bump_normal(sc, scene_material(sc, s.material), prim, info, s.uv, ns);
@@ -158,20 +156,20 @@ static inline AlphaTest scene_alpha(const Scene* sc, RngKey key, int bounce, uin
 }
 
 /* Closest hit of a path's ray at `bounce`, honouring opacity. */
-static inline bool scene_closest(const Scene* sc, RngKey key, int bounce, float3 org, float3 dir, Hit* hit) {
+static inline bool scene_closest(const Scene* sc, RngKey key, int bounce, vec3 org, vec3 dir, Hit* hit) {
     AlphaTest a = scene_alpha(sc, key, bounce, DIM_MASK_CLOSEST);
     return bvh_closest_alpha(sc->nodes, sc->tris, org, dir, INF_F, hit, &a);
 }
 
 /* True when a shadow ray of `bounce` is blocked before tmax, honouring opacity. */
-static inline bool scene_occluded(const Scene* sc, RngKey key, int bounce, float3 org, float3 dir, float tmax) {
+static inline bool scene_occluded(const Scene* sc, RngKey key, int bounce, vec3 org, vec3 dir, float tmax) {
     AlphaTest a = scene_alpha(sc, key, bounce, DIM_MASK_SHADOW);
     return bvh_any_alpha(sc->nodes, sc->tris, org, dir, tmax, &a);
 }
 
 /* Origin for a ray leaving s in direction d: offset to d's side of the surface. */
-static inline float3 spawn_origin(const Surface* s, float3 d) {
-    return offset_ray_origin(s->p, m_dot(d, s->ng) >= 0.0f ? s->ng : -s->ng);
+static inline vec3 spawn_origin(const Surface* s, vec3 d) {
+    return offset_ray_origin(s->p, m_dot(d, s->ng) >= 0.0f ? s->ng : v3_neg(s->ng));
 }
 
 #endif

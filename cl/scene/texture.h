@@ -109,30 +109,37 @@ static inline int tex_wrap(int i, int n, int mode) {
 }
 
 /* One texel, linear RGBA. */
-static inline float4 tex_texel(const Textures* tx, __global const float* t, int x, int y) {
+static inline vec4 tex_texel(const Textures* tx, __global const float* t, int x, int y) {
     int w = (int)t[TEX_WIDTH], h = (int)t[TEX_HEIGHT], mode = (int)t[TEX_WRAP];
     x = tex_wrap(x, w, mode);
     y = tex_wrap(y, h, mode);
-    if (x < 0 || y < 0) return (float4)(0.0f);
+    if (x < 0 || y < 0) return v4(0.0f, 0.0f, 0.0f, 0.0f);
     int at = as_int(t[TEX_OFFSET]) + y * w + x;
     int format = (int)t[TEX_FORMAT];
     if (format == TEXF_FLOAT) {
         __global const float* p = tx->texels32 + 4 * at;
-        return (float4)(p[0], p[1], p[2], p[3]);
+        return v4(p[0], p[1], p[2], p[3]);
     }
     __global const uchar* p = tx->texels8 + 4 * at;
     float a = (float)p[3] * (1.0f / 255.0f);
     if (format == TEXF_SRGB8)
-        return (float4)(SRGB8_TO_LINEAR[p[0]], SRGB8_TO_LINEAR[p[1]], SRGB8_TO_LINEAR[p[2]], a);
-    return (float4)((float)p[0], (float)p[1], (float)p[2], (float)p[3]) * (1.0f / 255.0f);
+        return v4(SRGB8_TO_LINEAR[p[0]], SRGB8_TO_LINEAR[p[1]], SRGB8_TO_LINEAR[p[2]], a);
+    return v4_scale(v4((float)p[0], (float)p[1], (float)p[2], (float)p[3]), 1.0f / 255.0f);
+}
+
+/* Bilinear blend of four texels at fractions (fx, fy): (1 - fy)((1 - fx) c00 + fx c10) + fy((1 - fx) c01 + fx c11). */
+static inline vec4 tex_bilerp(vec4 c00, vec4 c10, vec4 c01, vec4 c11, float fx, float fy) {
+    vec4 top = v4_add(v4_scale(c00, 1.0f - fx), v4_scale(c10, fx));
+    vec4 bottom = v4_add(v4_scale(c01, 1.0f - fx), v4_scale(c11, fx));
+    return v4_add(v4_scale(top, 1.0f - fy), v4_scale(bottom, fy));
 }
 
 /* A bitmap's linear RGBA at uv (after the uv transform), nearest or bilinear. */
-static inline float4 tex_bitmap(const Textures* tx, __global const float* t, float2 uv) {
+static inline vec4 tex_bitmap(const Textures* tx, __global const float* t, vec2 uv) {
     float w = t[TEX_WIDTH], h = t[TEX_HEIGHT];
     float x = uv.x * w - 0.5f;
     float y = (1.0f - uv.y) * h - 0.5f;
-    if (!(m_isfinite(x) && m_isfinite(y))) return (float4)(0.0f);
+    if (!(m_isfinite(x) && m_isfinite(y))) return v4(0.0f, 0.0f, 0.0f, 0.0f);
     /* keep far-away coordinates in int range; the wrap modes are periodic or saturating */
     x = m_clamp(x, -1.0e7f, 1.0e7f);
     y = m_clamp(y, -1.0e7f, 1.0e7f);
@@ -142,40 +149,36 @@ static inline float4 tex_bitmap(const Textures* tx, __global const float* t, flo
         return tex_texel(tx, t, (int)m_floor(x + 0.5f), (int)m_floor(y + 0.5f));
     }
     float ax = x - fx, ay = y - fy;
-    float4 c00 = tex_texel(tx, t, x0, y0), c10 = tex_texel(tx, t, x0 + 1, y0);
-    float4 c01 = tex_texel(tx, t, x0, y0 + 1), c11 = tex_texel(tx, t, x0 + 1, y0 + 1);
-    return (1.0f - ay) * ((1.0f - ax) * c00 + ax * c10) + ay * ((1.0f - ax) * c01 + ax * c11);
+    vec4 c00 = tex_texel(tx, t, x0, y0), c10 = tex_texel(tx, t, x0 + 1, y0);
+    vec4 c01 = tex_texel(tx, t, x0, y0 + 1), c11 = tex_texel(tx, t, x0 + 1, y0 + 1);
+    return tex_bilerp(c00, c10, c01, c11, ax, ay);
 }
 
 /* Texture `id` at uv: linear RGBA with the texture's scale applied to rgb. */
-static inline float4 tex_eval4(const Textures* tx, int id, float2 uv) {
+static inline vec4 tex_eval4(const Textures* tx, int id, vec2 uv) {
     __global const float* t = tx->info + TEX_STRIDE * id;
-    float2 st = (float2)(uv.x * t[TEX_UV_SCALE] + t[TEX_UV_OFFSET],
-                         uv.y * t[TEX_UV_SCALE + 1] + t[TEX_UV_OFFSET + 1]);
-    float3 scale = (float3)(t[TEX_SCALE], t[TEX_SCALE + 1], t[TEX_SCALE + 2]);
+    vec2 st = v2(uv.x * t[TEX_UV_SCALE] + t[TEX_UV_OFFSET], uv.y * t[TEX_UV_SCALE + 1] + t[TEX_UV_OFFSET + 1]);
+    vec3 scale = rgb_at(t + TEX_SCALE);
     if ((int)t[TEX_KIND] == TEX_CHECKER) {
         bool mu = st.x - m_floor(st.x) > 0.5f, mv = st.y - m_floor(st.y) > 0.5f;
-        if (mu == mv) return (float4)(scale, 1.0f);
-        return (float4)(t[TEX_COLOR1], t[TEX_COLOR1 + 1], t[TEX_COLOR1 + 2], 1.0f);
+        if (mu == mv) return v4(scale.x, scale.y, scale.z, 1.0f);
+        return v4(t[TEX_COLOR1], t[TEX_COLOR1 + 1], t[TEX_COLOR1 + 2], 1.0f);
     }
-    float4 c = tex_bitmap(tx, t, st);
-    return (float4)(c.x * scale.x, c.y * scale.y, c.z * scale.z, c.w);
+    vec4 c = tex_bitmap(tx, t, st);
+    return v4(c.x * scale.x, c.y * scale.y, c.z * scale.z, c.w);
 }
 
-static inline float3 tex_eval(const Textures* tx, int id, float2 uv) {
-    float4 c = tex_eval4(tx, id, uv);
-    return (float3)(c.x, c.y, c.z);
-}
+static inline vec3 tex_eval(const Textures* tx, int id, vec2 uv) { return v4_xyz(tex_eval4(tx, id, uv)); }
 
 /* A scalar view of a texture (opacity, bump height): the mean of rgb, as Mitsuba's
  * `eval_1` of an RGB texture. */
-static inline float tex_eval1(const Textures* tx, int id, float2 uv) {
-    float3 c = tex_eval(tx, id, uv);
+static inline float tex_eval1(const Textures* tx, int id, vec2 uv) {
+    vec3 c = tex_eval(tx, id, uv);
     return (c.x + c.y + c.z) * (1.0f / 3.0f);
 }
 
 /* Opacity (mask): the alpha channel of a bitmap that has one, else the mean of rgb. */
-static inline float tex_opacity(const Textures* tx, int id, float2 uv) {
+static inline float tex_opacity(const Textures* tx, int id, vec2 uv) {
     __global const float* t = tx->info + TEX_STRIDE * id;
     int ch = (int)t[TEX_CHANNELS];
     if ((int)t[TEX_KIND] == TEX_BITMAP && (ch == 2 || ch == 4)) return tex_eval4(tx, id, uv).w;

@@ -10,9 +10,9 @@ OpenCL accessors (``path_get_<field>`` / ``path_set_<field>``, the
 - ``aos`` (array of structures): one buffer of records, ``record_words`` words
   per path.
 
-A vector field also gets one accessor per component (``path_get_L_x``): code
-written on scalars is what PoCL's vectorizer accepts (a ``float3`` operation in
-a work-item loop stops it).
+A vector field is a ``vec3`` (a struct of three floats, cl/core/math.h, which PoCL's
+vectorizer accepts where it refuses ``float3``) and also gets one accessor per
+component (``path_get_L_x``).
 
 Stage code (``cl/*.cl``) only uses the accessors, so it compiles unchanged
 either way.
@@ -30,7 +30,7 @@ from pyclpt.device.context import Device, alloc
 class Field:
     name: str
     ctype: str  # "float" or "int"
-    width: int = 1  # 1 or 3 (float3)
+    width: int = 1  # 1 or 3 (a vec3 of floats: cl/core/math.h)
     doc: str = ""
 
 
@@ -111,8 +111,8 @@ def opencl_header(layout: str) -> str:
             return f"{word(f, k)} = {v if f.ctype == 'float' else f'as_float({v})'};"
 
     for f in FIELDS:
-        vt = f.ctype if f.width == 1 else f"{f.ctype}{f.width}"
-        value = load(f, 0) if f.width == 1 else f"({vt})({', '.join(load(f, k) for k in range(f.width))})"
+        vt = f.ctype if f.width == 1 else "vec3"
+        value = load(f, 0) if f.width == 1 else f"v3({', '.join(load(f, k) for k in range(f.width))})"
         sets = store(f, 0, "v") if f.width == 1 else " ".join(store(f, k, f"v.{_AXES[k]}") for k in range(f.width))
         out.append(f"static inline {vt} path_get_{f.name}(const PathStore* P, int i) {{ return {value}; }}")
         out.append(f"static inline void path_set_{f.name}(const PathStore* P, int i, {vt} v) {{ {sets} }}")

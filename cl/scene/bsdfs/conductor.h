@@ -9,11 +9,11 @@
 
 #include "scene/bsdfs/fresnel.h"
 
-static inline bool conductor_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+static inline bool conductor_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     s->wo = reflect_local(wi);
     s->pdf = 1.0f;
     s->delta = true;
-    s->weight = fresnel_conductor(wi.z, b->eta, b->k) * b->spec;
+    s->weight = v3_mul(fresnel_conductor(wi.z, b->eta, b->k), b->spec);
     return true;
 }
 

@@ -10,7 +10,7 @@
 #include "scene/bsdfs/fresnel.h"
 
 /* Smooth dielectric: reflection with probability F, else refraction (dielectric.cpp). */
-static inline bool dielectric_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+static inline bool dielectric_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     float cos_t, eta_ti;
     float f = fresnel_dielectric(wi.z, b->ior, &cos_t, &eta_ti);
     s->delta = true;
@@ -19,11 +19,11 @@ static inline bool dielectric_sample(const Bsdf* b, float3 wi, float u_lobe, flo
         s->pdf = f;
         s->weight = b->spec;
     } else {
-        s->wo = (float3)(-eta_ti * wi.x, -eta_ti * wi.y, cos_t);
+        s->wo = v3(-eta_ti * wi.x, -eta_ti * wi.y, cos_t);
         s->pdf = 1.0f - f;
         s->eta = 1.0f / eta_ti;
         /* radiance is compressed into a smaller solid angle on entering */
-        s->weight = b->trans * (eta_ti * eta_ti);
+        s->weight = v3_scale(b->trans, eta_ti * eta_ti);
     }
     return s->pdf > 0.0f;
 }

@@ -9,12 +9,12 @@
 
 #include "core/sampling.h"
 
-static inline float3 diffuse_eval(const Bsdf* b, float3 wi, float3 wo, float* pdf) {
+static inline vec3 diffuse_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
     *pdf = cosine_hemisphere_pdf(wo);
-    return b->color * (INV_PI_F * wo.z);
+    return v3_scale(b->color, INV_PI_F * wo.z);
 }
 
-static inline bool diffuse_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+static inline bool diffuse_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     s->wo = square_to_cosine_hemisphere(u);
     s->pdf = cosine_hemisphere_pdf(s->wo);
     s->weight = b->color;

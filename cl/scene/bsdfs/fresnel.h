@@ -7,19 +7,25 @@
 #include "core/common.h"
 
 /* Unpolarised Fresnel reflectance of a conductor with complex IOR eta + i k (cos_i >= 0). */
-static inline float3 fresnel_conductor(float cos_i, float3 eta, float3 k) {
+static inline float fresnel_conductor1(float cos_i, float eta, float k) {
     float c2 = cos_i * cos_i, s2 = 1.0f - c2;
-    float3 eta2 = eta * eta, k2 = k * k;
-    float3 t0 = eta2 - k2 - s2;
-    float3 a2pb2 = m_sqrt3(m_max3s(t0 * t0 + 4.0f * eta2 * k2, 0.0f));
-    float3 t1 = a2pb2 + c2;
-    float3 a = m_sqrt3(m_max3s(0.5f * (a2pb2 + t0), 0.0f));
-    float3 t2 = 2.0f * cos_i * a;
-    float3 rs = (t1 - t2) / (t1 + t2);
-    float3 t3 = c2 * a2pb2 + s2 * s2;
-    float3 t4 = t2 * s2;
-    float3 rp = rs * (t3 - t4) / (t3 + t4);
+    float eta2 = eta * eta, k2 = k * k;
+    float t0 = eta2 - k2 - s2;
+    float a2pb2 = m_sqrt(m_max(t0 * t0 + 4.0f * eta2 * k2, 0.0f));
+    float t1 = a2pb2 + c2;
+    float a = m_sqrt(m_max(0.5f * (a2pb2 + t0), 0.0f));
+    float t2 = 2.0f * cos_i * a;
+    float rs = (t1 - t2) / (t1 + t2);
+    float t3 = c2 * a2pb2 + s2 * s2;
+    float t4 = t2 * s2;
+    float rp = rs * (t3 - t4) / (t3 + t4);
     return 0.5f * (rp + rs);
+}
+
+/* The same per RGB channel. */
+static inline vec3 fresnel_conductor(float cos_i, vec3 eta, vec3 k) {
+    return v3(fresnel_conductor1(cos_i, eta.x, k.x), fresnel_conductor1(cos_i, eta.y, k.y),
+              fresnel_conductor1(cos_i, eta.z, k.z));
 }
 
 /* Dielectric Fresnel reflectance for a signed cos_i (negative: from inside), eta = int/ext.

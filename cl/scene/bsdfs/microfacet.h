@@ -47,7 +47,7 @@ static inline float erfinv_f(float x) {
 }
 
 /* The normal distribution D(m) (per unit solid angle of m; integrates D(m) m.z to 1). */
-static inline float mf_d(Microfacet d, float3 m) {
+static inline float mf_d(Microfacet d, vec3 m) {
     if (!(m.z > 0.0f)) return 0.0f;
     float a2 = d.alpha * d.alpha;
     float c2 = m.z * m.z;
@@ -66,7 +66,7 @@ static inline float mf_d(Microfacet d, float3 m) {
 }
 
 /* Smith's masking for one direction, zero where v sees the back of m (or m from behind). */
-static inline float mf_g1(Microfacet d, float3 v, float3 m) {
+static inline float mf_g1(Microfacet d, vec3 v, vec3 m) {
     if (m_dot(v, m) * v.z <= 0.0f) return 0.0f;
     float xy2 = d.alpha * d.alpha * (v.x * v.x + v.y * v.y);
     if (xy2 <= 0.0f) return 1.0f;
@@ -83,10 +83,10 @@ static inline float mf_g1(Microfacet d, float3 v, float3 m) {
 
 /* Visible-normal sampling of GGX at alpha = 1 (Heitz 2018, "Sampling the GGX Distribution of
  * Visible Normals"): the stretched direction vh (z > 0) to a normal of the hemisphere. */
-static inline float3 ggx_sample_visible_11(float3 vh, float2 u) {
+static inline vec3 ggx_sample_visible_11(vec3 vh, vec2 u) {
     float lensq = vh.x * vh.x + vh.y * vh.y;
-    float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * m_rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
-    float3 t2 = m_cross(vh, t1);
+    vec3 t1 = lensq > 0.0f ? v3_scale(v3(-vh.y, vh.x, 0.0f), m_rsqrt(lensq)) : v3(1.0f, 0.0f, 0.0f);
+    vec3 t2 = m_cross(vh, t1);
     float r = m_sqrt(u.x);
     float phi = 2.0f * PI_F * u.y;
     float cos_phi, sin_phi = m_sincos(phi, &cos_phi);
@@ -94,18 +94,18 @@ static inline float3 ggx_sample_visible_11(float3 vh, float2 u) {
     float p2 = r * sin_phi;
     float s = 0.5f * (1.0f + vh.z);
     p2 = (1.0f - s) * m_sqrt(m_max(0.0f, 1.0f - p1 * p1)) + s * p2;
-    return p1 * t1 + p2 * t2 + m_sqrt(m_max(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
+    return v3_add(v3_add(v3_scale(t1, p1), v3_scale(t2, p2)), v3_scale(vh, m_sqrt(m_max(0.0f, 1.0f - p1 * p1 - p2 * p2))));
 }
 
 /* Visible-slope sampling of Beckmann at alpha = 1 for an incident cosine cos_i > 0
  * (Jakob 2014, "An Improved Visible Normal Sampling Routine for the Beckmann Distribution",
  * as in Mitsuba 3's sample_visible_11): the slope CDF inverted by Newton steps in the erf domain. */
-static inline float2 beckmann_sample_visible_11(float cos_i, float2 u) {
+static inline vec2 beckmann_sample_visible_11(float cos_i, vec2 u) {
     float tan_i = m_sqrt(m_max(0.0f, 1.0f - cos_i * cos_i)) / cos_i;
     float cot_i = 1.0f / tan_i; /* inf at normal incidence: erf(inf) = 1, exp(-inf) = 0 */
     float maxval = erf(cot_i); /* exact erf (core/math.h) */
     float gauss = tan_i > 0.0f ? INV_SQRT_PI_F * tan_i * m_exp(-cot_i * cot_i) : 0.0f;
-    u = (float2)(m_clamp(u.x, 1e-6f, 1.0f - 1e-6f), m_clamp(u.y, 1e-6f, 1.0f - 1e-6f));
+    u = v2(m_clamp(u.x, 1e-6f, 1.0f - 1e-6f), m_clamp(u.y, 1e-6f, 1.0f - 1e-6f));
     /* initial guess: the analytic solution at grazing incidence */
     float x = maxval - (maxval + 1.0f) * erf(m_sqrt(-m_log(u.x)));
     float target = u.x * (1.0f + maxval + gauss);
@@ -119,30 +119,30 @@ static inline float2 beckmann_sample_visible_11(float cos_i, float2 u) {
         float step = value / deriv;
         if (m_isfinite(step)) x = m_clamp(x - step, lo, hi);
     }
-    return (float2)(erfinv_f(x), erfinv_f(m_clamp(2.0f * u.y - 1.0f, lo, 1.0f - 1e-6f)));
+    return v2(erfinv_f(x), erfinv_f(m_clamp(2.0f * u.y - 1.0f, lo, 1.0f - 1e-6f)));
 }
 
 /* A visible normal for wi (wi.z > 0), distributed as D(m) G1(wi, m) max(0, wi.m) / wi.z. */
-static inline float3 mf_sample_visible(Microfacet d, float3 wi, float2 u) {
-    float3 vh = m_normalize((float3)(d.alpha * wi.x, d.alpha * wi.y, wi.z));
-    float3 m;
+static inline vec3 mf_sample_visible(Microfacet d, vec3 wi, vec2 u) {
+    vec3 vh = m_normalize(v3(d.alpha * wi.x, d.alpha * wi.y, wi.z));
+    vec3 m;
     if (d.beckmann) {
         float lensq = vh.x * vh.x + vh.y * vh.y;
         float inv = lensq > 0.0f ? m_rsqrt(lensq) : 0.0f;
         float cos_phi = lensq > 0.0f ? vh.x * inv : 1.0f, sin_phi = vh.y * inv;
-        float2 s = beckmann_sample_visible_11(vh.z, u);
+        vec2 s = beckmann_sample_visible_11(vh.z, u);
         float sx = (cos_phi * s.x - sin_phi * s.y) * d.alpha;
         float sy = (sin_phi * s.x + cos_phi * s.y) * d.alpha;
-        m = (float3)(-sx, -sy, 1.0f);
+        m = v3(-sx, -sy, 1.0f);
     } else {
-        float3 nh = ggx_sample_visible_11(vh, u);
-        m = (float3)(d.alpha * nh.x, d.alpha * nh.y, m_max(1e-6f, nh.z));
+        vec3 nh = ggx_sample_visible_11(vh, u);
+        m = v3(d.alpha * nh.x, d.alpha * nh.y, m_max(1e-6f, nh.z));
     }
     return m_normalize(m);
 }
 
 /* Density of mf_sample_visible producing m (per unit solid angle of m). */
-static inline float mf_pdf_visible(Microfacet d, float3 wi, float3 m) {
+static inline float mf_pdf_visible(Microfacet d, vec3 wi, vec3 m) {
     if (wi.z <= 0.0f) return 0.0f;
     return mf_d(d, m) * mf_g1(d, wi, m) * m_max(m_dot(wi, m), 0.0f) / wi.z;
 }

@@ -25,35 +25,35 @@ static inline float plastic_prob_specular(const Bsdf* b, float t_i) {
 
 /* The diffuse base seen through the coating, without the transmittances:
  * diffuse / (1 - (nonlinear ? diffuse * r_int : r_int)) / eta^2 / pi. */
-static inline float3 plastic_base(const Bsdf* b) {
-    float3 diff = b->color;
-    float3 denom = (b->flags & MAT_FLAG_NONLINEAR) ? 1.0f - diff * b->fdr_int : (float3)(1.0f - b->fdr_int);
-    return diff / m_max3s(denom, 1e-6f) * (INV_PI_F / (b->ior * b->ior));
+static inline vec3 plastic_base(const Bsdf* b) {
+    vec3 diff = b->color;
+    vec3 denom = (b->flags & MAT_FLAG_NONLINEAR) ? v3_rsubs(1.0f, v3_scale(diff, b->fdr_int)) : v3_splat(1.0f - b->fdr_int);
+    return v3_scale(v3_div(diff, m_max3s(denom, 1e-6f)), INV_PI_F / (b->ior * b->ior));
 }
 
 /* The diffuse part (the coating is a delta): base (1 - F_i)(1 - F_o) cos_o. */
-static inline float3 plastic_eval(const Bsdf* b, float3 wi, float3 wo, float* pdf) {
+static inline vec3 plastic_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
     float f_i = fresnel_dielectric_f(wi.z, b->ior), f_o = fresnel_dielectric_f(wo.z, b->ior);
     float pd = 1.0f - plastic_prob_specular(b, 1.0f - f_i);
     *pdf = pd * cosine_hemisphere_pdf(wo);
-    return plastic_base(b) * ((1.0f - f_i) * (1.0f - f_o) * wo.z);
+    return v3_scale(plastic_base(b), (1.0f - f_i) * (1.0f - f_o) * wo.z);
 }
 
 /* The coating's mirror direction with probability plastic_prob_specular, else the base's
  * cosine-weighted direction. */
-static inline bool plastic_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+static inline bool plastic_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     float f_i = fresnel_dielectric_f(wi.z, b->ior);
     float ps = plastic_prob_specular(b, 1.0f - f_i);
     if (u_lobe < ps) {
         s->wo = reflect_local(wi);
         s->pdf = ps;
         s->delta = true;
-        s->weight = b->spec * (f_i / ps);
+        s->weight = v3_scale(b->spec, f_i / ps);
     } else {
         s->wo = square_to_cosine_hemisphere(u);
         if (s->wo.z <= 0.0f) return false;
-        float3 value = plastic_eval(b, wi, s->wo, &s->pdf);
-        s->weight = value / s->pdf;
+        vec3 value = plastic_eval(b, wi, s->wo, &s->pdf);
+        s->weight = v3_divs(value, s->pdf);
     }
     return true;
 }

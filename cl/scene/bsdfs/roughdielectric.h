@@ -15,20 +15,20 @@
  * reflection F D G / (4 |cos_i|); refraction eta^2 (1 - F) D G |wi.m| |wo.m| / (|cos_i| (wi.m + eta wo.m)^2)
  * times the radiance scaling 1 / eta^2, which cancels, eta being the IOR of wo's side over wi's.
  * The pdf is that of roughdielectric_sample: visible normal, lobe probability, half-vector Jacobian. */
-static inline float3 roughdielectric_eval(const Bsdf* b, float3 wi, float3 wo, float* pdf) {
+static inline vec3 roughdielectric_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
     float cos_i = wi.z, cos_o = wo.z;
-    if (cos_i == 0.0f || cos_o == 0.0f || bsdf_index_matched(b)) return (float3)(0.0f);
+    if (cos_i == 0.0f || cos_o == 0.0f || bsdf_index_matched(b)) return v3_splat(0.0f);
     Microfacet d = microfacet_of(b);
     bool reflect = cos_i * cos_o > 0.0f;
     float eta = cos_i > 0.0f ? b->ior : 1.0f / b->ior; /* IOR of wo's side over wi's */
-    float3 hv = wi + wo * (reflect ? 1.0f : eta);
+    vec3 hv = v3_add(wi, v3_scale(wo, reflect ? 1.0f : eta));
     float len = m_length(hv);
-    if (!(len > 1e-7f)) return (float3)(0.0f);
-    float3 m = hv / len;
-    if (m.z < 0.0f) m = -m;
+    if (!(len > 1e-7f)) return v3_splat(0.0f);
+    vec3 m = v3_divs(hv, len);
+    if (m.z < 0.0f) m = v3_neg(m);
     float dm = mf_d(d, m);
     float g1_i = mf_g1(d, wi, m), g1_o = mf_g1(d, wo, m);
-    if (dm == 0.0f || g1_i == 0.0f || g1_o == 0.0f) return (float3)(0.0f);
+    if (dm == 0.0f || g1_i == 0.0f || g1_o == 0.0f) return v3_splat(0.0f);
     float wi_m = m_dot(wi, m), wo_m = m_dot(wo, m);
     float ct, eti;
     float f = fresnel_dielectric(wi_m, b->ior, &ct, &eti);
@@ -37,51 +37,51 @@ static inline float3 roughdielectric_eval(const Bsdf* b, float3 wi, float3 wo, f
     float prob = dm * g1_i * m_abs(wi_m) / aci;
     if (reflect) {
         *pdf = prob * f / (4.0f * m_abs(wo_m));
-        return b->spec * (f * dm * g1_i * g1_o / (4.0f * aci));
+        return v3_scale(b->spec, f * dm * g1_i * g1_o / (4.0f * aci));
     }
     float denom = wi_m + eta * wo_m;
     float denom2 = denom * denom;
     *pdf = prob * (1.0f - f) * (eta * eta * m_abs(wo_m) / denom2);
-    return b->trans * ((1.0f - f) * dm * g1_i * g1_o * m_abs(wi_m * wo_m) / (aci * denom2));
+    return v3_scale(b->trans, (1.0f - f) * dm * g1_i * g1_o * m_abs(wi_m * wo_m) / (aci * denom2));
 }
 
 /* A visible normal of wi's side, then reflection with probability F(wi.m), else refraction
  * through m; weight = G1(wo, m) (times eta_ti^2 on refraction). */
-static inline bool roughdielectric_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+static inline bool roughdielectric_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     float cos_i = wi.z;
     if (cos_i == 0.0f) return false;
     if (bsdf_index_matched(b)) { /* an invisible interface */
-        s->wo = -wi;
+        s->wo = v3_neg(wi);
         s->pdf = 1.0f;
         s->delta = true;
         s->weight = b->trans;
         return true;
     }
     Microfacet d = microfacet_of(b);
-    float3 wi_up = cos_i > 0.0f ? wi : -wi;
-    float3 m = mf_sample_visible(d, wi_up, u);
+    vec3 wi_up = cos_i > 0.0f ? wi : v3_neg(wi);
+    vec3 m = mf_sample_visible(d, wi_up, u);
     float pdf_m = mf_pdf_visible(d, wi_up, m);
     if (!(pdf_m > 0.0f)) return false;
     float cos_t, eta_ti;
     float wi_m = m_dot(wi, m);
     float f = fresnel_dielectric(wi_m, b->ior, &cos_t, &eta_ti);
     if (u_lobe <= f) {
-        s->wo = 2.0f * wi_m * m - wi;
+        s->wo = v3_sub(v3_scale(m, 2.0f * wi_m), wi);
         float wo_m = m_dot(s->wo, m);
         s->pdf = pdf_m * f / (4.0f * m_abs(wo_m));
         s->weight = b->spec;
     } else {
-        s->wo = m * (wi_m * eta_ti + cos_t) - wi * eta_ti;
+        s->wo = v3_sub(v3_scale(m, wi_m * eta_ti + cos_t), v3_scale(wi, eta_ti));
         float eta = 1.0f / eta_ti;
         float wo_m = m_dot(s->wo, m);
         float denom = wi_m + eta * wo_m;
         s->pdf = pdf_m * (1.0f - f) * (eta * eta * m_abs(wo_m) / (denom * denom));
         s->eta = eta;
-        s->weight = b->trans * (eta_ti * eta_ti);
+        s->weight = v3_scale(b->trans, eta_ti * eta_ti);
     }
     float g1_o = mf_g1(d, s->wo, m);
     if (g1_o == 0.0f) return false; /* wo on the wrong side of the macrosurface */
-    s->weight *= g1_o;
+    s->weight = v3_scale(s->weight, g1_o);
     return s->pdf > 0.0f && m_isfinite(s->pdf);
 }
 

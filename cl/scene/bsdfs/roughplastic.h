@@ -26,35 +26,35 @@ static inline float roughplastic_transmittance(const Bsdf* b, float cos_theta) {
 }
 
 /* Coating F D G / (4 cos_i) + base t_i t_o cos_o, and the pdf of both lobes together. */
-static inline float3 roughplastic_eval(const Bsdf* b, float3 wi, float3 wo, float* pdf) {
+static inline vec3 roughplastic_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
     Microfacet d = microfacet_of(b);
     float t_i = roughplastic_transmittance(b, wi.z), t_o = roughplastic_transmittance(b, wo.z);
     float ps = plastic_prob_specular(b, t_i);
-    float3 h = m_normalize(wi + wo);
+    vec3 h = m_normalize(v3_add(wi, wo));
     float dh = mf_d(d, h);
     float g1_i = mf_g1(d, wi, h);
     float spec_pdf = dh * g1_i / (4.0f * wi.z);
     *pdf = ps * spec_pdf + (1.0f - ps) * cosine_hemisphere_pdf(wo);
     float f = fresnel_dielectric_f(m_dot(wi, h), b->ior);
-    float3 value = b->spec * (f * dh * g1_i * mf_g1(d, wo, h) / (4.0f * wi.z));
-    return value + plastic_base(b) * (t_i * t_o * wo.z);
+    vec3 value = v3_scale(b->spec, f * dh * g1_i * mf_g1(d, wo, h) / (4.0f * wi.z));
+    return v3_add(value, v3_scale(plastic_base(b), t_i * t_o * wo.z));
 }
 
 /* The coating (a visible normal) or the base (cosine-weighted), chosen by plastic_prob_specular;
  * the weight of both lobes together, as Mitsuba: eval / pdf. */
-static inline bool roughplastic_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+static inline bool roughplastic_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     float ps = plastic_prob_specular(b, roughplastic_transmittance(b, wi.z));
     if (u_lobe < ps) {
-        float3 h = mf_sample_visible(microfacet_of(b), wi, u);
-        s->wo = 2.0f * m_dot(wi, h) * h - wi;
+        vec3 h = mf_sample_visible(microfacet_of(b), wi, u);
+        s->wo = v3_sub(v3_scale(h, 2.0f * m_dot(wi, h)), wi);
     } else {
         s->wo = square_to_cosine_hemisphere(u);
     }
     if (s->wo.z <= 0.0f) return false;
     /* the weight of both lobes together, as Mitsuba: eval / pdf */
-    float3 value = roughplastic_eval(b, wi, s->wo, &s->pdf);
+    vec3 value = roughplastic_eval(b, wi, s->wo, &s->pdf);
     if (!(s->pdf > 0.0f)) return false;
-    s->weight = value / s->pdf;
+    s->weight = v3_divs(value, s->pdf);
     return true;
 }
 

@@ -12,7 +12,7 @@
 
 /* R' = R + T R T / (1 - R^2) = 2R / (1 + R) with R at |cos_i| from outside; reflection with
  * probability R', else straight through. */
-static inline bool thindielectric_sample(const Bsdf* b, float3 wi, float u_lobe, float2 u, BsdfSample* s) {
+static inline bool thindielectric_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     float r = fresnel_dielectric_f(m_abs(wi.z), b->ior);
     r = 2.0f * r / (1.0f + r);
     s->delta = true;
@@ -21,7 +21,7 @@ static inline bool thindielectric_sample(const Bsdf* b, float3 wi, float u_lobe,
         s->pdf = r;
         s->weight = b->spec;
     } else {
-        s->wo = -wi;
+        s->wo = v3_neg(wi);
         s->pdf = 1.0f - r;
         s->weight = b->trans;
     }
