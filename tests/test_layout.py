@@ -105,7 +105,7 @@ def test_stage_has_one_name(stage):
     src = cl_dir() / "integrators" / "wavefront" / f"{stage}.cl"
     assert src.is_file()
     text = src.read_text()
-    assert re.search(rf"__kernel\s+void\s+{stage}\s*\(", text), f"{src}: no kernel named {stage}"
+    assert re.search(rf"__kernel\s+(?:SCALAR_KERNEL\s+)?void\s+{stage}\s*\(", text), f"{src}: no kernel named {stage}"
     assert "Consumes:" in text.split("*/")[0] and "Produces:" in text.split("*/")[0], \
         f"{src}: the header comment says what the kernel consumes and produces"
     assert callable(getattr(Wavefront, stage, None)), f"Wavefront.{stage}"

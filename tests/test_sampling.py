@@ -66,7 +66,7 @@ __kernel void bsdf_eval_k(__global const float* mat, __global const float* wi, i
                           __global const float* wo, __global float* out) {
     int i = get_global_id(0);
     float pdf = -1.0f;
-    Bsdf b = bsdf_from(mat);
+    Bsdf b = bsdf_from(mat, 1);
     vec3 v = bsdf_eval(&b, load3(wi, i * wi_stride), load3(wo, i), &pdf);
     store3(out + 4 * i, 0, v);
     out[4 * i + 3] = pdf;
@@ -83,7 +83,7 @@ __kernel void bsdf_sample_k(__global const float* mat, __global const float* wi,
     s.pdf = 0.0f;
     s.eta = 0.0f;
     s.delta = false;
-    Bsdf b = bsdf_from(mat);
+    Bsdf b = bsdf_from(mat, 1);
     bool ok = bsdf_sample(&b, w, u[3 * i], v2(u[3 * i + 1], u[3 * i + 2]), &s);
     float pdf = -1.0f;
     vec3 v = bsdf_eval(&b, w, s.wo, &pdf);
@@ -108,7 +108,7 @@ __kernel void bsdf_cells_k(__global const float* mat, __global const float* wi_p
     int cell = cells[get_global_id(0)];
     int i = cell / n_phi, j = cell % n_phi;
     vec3 wi = load3(wi_p, 0);
-    Bsdf bsdf = bsdf_from(mat);
+    Bsdf bsdf = bsdf_from(mat, 1);
     float4 acc = (float4)(0.0f);
     for (int a = 0; a < q_t; ++a) {
         vec3 t = load3(tnodes, i * q_t + a);

@@ -19,7 +19,7 @@ KERNEL = r"""
 __kernel void tex_lookup(__global const float* info, __global const uchar* t8, __global const float* t32,
                          int id, __global const float* uv, __global float* out) {
     int i = get_global_id(0);
-    Textures tx = {info, t8, t32};
+    Textures tx = {info, t8, t32, 1};
     vec2 st = v2(uv[2 * i], uv[2 * i + 1]);
     vec4 c = tex_eval4(&tx, id, st);
     vstore4((float4)(c.x, c.y, c.z, c.w), i, out);

@@ -7,9 +7,11 @@ import pytest
 from closed_forms import emitter_pixels
 
 import pyclpt
+from pyclpt.buffers import scene as scene_buffers
+from pyclpt.buffers.scene import pack_scene
 from pyclpt.integrators.path_state import FIELDS, bytes_per_path, opencl_header, record_words
 from pyclpt.integrators.wavefront import STAGES
-from scenes import interior_furnace, sensor
+from scenes import interior_furnace, material_zoo, sensor
 
 
 def render(scene, **kw):
@@ -277,3 +279,46 @@ def test_wavefront_memory_does_not_grow_with_image_or_spp(cornell_box):
     r.render(1, progress=False)
     assert r.stats.memory == {"wave_size": 512, "bytes_per_path": bytes_per_path() + 25,
                               "path_state_bytes": 512 * bytes_per_path()}
+
+
+def test_material_zoo_wavefront_equals_megakernel():
+    """Every material kind, texture, bump map, mask and emitter kind (tests/scenes.py: material_zoo):
+    every branch of the shading code gives the megakernel's image in the wavefront's stages."""
+    kw = dict(spp=2, max_depth=6, width=24, height=24, seed=6)
+    mega, _ = render(material_zoo(), integrator="megakernel", **dict(kw))
+    soa, _ = render(material_zoo(), integrator="wavefront", layout="soa", **dict(kw))
+    aos, _ = render(material_zoo(), integrator="wavefront", layout="aos", **dict(kw))
+    assert mega.max() > 0
+    np.testing.assert_array_equal(soa, mega)
+    np.testing.assert_array_equal(aos, mega)
+
+
+def test_specialisation_masks(cornell_box):
+    """-DSCENE_MATERIALS / -DSCENE_LIGHTS list the kinds a scene has; -DSCENE_HAS_TEXTURES whether a
+    reflectance or transmittance is textured (pyclpt/buffers/scene.py)."""
+    box = pack_scene(cornell_box).defines
+    assert (box["SCENE_MATERIALS"], box["SCENE_LIGHTS"], box["SCENE_HAS_TEXTURES"]) == (1, 1, False)
+    zoo = pack_scene(material_zoo()).defines
+    assert zoo["SCENE_MATERIALS"] == 0xFF  # all eight kinds (bits MAT_*)
+    assert zoo["SCENE_LIGHTS"] == 0b111  # triangle, point, constant (bits LIGHT_*)
+    assert zoo["SCENE_HAS_TEXTURES"] and zoo["SCENE_HAS_MASKS"] and zoo["SCENE_HAS_BUMPMAPS"]
+
+
+@pytest.mark.parametrize("integrator", ["megakernel", "wavefront"])
+def test_specialisation_changes_no_pixel(cornell_box, monkeypatch, integrator):
+    """Compiling only the scene's material and emitter kinds (and no texture lookups where there are
+    none) removes code no path can reach: the image is bit-identical to the one from kernels built with
+    every kind."""
+    kw = dict(spp=4, max_depth=6, width=24, height=24, seed=2, integrator=integrator)
+    specialised, _ = render(cornell_box, **dict(kw))
+
+    def general(scene):
+        arrays = pack_scene(scene)
+        arrays.defines = {k: v for k, v in arrays.defines.items() if k not in ("SCENE_MATERIALS", "SCENE_LIGHTS")}
+        arrays.defines["SCENE_HAS_TEXTURES"] = True
+        return arrays
+
+    monkeypatch.setattr(scene_buffers, "pack_scene", general)
+    every_kind, _ = render(cornell_box, **dict(kw))
+    assert specialised.max() > 0
+    np.testing.assert_array_equal(specialised, every_kind)

@@ -15,6 +15,19 @@
 #define INV_2PI_F 0.15915494309189533577f
 #define INF_F INFINITY
 
+/* SCALAR_KERNEL: a kernel that Intel's CPU runtime must not vectorize across work-items. Its compiler
+ * runs several work-items in the SIMD lanes of one thread, which pays for straight-line stages
+ * (sample_bsdf 3x, process_hit 2.3x) but not where a loop of data-dependent length runs per work-item
+ * (BVH traversal: intersect 0.5x, shadow_test 0.3x; the megakernel's bounce loop: 0.55x), since
+ * every lane waits for the longest: docs/devices.md. intel_vec_len_hint(1) (extension
+ * cl_intel_vec_len_hint, whose macro Intel's compiler defines) keeps those scalar; elsewhere it is
+ * nothing. */
+#ifdef cl_intel_vec_len_hint
+#define SCALAR_KERNEL __attribute__((intel_vec_len_hint(1)))
+#else
+#define SCALAR_KERNEL
+#endif
+
 /* Ray offset from a surface, scaled by the hit point's magnitude. */
 #define RAY_EPS 1e-4f
 
@@ -22,8 +35,14 @@ static inline vec3 load3(__global const float* p, int i) {
     return v3(p[3 * i + 0], p[3 * i + 1], p[3 * i + 2]);
 }
 
-/* Three consecutive floats from p (an RGB triple of a record). */
-static inline vec3 rgb_at(__global const float* p) { return v3(p[0], p[1], p[2]); }
+/* Three consecutive floats of a record (an RGB triple, a position): p[0], p[unit], p[2 unit], where
+ * unit is 1 read at run time (Scene.unit, from the CONST_UNIT slot of the scene's constants). PoCL
+ * runs LLVM's SLP vectorizer on each work-item function before it vectorizes the loop over
+ * work-items; loads the compiler can prove adjacent let SLP pair x and y into <2 x float>
+ * operations, and one such instruction stops the loop vectorizer (docs/wavefront.md,
+ * "Vectorized stages"). Through an opaque stride they stay scalar, and the work-item loop
+ * vectorizes. Costs nothing on a GPU. */
+static inline vec3 rgb_at(__global const float* p, int unit) { return v3(p[0], p[unit], p[2 * unit]); }
 
 static inline void store3(__global float* p, int i, vec3 v) {
     p[3 * i + 0] = v.x;

@@ -79,13 +79,13 @@ static inline bool m_isinf(float x) { return (as_uint(x) & 0x7fffffffu) == 0x7f8
  * ("instruction return type cannot be vectorized"), while a struct of scalars becomes plain scalars once
  * inlined. The operations are componentwise IEEE arithmetic, as on float3: v3_add(v3_mul(a, b), c) is
  * a * b + c rounded the same way (FP_CONTRACT is off, core/common.h). Buffers hold scalar fields. */
-typedef struct {
+typedef struct __attribute__((aligned(32))) {
     float x, y, z;
 } vec3;
-typedef struct {
+typedef struct __attribute__((aligned(32))) {
     float x, y;
 } vec2;
-typedef struct {
+typedef struct __attribute__((aligned(32))) {
     float x, y, z, w;
 } vec4;
 

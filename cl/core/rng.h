@@ -29,8 +29,10 @@ static inline uint mulhi32(uint a, uint b) { return (uint)(((ulong)a * (ulong)b)
 /* Philox4x32-10 on scalars, its ten rounds unrolled: no vector types and no loop, so a stage that
  * draws numbers can still be vectorized across work-items (a uint4 or a loop here stops it), and the
  * draws run 50x faster on PoCL than with a uint4, a loop and mul_hi (bench/rng_speed.py). The draws use the
- * first two output words; the compiler drops the work of the others. */
-static inline void philox4x32_10_words(uint c0, uint c1, uint c2, uint c3, uint k0, uint k1,
+ * first two output words; the compiler drops the work of the others. Always inlined: LLVM's inliner
+ * finds the unrolled rounds too big for a stage's three or four draws, and a call stops PoCL's
+ * vectorizer. */
+static inline __attribute__((always_inline)) void philox4x32_10_words(uint c0, uint c1, uint c2, uint c3, uint k0, uint k1,
                                        uint* r0, uint* r1, uint* r2, uint* r3) {
     const uint M0 = 0xD2511F53u, M1 = 0xCD9E8D57u;
     const uint W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
@@ -70,7 +72,7 @@ static inline RngKey rng_key(uint seed, uint pixel, uint sample) {
 }
 
 /* The first two words of the block at counter (sample, bounce, dim, extra) under key (seed, pixel). */
-static inline void rng_words(RngKey key, uint bounce, uint dim, uint extra, uint* r0, uint* r1) {
+static inline __attribute__((always_inline)) void rng_words(RngKey key, uint bounce, uint dim, uint extra, uint* r0, uint* r1) {
     uint r2, r3;
     philox4x32_10_words(key.sample, bounce, dim, extra, key.seed, key.pixel, r0, r1, &r2, &r3);
 }

@@ -28,8 +28,12 @@ static inline vec3 to_world(Frame f, vec3 v) {
 /* Shirley-Chiu concentric mapping of [0,1)^2 to the unit disk. */
 static inline vec2 square_to_disk_concentric(vec2 u) {
     float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
-    /* selects, not branches: both quotients are computed (a NaN for o = 0 is never chosen) */
-    bool x_major = m_abs(ox) > m_abs(oy);
+    /* selects, not branches: both quotients are computed (a NaN for o = 0 is never chosen).
+     * |ox| > |oy| as (ox - oy)(ox + oy) > 0: the same decision for every u (ox, oy are multiples of
+     * 2^-23 in [-1, 1], so neither factor rounds to or past zero and the product cannot underflow),
+     * but not a comparison of two alike expressions, which LLVM's SLP vectorizer would pair into a
+     * <2 x float> operation that stops PoCL's vectorizer (docs/wavefront.md). */
+    bool x_major = (ox - oy) * (ox + oy) > 0.0f;
     float r = x_major ? ox : oy;
     float theta = x_major ? (PI_F / 4.0f) * (oy / ox) : (PI_F / 2.0f) - (PI_F / 4.0f) * (ox / oy);
     float c, s = m_sincos(theta, &c);

@@ -7,7 +7,7 @@
  * (path.h), same random numbers. */
 #include "integrators/path.h"
 
-__kernel void megakernel(SCENE_PARAMS, __global float* frame, __global uchar* drop_marks,
+__kernel SCALAR_KERNEL void megakernel(SCENE_PARAMS, __global float* frame, __global uchar* drop_marks,
                          uint seed, uint sample, int pixel_offset, int count, int max_depth) {
     int i = get_global_id(0);
     if (i >= count) return;

@@ -51,8 +51,9 @@ static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState
     vec2 j = rng_2d(key, 0, DIM_CAMERA_X);
     float sx = 2.0f * (((float)px + j.x) / (float)width) - 1.0f;
     float sy = 1.0f - 2.0f * (((float)py + j.y) / (float)height);
-    vec3 forward = rgb_at(c + CONST_CAM_FORWARD), right = rgb_at(c + CONST_CAM_RIGHT), up = rgb_at(c + CONST_CAM_UP);
-    ps->org = rgb_at(c + CONST_CAM_ORIGIN);
+    vec3 forward = rgb_at(c + CONST_CAM_FORWARD, sc->unit), right = rgb_at(c + CONST_CAM_RIGHT, sc->unit);
+    vec3 up = rgb_at(c + CONST_CAM_UP, sc->unit);
+    ps->org = rgb_at(c + CONST_CAM_ORIGIN, sc->unit);
     ps->dir = m_normalize(v3_add(v3_add(forward, v3_scale(right, sx)), v3_scale(up, sy)));
     ps->beta = v3_splat(1.0f);
     ps->L = v3_splat(0.0f);

@@ -110,18 +110,18 @@ typedef struct {
 
 static inline int mat_type(Material m) { return (int)m[MAT_TYPE]; }
 static inline int mat_flags(Material m) { return (int)m[MAT_FLAGS]; }
-static inline vec3 mat_rgb(Material m, int at) { return rgb_at(m + at); }
+static inline vec3 mat_rgb(Material m, int at, int unit) { return rgb_at(m + at, unit); }
 
-/* The material's constant parameters (textures not applied: see bsdf_at in scene.h). */
-static inline Bsdf bsdf_from(Material m) {
+/* The material's constant parameters (textures not applied: see bsdf_at in scene.h); unit as rgb_at's. */
+static inline Bsdf bsdf_from(Material m, int unit) {
     Bsdf b;
     b.type = mat_type(m);
     b.flags = mat_flags(m);
-    b.color = mat_rgb(m, MAT_COLOR);
-    b.spec = mat_rgb(m, MAT_SPEC);
-    b.trans = mat_rgb(m, MAT_TRANS);
-    b.eta = mat_rgb(m, MAT_ETA);
-    b.k = mat_rgb(m, MAT_K);
+    b.color = mat_rgb(m, MAT_COLOR, unit);
+    b.spec = mat_rgb(m, MAT_SPEC, unit);
+    b.trans = mat_rgb(m, MAT_TRANS, unit);
+    b.eta = mat_rgb(m, MAT_ETA, unit);
+    b.k = mat_rgb(m, MAT_K, unit);
     b.ior = m[MAT_IOR];
     b.alpha = m[MAT_ALPHA];
     b.fdr_int = m[MAT_FDR_INT];
@@ -159,11 +159,21 @@ static inline float mean3(vec3 v) { return (v.x + v.y + v.z) * (1.0f / 3.0f); }
 
 /* ---- dispatch ---- */
 
+/* -DSCENE_MATERIALS=mask (pyclpt/buffers/materials.py) lists the material kinds a scene has (bit MAT_*): the
+ * dispatch below compiles only those, so a stage shading one kind has no branch on the kind and can be
+ * vectorized. Without it every kind is compiled. */
+#ifdef SCENE_MATERIALS
+#define HAS_MATERIAL(t) (((SCENE_MATERIALS) >> (t)) & 1)
+#else
+#define HAS_MATERIAL(t) 1
+#endif
+
 /* True when the material has only delta lobes (no light sampling there). */
 static inline bool bsdf_is_delta(const Bsdf* b) {
     int t = b->type;
-    return t == MAT_CONDUCTOR || t == MAT_DIELECTRIC || t == MAT_THINDIELECTRIC ||
-           (t == MAT_ROUGHDIELECTRIC && bsdf_index_matched(b));
+    return (HAS_MATERIAL(MAT_CONDUCTOR) && t == MAT_CONDUCTOR) || (HAS_MATERIAL(MAT_DIELECTRIC) && t == MAT_DIELECTRIC) ||
+           (HAS_MATERIAL(MAT_THINDIELECTRIC) && t == MAT_THINDIELECTRIC) ||
+           (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC && bsdf_index_matched(b));
 }
 
 /* Flip both directions to the front side for two-sided materials. */
@@ -180,14 +190,14 @@ static inline vec3 bsdf_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
     *pdf = 0.0f;
     int type = b->type;
     /* two-sided by nature: both directions as they are */
-    if (type == MAT_ROUGHDIELECTRIC) return roughdielectric_eval(b, wi, wo, pdf);
+    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && type == MAT_ROUGHDIELECTRIC) return roughdielectric_eval(b, wi, wo, pdf);
     /* one-sided: on the front side (two-sided ones flipped there) */
     bsdf_orient(b, &wi, &wo);
     if (wi.z <= 0.0f || wo.z <= 0.0f) return v3_splat(0.0f);
-    if (type == MAT_DIFFUSE) return diffuse_eval(b, wi, wo, pdf);
-    if (type == MAT_ROUGHCONDUCTOR) return roughconductor_eval(b, wi, wo, pdf);
-    if (type == MAT_PLASTIC) return plastic_eval(b, wi, wo, pdf);
-    if (type == MAT_ROUGHPLASTIC) return roughplastic_eval(b, wi, wo, pdf);
+    if (HAS_MATERIAL(MAT_DIFFUSE) && type == MAT_DIFFUSE) return diffuse_eval(b, wi, wo, pdf);
+    if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && type == MAT_ROUGHCONDUCTOR) return roughconductor_eval(b, wi, wo, pdf);
+    if (HAS_MATERIAL(MAT_PLASTIC) && type == MAT_PLASTIC) return plastic_eval(b, wi, wo, pdf);
+    if (HAS_MATERIAL(MAT_ROUGHPLASTIC) && type == MAT_ROUGHPLASTIC) return roughplastic_eval(b, wi, wo, pdf);
     return v3_splat(0.0f); /* conductor, dielectric, thindielectric: delta lobes only */
 }
 
@@ -197,19 +207,19 @@ static inline bool bsdf_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, Bsd
     s->eta = 1.0f;
     s->delta = false;
     /* two-sided by nature: wi on either side */
-    if (type == MAT_DIELECTRIC) return dielectric_sample(b, wi, u_lobe, u, s);
-    if (type == MAT_THINDIELECTRIC) return thindielectric_sample(b, wi, u_lobe, u, s);
-    if (type == MAT_ROUGHDIELECTRIC) return roughdielectric_sample(b, wi, u_lobe, u, s);
+    if (HAS_MATERIAL(MAT_DIELECTRIC) && type == MAT_DIELECTRIC) return dielectric_sample(b, wi, u_lobe, u, s);
+    if (HAS_MATERIAL(MAT_THINDIELECTRIC) && type == MAT_THINDIELECTRIC) return thindielectric_sample(b, wi, u_lobe, u, s);
+    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && type == MAT_ROUGHDIELECTRIC) return roughdielectric_sample(b, wi, u_lobe, u, s);
     /* one-sided: sampled on the front side, wo mirrored back for a two-sided material seen from behind */
     bool flipped = bsdf_twosided(b) && wi.z < 0.0f;
     if (flipped) wi.z = -wi.z;
     if (wi.z <= 0.0f) return false;
     bool sampled;
-    if (type == MAT_DIFFUSE) sampled = diffuse_sample(b, wi, u_lobe, u, s);
-    else if (type == MAT_CONDUCTOR) sampled = conductor_sample(b, wi, u_lobe, u, s);
-    else if (type == MAT_ROUGHCONDUCTOR) sampled = roughconductor_sample(b, wi, u_lobe, u, s);
-    else if (type == MAT_PLASTIC) sampled = plastic_sample(b, wi, u_lobe, u, s);
-    else if (type == MAT_ROUGHPLASTIC) sampled = roughplastic_sample(b, wi, u_lobe, u, s);
+    if (HAS_MATERIAL(MAT_DIFFUSE) && type == MAT_DIFFUSE) sampled = diffuse_sample(b, wi, u_lobe, u, s);
+    else if (HAS_MATERIAL(MAT_CONDUCTOR) && type == MAT_CONDUCTOR) sampled = conductor_sample(b, wi, u_lobe, u, s);
+    else if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && type == MAT_ROUGHCONDUCTOR) sampled = roughconductor_sample(b, wi, u_lobe, u, s);
+    else if (HAS_MATERIAL(MAT_PLASTIC) && type == MAT_PLASTIC) sampled = plastic_sample(b, wi, u_lobe, u, s);
+    else if (HAS_MATERIAL(MAT_ROUGHPLASTIC) && type == MAT_ROUGHPLASTIC) sampled = roughplastic_sample(b, wi, u_lobe, u, s);
     else return false;
     if (!sampled) return false;
     if (flipped) s->wo.z = -s->wo.z;

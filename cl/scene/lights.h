@@ -50,6 +50,14 @@
 #define LIGHT_CONSTANT 2
 #define LIGHT_ENVMAP 3
 
+/* -DSCENE_LIGHTS=mask (pyclpt/buffers/lights.py) lists the emitter kinds a scene has (bit LIGHT_*): only
+ * those are compiled (no branch on a kind the scene lacks). Without it every kind is compiled. */
+#ifdef SCENE_LIGHTS
+#define HAS_LIGHT(t) (((SCENE_LIGHTS) >> (t)) & 1)
+#else
+#define HAS_LIGHT(t) 1
+#endif
+
 /* envmap block in light_data */
 #define ENV_TO_WORLD 0 /* 3x3 rotation, row-major, map frame -> world */
 #define ENV_WIDTH 9    /* texels */
@@ -184,15 +192,16 @@ static inline vec3 env_sample(const Scene* sc, __global const float* e, vec2 u, 
  * *pdf is the solid-angle density with which light_sample produces dir, emitter choice included. */
 static inline vec3 env_eval(const Scene* sc, vec3 dir, bool want_pdf, float* pdf) {
     *pdf = 0.0f;
+    if (!HAS_LIGHT(LIGHT_CONSTANT) && !HAS_LIGHT(LIGHT_ENVMAP)) return v3_splat(0.0f);
     int env = (int)sc->consts[CONST_ENV_LIGHT];
     if (env < 0) return v3_splat(0.0f);
     /* (env > 0 ? env : 0) is env here; it keeps the record's address in the buffer even where a compiler
      * hoists the loads below above the test (Intel's CPU OpenCL vectoriser does, in the megakernel,
      * and read lights[-8] as an address 16 GiB past the buffer: docs/devices.md). */
     __global const float* l = sc->lights + LIGHT_STRIDE * (env > 0 ? env : 0);
-    if ((int)l[LIGHT_TYPE] == LIGHT_CONSTANT) {
+    if (!HAS_LIGHT(LIGHT_ENVMAP) || (int)l[LIGHT_TYPE] == LIGHT_CONSTANT) {
         if (want_pdf) *pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;
-        return rgb_at(l + LIGHT_RADIANCE);
+        return rgb_at(l + LIGHT_RADIANCE, sc->unit);
     }
     __global const float* e = sc->light_data + as_int(l[LIGHT_PRIM]);
     vec2 xy = env_texel_coords(e, env_to_local(e, dir));
@@ -210,35 +219,35 @@ static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u,
     __global const float* l = sc->lights + LIGHT_STRIDE * id;
     int type = (int)l[LIGHT_TYPE];
     ls->delta = false;
-    if (type == LIGHT_CONSTANT) {
+    if (HAS_LIGHT(LIGHT_CONSTANT) && type == LIGHT_CONSTANT) {
         ls->wi = square_to_uniform_sphere(u);
         ls->dist = INF_F;
-        ls->radiance = rgb_at(l + LIGHT_RADIANCE);
+        ls->radiance = rgb_at(l + LIGHT_RADIANCE, sc->unit);
         ls->pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;
         return ls->pdf > 0.0f;
     }
-    if (type == LIGHT_ENVMAP) {
+    if (HAS_LIGHT(LIGHT_ENVMAP) && type == LIGHT_ENVMAP) {
         float pdf;
         ls->wi = env_sample(sc, sc->light_data + as_int(l[LIGHT_PRIM]), u, &ls->radiance, &pdf);
         ls->dist = INF_F;
         ls->pdf = l[LIGHT_PMF] * pdf;
         return ls->pdf > 0.0f;
     }
-    if (type == LIGHT_POINT) {
+    if (HAS_LIGHT(LIGHT_POINT) && type == LIGHT_POINT) {
         __global const float* pos = sc->light_data + as_int(l[LIGHT_PRIM]);
-        vec3 d = v3_sub(rgb_at(pos), p);
+        vec3 d = v3_sub(rgb_at(pos, sc->unit), p);
         float dist2 = m_dot(d, d);
         if (!(dist2 > 0.0f)) return false;
         ls->dist = m_sqrt(dist2);
         ls->wi = v3_divs(d, ls->dist);
-        ls->radiance = v3_divs(rgb_at(l + LIGHT_RADIANCE), dist2);
+        ls->radiance = v3_divs(rgb_at(l + LIGHT_RADIANCE, sc->unit), dist2);
         ls->pdf = l[LIGHT_PMF];
         ls->delta = true;
         return ls->pdf > 0.0f;
     }
     int prim = as_int(l[LIGHT_PRIM]);
     __global const float* t = sc->tris + 9 * prim;
-    vec3 v0 = rgb_at(t), e1 = rgb_at(t + 3), e2 = rgb_at(t + 6);
+    vec3 v0 = rgb_at(t, sc->unit), e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
     vec2 b = square_to_triangle(u);
     vec3 y = v3_add(v3_add(v0, v3_scale(e1, b.x)), v3_scale(e2, b.y));
     vec3 ng = m_normalize(m_cross(e1, e2));
@@ -249,7 +258,7 @@ static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u,
     ls->wi = v3_divs(d, ls->dist);
     float cos_l = -m_dot(ls->wi, ng);
     ls->pdf = light_pdf_area(sc, id, ls->dist, cos_l);
-    ls->radiance = rgb_at(l + LIGHT_RADIANCE);
+    ls->radiance = rgb_at(l + LIGHT_RADIANCE, sc->unit);
     return ls->pdf > 0.0f;
 }
 
@@ -257,7 +266,7 @@ static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u,
 static inline vec3 light_emitted(const Scene* sc, int light, vec3 ng, vec3 dir) {
     if (light < 0 || m_dot(ng, dir) >= 0.0f) return v3_splat(0.0f);
     __global const float* l = sc->lights + LIGHT_STRIDE * light;
-    return rgb_at(l + LIGHT_RADIANCE);
+    return rgb_at(l + LIGHT_RADIANCE, sc->unit);
 }
 
 #endif

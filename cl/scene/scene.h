@@ -32,6 +32,7 @@
 #define CONST_ENV_RADIANCE 14 /* constant environment (rgb; lights.h reads the light record) */
 #define CONST_ENV_LIGHT 17 /* index of the environment in `lights`, or -1 */
 #define CONST_NUM_LIGHTS 18
+#define CONST_UNIT 19 /* 1.0: the stride of record reads, opaque to the compiler (rgb_at, core/common.h) */
 #define CONST_COUNT 20
 
 typedef struct {
@@ -46,6 +47,7 @@ typedef struct {
     __global const float* light_data;
     __global const float* consts;
     Textures tex;
+    int unit; /* 1, read from consts[CONST_UNIT] (rgb_at, core/common.h) */
 } Scene;
 
 #define SCENE_PARAMS                                                                       \
@@ -60,7 +62,8 @@ typedef struct {
 #define SCENE_INIT                                                                          \
     {scene_nodes, scene_tris, scene_tri_info, scene_tri_vidx, scene_vnormals, scene_vuvs,  \
      scene_materials, scene_lights, scene_light_data, scene_consts,                        \
-     {scene_textures, scene_texels8, scene_texels32}}
+     {scene_textures, scene_texels8, scene_texels32, (int)scene_consts[CONST_UNIT]},        \
+     (int)scene_consts[CONST_UNIT]}
 
 /* What a path needs to know about the point it hit. */
 typedef struct {
@@ -77,13 +80,15 @@ static inline Material scene_material(const Scene* sc, int id) { return sc->mate
 /* The material of a surface with its textures looked up at the surface's uv. */
 static inline Bsdf bsdf_at(const Scene* sc, const Surface* s) {
     Material m = scene_material(sc, s->material);
-    Bsdf b = bsdf_from(m);
+    Bsdf b = bsdf_from(m, sc->unit);
+#ifdef SCENE_HAS_TEXTURES /* pyclpt/buffers/materials.py: some reflectance or transmittance is textured */
     int t = (int)m[MAT_COLOR_TEX];
     if (t >= 0) b.color = v3_mul(b.color, tex_eval(&sc->tex, t, s->uv));
     t = (int)m[MAT_SPEC_TEX];
     if (t >= 0) b.spec = v3_mul(b.spec, tex_eval(&sc->tex, t, s->uv));
     t = (int)m[MAT_TRANS_TEX];
     if (t >= 0) b.trans = v3_mul(b.trans, tex_eval(&sc->tex, t, s->uv));
+#endif
     return b;
 }
 
@@ -96,7 +101,7 @@ static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, 
     if (t < 0 || !(info & TRI_HAS_UVS)) return ns;
     __global const int* vi = sc->tri_vidx + 3 * prim;
     __global const float* tri = sc->tris + 9 * prim;
-    vec3 e1 = rgb_at(tri + 3), e2 = rgb_at(tri + 6);
+    vec3 e1 = rgb_at(tri + 3, sc->unit), e2 = rgb_at(tri + 6, sc->unit);
     vec2 t0 = v2(sc->vuvs[2 * vi[0]], sc->vuvs[2 * vi[0] + 1]);
     vec2 d1 = v2(sc->vuvs[2 * vi[1]] - t0.x, sc->vuvs[2 * vi[1] + 1] - t0.y);
     vec2 d2 = v2(sc->vuvs[2 * vi[2]] - t0.x, sc->vuvs[2 * vi[2] + 1] - t0.y);
@@ -127,7 +132,7 @@ static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, 
 static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
     Surface s;
     __global const float* t = sc->tris + 9 * prim;
-    vec3 v0 = rgb_at(t), e1 = rgb_at(t + 3), e2 = rgb_at(t + 6);
+    vec3 v0 = rgb_at(t, sc->unit), e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
     s.p = v3_add(v3_add(v0, v3_scale(e1, u)), v3_scale(e2, v));
     s.ng = m_normalize(m_cross(e1, e2));
     int info = sc->tri_info[2 * prim];
@@ -137,8 +142,9 @@ static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
     vec3 ns = s.ng;
     if (info & TRI_HAS_NORMALS) {
         int i0 = sc->tri_vidx[3 * prim], i1 = sc->tri_vidx[3 * prim + 1], i2 = sc->tri_vidx[3 * prim + 2];
-        vec3 n = v3_add(v3_add(v3_scale(load3(sc->vnormals, i0), 1.0f - u - v), v3_scale(load3(sc->vnormals, i1), u)),
-                        v3_scale(load3(sc->vnormals, i2), v));
+        vec3 n0 = rgb_at(sc->vnormals + 3 * i0, sc->unit), n1 = rgb_at(sc->vnormals + 3 * i1, sc->unit);
+        vec3 n2 = rgb_at(sc->vnormals + 3 * i2, sc->unit);
+        vec3 n = v3_add(v3_add(v3_scale(n0, 1.0f - u - v), v3_scale(n1, u)), v3_scale(n2, v));
         float len = m_length(n);
         if (len > 0.0f && m_isfinite(len)) ns = v3_divs(n, len);
     }

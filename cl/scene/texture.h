@@ -44,6 +44,7 @@ typedef struct {
     __global const float* info;
     __global const uchar* texels8;
     __global const float* texels32;
+    int unit; /* 1: the stride of record reads (rgb_at, core/common.h) */
 } Textures;
 
 static __constant float SRGB8_TO_LINEAR[256] = {
@@ -158,7 +159,7 @@ static inline vec4 tex_bitmap(const Textures* tx, __global const float* t, vec2 
 static inline vec4 tex_eval4(const Textures* tx, int id, vec2 uv) {
     __global const float* t = tx->info + TEX_STRIDE * id;
     vec2 st = v2(uv.x * t[TEX_UV_SCALE] + t[TEX_UV_OFFSET], uv.y * t[TEX_UV_SCALE + 1] + t[TEX_UV_OFFSET + 1]);
-    vec3 scale = rgb_at(t + TEX_SCALE);
+    vec3 scale = rgb_at(t + TEX_SCALE, tx->unit);
     if ((int)t[TEX_KIND] == TEX_CHECKER) {
         bool mu = st.x - m_floor(st.x) > 0.5f, mv = st.y - m_floor(st.y) > 0.5f;
         if (mu == mv) return v4(scale.x, scale.y, scale.z, 1.0f);

@@ -47,6 +47,14 @@ class LightArrays:
     env_light: int  # index of the environment in lights, or -1
     tri_light: np.ndarray  # (T,) int32: light index of each leaf-order triangle, or -1
 
+    @property
+    def kinds(self) -> int:
+        """Bit LIGHT_* set for every emitter kind present (-DSCENE_LIGHTS)."""
+        kinds = 0
+        for t in np.unique(self.lights[:, LIGHT_TYPE].astype(np.int64)):
+            kinds |= 1 << int(t)
+        return kinds
+
 
 def _int_bits(i: int) -> np.float32:
     return np.array([i], np.int32).view(np.float32)[0]
@@ -219,4 +227,5 @@ def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int) ->
         c[14:17] = scene.environment
     c[17] = lights.env_light
     c[18] = lights.lights.shape[0]
+    c[19] = 1.0  # CONST_UNIT: the stride of record reads, opaque to the compiler (rgb_at, cl/core/common.h)
     return c

@@ -201,10 +201,16 @@ class MaterialArrays:
     textures: TextureTable
     masked: np.ndarray  # (M,) bool: material has an opacity
     has_bumpmaps: bool
+    has_textures: bool  # a reflectance or transmittance is textured (-DSCENE_HAS_TEXTURES)
+    kinds: int  # bit MAT_TYPES[kind] set for every material kind present (-DSCENE_MATERIALS)
 
 
 def pack_materials(materials: list[Material], textures: TextureTable | None = None) -> MaterialArrays:
     textures = textures if textures is not None else TextureTable()
     recs = np.stack([pack_material(m, textures) for m in materials])
     masked = (recs[:, MAT_FLAGS].astype(np.int32) & FLAG_MASKED) != 0
-    return MaterialArrays(recs, textures, masked, bool(np.any(recs[:, MAT_BUMP_TEX] >= 0)))
+    textured = bool(np.any(recs[:, [MAT_COLOR_TEX, MAT_SPEC_TEX, MAT_TRANS_TEX]] >= 0))
+    kinds = 0
+    for t in np.unique(recs[:, MAT_TYPE].astype(np.int64)):
+        kinds |= 1 << int(t)
+    return MaterialArrays(recs, textures, masked, bool(np.any(recs[:, MAT_BUMP_TEX] >= 0)), textured, kinds)

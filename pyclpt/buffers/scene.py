@@ -42,7 +42,8 @@ class SceneArrays:
     lights: LightArrays
     textures: TextureTable
     bounds: np.ndarray  # (2, 3) scene bounding box
-    defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, BVH_WIDTH, BVH_LEAF_PACKETS
+    defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, SCENE_HAS_TEXTURES, SCENE_MATERIALS,
+    # SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS
     node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer)
 
     @property
@@ -104,7 +105,8 @@ def pack_scene(scene: Scene) -> SceneArrays:
         textures=mats.textures,
         bounds=bounds,
         defines={"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
-                 "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets},
+                 "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
+                 "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets},
         node_buffer=leaf_packet_buffer(bvh) if packets else bvh.nodes,
     )
 

@@ -19,9 +19,9 @@ Variables of other programs that pyclpt reads or sets for itself (:data:`FOREIGN
 ``OCL_ICD_VENDORS``          the folder of ``.icd`` files the OpenCL ICD loader reads; pyclpt points
                              it at a folder registering Intel's CPU runtime unless the user set it
                              (pyclpt/device/vendors.py)
-``CL_CONFIG_USE_VECTORIZER`` Intel's CPU runtime: whether its compiler vectorizes kernels across
-                             work-items; pyclpt sets ``False`` where the runtime is registered, unless
-                             the user set it (its vectorizer miscompiles some kernels: docs/devices.md)
+``CL_CONFIG_USE_VECTORIZER`` Intel's CPU runtime: ``False`` stops its compiler vectorizing kernels
+                             across work-items (by default it vectorizes the straight-line stages:
+                             docs/devices.md); read by the runtime, and by pyclpt for the build options
 ===========================  ==================================================================
 
 Readers here refuse a bad value with :class:`EnvironmentVariableError`, whose message names the

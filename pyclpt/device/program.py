@@ -119,9 +119,9 @@ INLINE_MATH_DEFINE = "INLINE_MATH"
 
 def device_options(device: Device) -> list[str]:
     """Options chosen by the device: PoCL gets ``-DINLINE_MATH`` (see cl/core/math.h). Intel's CPU
-    runtime gets a define naming its vectorizer setting (``CL_CONFIG_USE_VECTORIZER``, which
-    pyclpt/device/vendors.py sets to False), so that pyopencl's binary cache, keyed by source and
-    options, never hands back a binary compiled under the other setting."""
+    runtime gets a define naming its vectorizer setting (``CL_CONFIG_USE_VECTORIZER``), so that
+    pyopencl's binary cache, keyed by source and options, never hands back a binary compiled under
+    another setting."""
     if device.is_pocl:
         return [f"-D{INLINE_MATH_DEFINE}"]
     if device.is_intel_cpu:

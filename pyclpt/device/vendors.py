@@ -13,12 +13,10 @@ then appear together; :func:`pyclpt.list_devices` lists the registered Intel pla
 others, so PoCL keeps its ``0:0``. ``PYCLPT_DEVICE=intel`` (any substring of the platform name)
 selects it.
 
-Intel's vectorizer (which packs work-items into SIMD lanes) miscompiles some of pyclpt's kernels:
-lanes of the wavefront's ``sample_bsdf`` end live paths, and the rough materials' visible-normal
-sampling returns wrong directions in some lanes (different images from PoCL's; with the vectorizer
-off every image is bit-identical to PoCL's, and the megakernel runs 4x faster). So wherever Intel's
-runtime may be loaded, pyclpt sets ``CL_CONFIG_USE_VECTORIZER=False`` for this process (Intel's
-runtime reads it when it loads) unless the user set that variable.
+Intel's vectorizer (which packs work-items into SIMD lanes) is left on: the kernels whose work-items
+run loops of data-dependent length (the megakernel, ``intersect``, ``shadow_test``) opt out with
+``intel_vec_len_hint(1)`` (``SCALAR_KERNEL`` in cl/core/common.h), and the straight-line stages run
+vectorized. ``CL_CONFIG_USE_VECTORIZER=False`` turns it off for every kernel (docs/devices.md).
 
 A user's own ``OCL_ICD_VENDORS`` is left alone (nothing is registered then); so is a system where
 ``/etc/OpenCL/vendors`` already registers ``libintelocl.so``. Without the runtime nothing changes.
@@ -109,8 +107,6 @@ def register() -> str:
     if state is not None:
         return state
     state = _register()
-    if state in ("registered", "system", "user") and env.get(VECTORIZER_ENV) is None:
-        env.set_for_process(VECTORIZER_ENV, "False")  # see the module docstring
     log.debug("Intel CPU OpenCL runtime: %s", state)
     return state
 

@@ -4,7 +4,7 @@
  *           (compaction then splits the ray queue into the hit and miss queues). */
 #include "integrators/wavefront/wavefront.h"
 
-__kernel void intersect(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* ray_queue,
+__kernel SCALAR_KERNEL void intersect(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* ray_queue,
                         __global uchar* flags, uint seed, uint sample) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_RAY)) return;

@@ -4,7 +4,7 @@
  *           builds the light-contribution queue). */
 #include "integrators/wavefront/wavefront.h"
 
-__kernel void shadow_test(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* shadow_queue,
+__kernel SCALAR_KERNEL void shadow_test(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* shadow_queue,
                           __global uchar* flags, uint seed, uint sample) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_SHADOW)) return;
