@@ -191,7 +191,7 @@ def run(settings: dict, out_dir: Path, progress: bool = True) -> dict:
                             device=device, spp=settings["spp"] if depth == settings["spp_depth"] else None)
                         bar.update(len(methods))
                         done += len(methods)
-                        _fill_megakernel_counts(runs, depth, scene, w, h, device)
+                        _fill_counts(runs, depth, scene, w, h, device)
                     first = runs[0]
                     entry.info.update(setup_s=first["setup_s"], bvh_build_s=first.get("bvh_build_s"),
                                       compile_s=sum(r["compile_s"] for r in runs))
@@ -218,24 +218,34 @@ def run(settings: dict, out_dir: Path, progress: bool = True) -> dict:
     return res
 
 
-def _fill_megakernel_counts(runs: list[dict], depth: int, scene, w: int, h: int, device) -> None:
-    """The megakernel traces the wavefront's rays (same estimator, same random numbers): take its
-    counts from a wavefront run of the same seeds, or count them with one."""
+COUNTING_RUN = "wavefront-soa counting run of the same seeds (every bounce through the queues)"
+
+
+def _fill_counts(runs: list[dict], depth: int, scene, w: int, h: int, device) -> None:
+    """Every method traces the same rays (same estimator, same random numbers). The megakernel counts
+    none, and a wavefront run counts them only when its queues ran every bounce (no finish_paths
+    tail): fill the others' counts from a run that counted the same seeds, or from one counting run."""
     from .runner import count_rays
 
     at = [r for r in runs if r["depth"] == depth]
-    mk = next((r for r in at if r["method"] == "megakernel"), None)
-    if mk is None:
+    missing = [r for r in at if not r.get("counts")]
+    if not missing:
         return
-    src = next((r for r in at if r["method"] == "wavefront-soa" and r["counts"]), None) or \
-        next((r for r in at if r["method"] == "wavefront-aos" and r["counts"]), None)
-    if src is not None and src["seeds"] == mk["seeds"]:
-        mk["counts"] = dict(src["counts"])
-        mk["bounces"] = src["bounces"]
-        mk["counts_source"] = f"{src['method']} run of the same seeds"
-    else:
-        mk["counts"] = count_rays(scene, depth, w, h, mk["seeds"], device)
-        mk["counts_source"] = "wavefront-soa counting run of the same seeds"
+    counted = None
+    for r in missing:
+        src = next((o for m in ("wavefront-soa", "wavefront-aos") for o in at if o["method"] == m
+                    and o.get("counts_source") == "measured" and o["seeds"] == r["seeds"]), None)
+        if src is not None:
+            r["counts"] = dict(src["counts"])
+            r["bounces"] = r.get("bounces") or src["bounces"]  # a wavefront run keeps its own rows (its tail)
+            r["counts_source"] = f"{src['method']} run of the same seeds"
+            continue
+        if counted is None or counted[0] != r["seeds"]:
+            rows: list[dict] = []
+            counted = (r["seeds"], count_rays(scene, depth, w, h, r["seeds"], device, rows), rows)
+        r["counts"] = dict(counted[1])
+        r["bounces"] = r.get("bounces") or counted[2]
+        r["counts_source"] = COUNTING_RUN
 
 
 # -- writing -------------------------------------------------------------------------------------

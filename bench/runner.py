@@ -56,10 +56,10 @@ def ray_counts(bounces: list[dict]) -> dict[str, int]:
 
 
 def make_renderer(scene: pyclpt.Scene, method: str, depth: int, width: int, height: int,
-                  device: Any = None) -> pyclpt.Renderer:
+                  device: Any = None, **options: Any) -> pyclpt.Renderer:
     integrator, layout = METHODS[method]
     return pyclpt.Renderer(scene, integrator=integrator, layout=layout, max_depth=depth, width=width,
-                           height=height, device=device)
+                           height=height, device=device, **options)
 
 
 def _frame(renderer: pyclpt.Renderer, spp: int, seed: int, first_sample: int = 0) -> tuple[float, float, float]:
@@ -103,7 +103,8 @@ class FrameLog:
             row["ms"] += k["total_ms"]
             row["launches"] += k["launches"]
         if st.bounces:
-            self.per_seed.append(ray_counts(st.bounces))
+            if not any(b.get("tail") for b in st.bounces):  # finish_paths counts none of its bounces
+                self.per_seed.append(ray_counts(st.bounces))
             if len(self.seeds) == 1:
                 self.bounces = [dict(b) for b in st.bounces]
 
@@ -153,14 +154,17 @@ def time_spp(renderers: dict[str, pyclpt.Renderer], spp: int, seed: int = 0, chu
 
 
 def count_rays(scene: pyclpt.Scene, depth: int, width: int, height: int, seeds: list[int],
-               device: Any = None) -> dict[str, float]:
+               device: Any = None, bounces: list[dict] | None = None) -> dict[str, float]:
     """Rays per frame (mean over ``seeds``) of the estimator at this depth and resolution,
-    counted by a wavefront run (the megakernel traces the same rays; see the module docstring)."""
-    r = make_renderer(scene, "wavefront-soa", depth, width, height, device)
+    counted by a wavefront run (the megakernel traces the same rays; see the module docstring), every
+    bounce through the queues (``tail_paths=0``: finish_paths does not count the bounces it runs)."""
+    r = make_renderer(scene, "wavefront-soa", depth, width, height, device, tail_paths=0)
     per_seed = []
     for seed in seeds:
         r.render(1, seed=seed, progress=False)
         per_seed.append(ray_counts(r.stats.bounces))
+        if bounces is not None and not bounces:  # the first seed's rows, if asked for
+            bounces += [dict(b) for b in r.stats.bounces]
     return {key: statistics.fmean(c[key] for c in per_seed) for key in per_seed[0]}
 
 

@@ -16,7 +16,7 @@ from scenes import interior_furnace, material_zoo, sensor
 
 def render(scene, **kw):
     r = pyclpt.Renderer(scene, **{k: kw.pop(k) for k in list(kw) if k in (
-        "integrator", "layout", "max_depth", "width", "height", "wave_size", "device")})
+        "integrator", "layout", "max_depth", "width", "height", "wave_size", "device", "tail_paths")})
     img = r.render(kw.pop("spp"), seed=kw.pop("seed", 0), progress=False)
     return img, r
 
@@ -78,9 +78,10 @@ def test_repeat_runs_are_bit_identical(cornell_box):
 
 @pytest.mark.parametrize("schedule", ["readback", "capacity"])
 def test_queue_conservation(cornell_box, schedule):
-    """Every path ends exactly once; counts add up at every bounce."""
+    """Every path ends exactly once; counts add up at every bounce (every bounce through the queues:
+    tail_paths=0)."""
     scene = cornell_box
-    r = pyclpt.Renderer(scene, integrator="wavefront", max_depth=-1, width=32, height=32)
+    r = pyclpt.Renderer(scene, integrator="wavefront", max_depth=-1, width=32, height=32, tail_paths=0)
     r.integrator.schedule = schedule
     spp = 3
     r.render(spp, seed=2, progress=False)
@@ -139,7 +140,7 @@ OLD_COUNTS = {
 @pytest.mark.parametrize("schedule", ["readback", "capacity"])
 def test_queue_counts_equal_those_of_atomic_queues(name, max_depth, schedule, shared_scenes):
     r = pyclpt.Renderer(pyclpt.load(name), integrator="wavefront", max_depth=max_depth, width=24, height=16,
-                        wave_size=300)
+                        wave_size=300, tail_paths=0)
     r.integrator.schedule = schedule
     r.render(2, seed=4, progress=False)
     rows = [tuple(row[k] for k in ("rays", "hits", "misses", "shadow_rays", "unoccluded")) for row in r.stats.bounces]
@@ -163,7 +164,8 @@ def test_queues_list_slots_in_ascending_order(cornell_box, schedule):
 
     from pyclpt.integrators.wavefront import Q_COUNT
 
-    r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=-1, width=40, height=30, wave_size=1000)
+    r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=-1, width=40, height=30, wave_size=1000,
+                        tail_paths=0)
     w = r.integrator
     w.schedule = schedule
     w.warm_up()
@@ -222,7 +224,8 @@ def test_no_path_ends_by_roulette_before_rr_depth():
     roulette starts (on rays of bounce RR_DEPTH = 3, docs/architecture.md) every path is alive; from
     there on paths end (throughput 0.5^3, so most of them at once)."""
     rr_depth = 3
-    r = pyclpt.Renderer(interior_furnace(0.5), integrator="wavefront", max_depth=-1, width=16, height=16)
+    r = pyclpt.Renderer(interior_furnace(0.5), integrator="wavefront", max_depth=-1, width=16, height=16,
+                        tail_paths=0)
     r.render(4, seed=3, progress=False)
     rows = r.stats.bounces
     paths = 16 * 16 * 4
@@ -232,7 +235,7 @@ def test_no_path_ends_by_roulette_before_rr_depth():
 
 
 def test_launch_sequence_per_bounce(cornell_box):
-    r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=3, width=8, height=8)
+    r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=3, width=8, height=8, tail_paths=0)
     r.render(1, progress=False)
     seq = r.integrator.profile.sequence
     compact = ["compact_count", "compact_scatter"]
@@ -240,7 +243,7 @@ def test_launch_sequence_per_bounce(cornell_box):
                   "light_contribution", "sample_bsdf", *compact]
     assert seq == ["path_init"] + per_bounce * 3
     table = {row["kernel"]: row for row in r.stats.kernels}
-    assert set(table) == set(STAGES)
+    assert set(table) == set(STAGES) - {"finish_paths"}  # tail_paths=0: the stages do every bounce
     for name, row in table.items():  # the table counts what was launched, and shares the time it measured
         assert row["launches"] == seq.count(name) == {"path_init": 1, "compact_count": 12,
                                                        "compact_scatter": 12}.get(name, 3)
@@ -252,7 +255,7 @@ def test_launch_sequence_per_bounce(cornell_box):
         "origin": [0, 0, 0], "target": [0, 0, -1], "up": [0, 1, 0]}}], size=8),
         "sky": {"type": "constant", "radiance": 1.0},
         "behind": {"type": "rectangle", "to_world": [{"translate": [0, 0, 5]}]}})
-    r = pyclpt.Renderer(sky, integrator="wavefront", max_depth=5, width=8, height=8)
+    r = pyclpt.Renderer(sky, integrator="wavefront", max_depth=5, width=8, height=8, tail_paths=0)
     assert np.all(r.render(2, progress=False) == 1.0)
     assert r.integrator.profile.sequence == (["path_init"] + per_bounce) * 2
 
@@ -322,3 +325,33 @@ def test_specialisation_changes_no_pixel(cornell_box, monkeypatch, integrator):
     every_kind, _ = render(cornell_box, **dict(kw))
     assert specialised.max() > 0
     np.testing.assert_array_equal(specialised, every_kind)
+
+
+@pytest.mark.parametrize("tail_paths", [0, 40, 10_000])
+def test_finish_paths_gives_the_megakernels_image(cornell_box, tail_paths, each_device):
+    """finish_paths runs the megakernel's loop (path_continue) on the paths a wave has left: the image is
+    the megakernel's, bit for bit, whether it takes over at the second bounce (10_000), later (40) or
+    never (0)."""
+    kw = dict(spp=4, max_depth=-1, width=24, height=24, seed=7, device=each_device)
+    mega, _ = render(cornell_box, integrator="megakernel", **dict(kw))
+    wave, r = render(cornell_box, integrator="wavefront", tail_paths=tail_paths, **dict(kw))
+    assert mega.max() > 0
+    np.testing.assert_array_equal(wave, mega)
+    tails = [row["tail"] for row in r.stats.bounces if row["tail"]]
+    assert (len(tails) > 0) == (tail_paths > 0)
+    if tail_paths == 10_000:
+        assert r.stats.bounces[1]["tail"] == r.stats.bounces[1]["rays"]  # all of them from bounce 1
+
+
+def test_every_path_ends_once_with_a_tail(cornell_box):
+    """With finish_paths taking the last paths: the paths the stages ended plus those the tail took are
+    all the paths, the tail's bounce launches no stage, and the megakernel's image comes out."""
+    r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=-1, width=32, height=32, tail_paths=100)
+    r.render(1, seed=2, progress=False)
+    rows = r.stats.bounces
+    tail = rows[-1]
+    assert tail["tail"] == tail["rays"] > 0 and tail["hits"] == tail["misses"] == tail["shadow_rays"] == 0
+    assert all(row["tail"] == 0 for row in rows[:-1]) and rows[-2]["rays"] > 100 >= tail["rays"]
+    ended = sum(row["misses"] + row["hits"] - nxt["rays"] for row, nxt in zip(rows[:-1], rows[1:]))
+    assert ended + tail["tail"] == 32 * 32
+    assert r.integrator.profile.sequence.count("finish_paths") == 1

@@ -78,7 +78,15 @@ static inline bool m_isinf(float x) { return (as_uint(x) & 0x7fffffffu) == 0x7f8
  * which PoCL uses to run a kernel's work-items 8 or 16 at a time, refuses any instruction of vector type
  * ("instruction return type cannot be vectorized"), while a struct of scalars becomes plain scalars once
  * inlined. The operations are componentwise IEEE arithmetic, as on float3: v3_add(v3_mul(a, b), c) is
- * a * b + c rounded the same way (FP_CONTRACT is off, core/common.h). Buffers hold scalar fields. */
+ * a * b + c rounded the same way (FP_CONTRACT is off, core/common.h). Buffers hold scalar fields.
+ *
+ * aligned(32) makes each type larger than 16 bytes, so the x86-64 calling convention passes and
+ * returns it in memory, which SROA turns back into scalars once inlined. A 12-byte struct would be
+ * returned as {<2 x float>, float}: x and y packed into one vector register, vector values that
+ * (1) PoCL's pre-pass SLP vectorizer builds <2 x float> arithmetic on, which stops its work-item
+ * loop vectorizer (docs/wavefront.md, "Vectorized stages"), and (2) Intel's CPU vectorizer
+ * miscompiles: with 12-byte vec3 (as with float3 before them) its vectorized wavefront stages gave
+ * wrong images (docs/devices.md; tests/test_devices.py fails without the alignment). */
 typedef struct __attribute__((aligned(32))) {
     float x, y, z;
 } vec3;

@@ -16,23 +16,6 @@ __kernel SCALAR_KERNEL void megakernel(SCENE_PARAMS, __global float* frame, __gl
     RngKey key = rng_key(seed, (uint)pixel, sample);
     PathState ps;
     camera_path(&sc, key, pixel, &ps);
-    if (max_depth != 0) {
-        for (;;) {
-            Hit hit;
-            if (!scene_closest(&sc, key, ps.depth, ps.org, ps.dir, &hit)) {
-                path_miss(&sc, &ps);
-                break;
-            }
-            Surface s = surface_at(&sc, hit.prim, hit.u, hit.v);
-            path_hit_emission(&sc, &s, hit.t, &ps);
-            if (!depth_allows(ps.depth + 1, max_depth)) break;
-            Bsdf b = bsdf_at(&sc, &s); /* the material at the hit, textures looked up once */
-            ShadowRay sr;
-            if (path_sample_light(&sc, key, &s, &b, &ps, &sr) &&
-                !scene_occluded(&sc, key, ps.depth, sr.org, sr.dir, sr.tmax))
-                ps.L = v3_add(ps.L, sr.contrib);
-            if (!path_sample_bsdf(key, &s, &b, &ps, max_depth)) break;
-        }
-    }
+    if (max_depth != 0) path_continue(&sc, key, &ps, max_depth);
     film_commit(frame, drop_marks, pixel, ps.L);
 }

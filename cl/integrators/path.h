@@ -141,6 +141,27 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     return true;
 }
 
+/* The rest of a path from its current ray, bounce after bounce, until it leaves the scene, reaches the
+ * depth limit or ends by roulette: the megakernel's loop, which the wavefront's finish_paths stage also
+ * runs for the last paths of a wave. */
+static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int max_depth) {
+    for (;;) {
+        Hit hit;
+        if (!scene_closest(sc, key, ps->depth, ps->org, ps->dir, &hit)) {
+            path_miss(sc, ps);
+            return;
+        }
+        Surface s = surface_at(sc, hit.prim, hit.u, hit.v);
+        path_hit_emission(sc, &s, hit.t, ps);
+        if (!depth_allows(ps->depth + 1, max_depth)) return;
+        Bsdf b = bsdf_at(sc, &s); /* the material at the hit, textures looked up once */
+        ShadowRay sr;
+        if (path_sample_light(sc, key, &s, &b, ps, &sr) && !scene_occluded(sc, key, ps->depth, sr.org, sr.dir, sr.tmax))
+            ps->L = v3_add(ps->L, sr.contrib);
+        if (!path_sample_bsdf(key, &s, &b, ps, max_depth)) return;
+    }
+}
+
 /* The end of a path: its radiance goes to the frame; a NaN or inf sample is dropped (0 is
  * written) and marked in drop_marks[pixel], which the film counts after the frame
  * (cl/film/count_dropped.cl). A plain add, not an atomic: one path owns its pixel in a frame,

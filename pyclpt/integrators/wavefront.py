@@ -5,11 +5,14 @@ one file per stage; see docs/wavefront.md).
 Per wave (a chunk of at most ``wave_size`` pixels of one sample index):
 
     path_init -> [ intersect, C -> miss -> process_hit, C -> shadow_test, C
-                   -> light_contribution -> sample_bsdf, C ] per bounce
+                   -> light_contribution -> sample_bsdf, C ] per bounce -> finish_paths
 
 where C is the order-preserving compaction (``compact_count``, ``compact_scatter``)
 that builds the next queue(s) from the flags the stage before wrote, so every queue
-lists path slots in ascending order and no stage needs an atomic.
+lists path slots in ascending order and no stage needs an atomic. Once at most
+``tail_paths`` paths are left (after the first bounce), ``finish_paths`` runs each of
+them to its end in one work-item, as the megakernel does: the same image, without a
+bounce's nine launches for a few paths.
 
 Each method of :class:`Wavefront` named after a stage launches that stage's
 kernel. Paths in flight never exceed ``wave_size`` whatever the image size or
@@ -29,7 +32,7 @@ from pyclpt.film.film import Film
 from pyclpt.integrators.path_state import PathStorage, bytes_per_path, opencl_header
 
 STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf",
-          "compact_count", "compact_scatter")
+          "compact_count", "compact_scatter", "finish_paths")
 # counter order, as Q_* in cl/integrators/wavefront/wavefront.h
 QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")
 Q_COUNT = len(QUEUES)
@@ -40,6 +43,7 @@ QUEUE_BYTES_PER_PATH = 6 * 4 + 1
 SCHEDULES = ("readback", "capacity")
 DEFAULT_WAVE_SIZE = 1 << 18
 CAPACITY_CHECK = 4
+TAIL_FRACTION = 4  # default tail_paths: a quarter of the wave (docs/wavefront.md, "The tail")
 
 
 class Wavefront:
@@ -47,7 +51,7 @@ class Wavefront:
 
     def __init__(self, device: Device, scene: SceneBuffers, film: Film, max_depth: int, *,
                  layout: str = "soa", wave_size: int = DEFAULT_WAVE_SIZE, schedule: str = "readback",
-                 local_size: int = 64) -> None:
+                 local_size: int = 64, tail_paths: int | None = None) -> None:
         if schedule not in SCHEDULES:
             raise ValueError(f"unknown wavefront schedule {schedule!r} ({', '.join(SCHEDULES)})")
         if max_depth < 0:
@@ -58,6 +62,10 @@ class Wavefront:
         self.max_depth, self.layout, self.schedule = max_depth, layout, schedule
         self.local_size = local_size
         self.capacity = min(wave_size, film.pixels)
+        # paths left at which finish_paths takes over (the readback schedule; 0: never)
+        self.tail_paths = self.capacity // TAIL_FRACTION if tail_paths is None else int(tail_paths)
+        if self.tail_paths < 0:
+            raise ValueError(f"tail_paths must be >= 0, got {tail_paths}")
         self.paths = PathStorage(device, layout, self.capacity)
         nbytes = 4 * self.capacity
         self.ray_queues = [alloc(device, nbytes, "ray queue"), alloc(device, nbytes, "ray queue")]
@@ -74,6 +82,7 @@ class Wavefront:
                                                    defines=defines), s) for s in STAGES}
         self.profile = KernelProfile()
         self._bounce_totals = np.zeros((max_depth + 2, Q_COUNT), np.int64)
+        self._tail_totals = np.zeros(max_depth + 2, np.int64)  # paths finish_paths took at each bounce
         self._counts = np.zeros((max_depth + 2, Q_COUNT), np.int32)
 
     @property
@@ -124,6 +133,12 @@ class Wavefront:
                      self.flags, self.film.frame, self.film.drop_marks,
                      np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
 
+    def finish_paths(self, n: int, bounce: int, seed: int, sample: int) -> None:
+        """Run the ``n`` paths of the ray queue of ``bounce`` to their ends, one per work-item."""
+        self._launch("finish_paths", n, *self._scene_args, *self._common(bounce), self.ray_queues[bounce % 2],
+                     self.film.frame, self.film.drop_marks, np.uint32(seed), np.uint32(sample),
+                     np.int32(self.max_depth))
+
     def compact_count(self, n: int, bounce: int, src_q: int) -> None:
         """Count the flagged entries per block of the queue ``src_q`` (at most ``n`` entries)."""
         self._launch("compact_count", -(-n // COMPACT_BLOCK), self.counters, np.int32(bounce), np.int32(src_q),
@@ -167,6 +182,8 @@ class Wavefront:
         self.path_init(1, 0, 0, 0)
         cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
         self.bounce(1, 0, 0, 0)
+        cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
+        self.finish_paths(1, 0, 0, 0)  # an empty queue: compiled, nothing run
         cl.enqueue_fill_buffer(q, self.film.frame, np.float32(0), 0, 4 * 3 * self.film.pixels)
         q.finish()
         self.profile.clear()
@@ -186,6 +203,10 @@ class Wavefront:
                     rays = self._read_count(bounce, 0)
                     if rays == 0:
                         break
+                    if bounce > 0 and rays <= self.tail_paths:
+                        self.finish_paths(rays, bounce, seed, sample)
+                        self._tail_totals[bounce] += rays
+                        break
                 else:
                     # launch at capacity; kernels read their counts on the device. The host
                     # looks at the ray count only every CAPACITY_CHECK bounces to stop early.
@@ -204,10 +225,13 @@ class Wavefront:
         return int(out[0])
 
     def bounce_stats(self) -> list[dict[str, int]]:
-        """Per bounce since the last reset: paths alive (rays), hits, misses, shadow rays, unoccluded."""
+        """Per bounce since the last reset: paths alive (rays), hits, misses, shadow rays, unoccluded, and
+        the paths finish_paths ran to their ends from this bounce on (``tail``; their later bounces
+        are not counted)."""
         rows = []
         for b in range(self.max_depth + 1):
-            row = {"bounce": b, **{name: int(self._bounce_totals[b, i]) for i, name in enumerate(QUEUES)}}
+            row = {"bounce": b, **{name: int(self._bounce_totals[b, i]) for i, name in enumerate(QUEUES)},
+                   "tail": int(self._tail_totals[b])}
             if row["rays"] == 0 and b > 0:
                 break
             rows.append(row)
@@ -215,3 +239,4 @@ class Wavefront:
 
     def reset_stats(self) -> None:
         self._bounce_totals[:] = 0
+        self._tail_totals[:] = 0

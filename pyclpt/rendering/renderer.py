@@ -68,7 +68,7 @@ class Renderer:
     def __init__(self, scene: Scene, *, integrator: str = "megakernel", layout: str = "soa",
                  max_depth: int | None = None, width: int | None = None, height: int | None = None,
                  device: Device | str | None = None, wave_size: int | None = None,
-                 local_size: int | None = None, schedule: str | None = None,
+                 local_size: int | None = None, schedule: str | None = None, tail_paths: int | None = None,
                  precision: str = DEFAULT_PRECISION) -> None:
         check_scene(scene)
         check_choice(integrator, "integrator", INTEGRATORS)
@@ -78,6 +78,7 @@ class Renderer:
         height = check_optional_int(height, "height", lo=1, hi=MAX_RESOLUTION, note=" (None: the scene's)")
         wave_size = check_optional_int(wave_size, "wave_size", lo=1)
         local_size = check_optional_int(local_size, "local_size", lo=1)
+        tail_paths = check_optional_int(tail_paths, "tail_paths", lo=0, note=" (wavefront: 0 never hands paths on)")
         check_options(precision=precision)
         self.scene = scene
         self.device = get_device(device)
@@ -108,6 +109,8 @@ class Renderer:
 
             if schedule:
                 options["schedule"] = schedule
+            if tail_paths is not None:
+                options["tail_paths"] = tail_paths
             self.integrator = Wavefront(self.device, self.scene_buffers, self.film, self.depth_limit,
                                         layout=layout, **options)
         self.integrator.warm_up()

@@ -51,6 +51,14 @@ static inline PathState path_load_shading(const PathStore* P, int slot, int boun
     return ps;
 }
 
+/* Everything path_continue needs to run a queued path on from its current ray (finish_paths). */
+static inline PathState path_load_ray(const PathStore* P, int slot, int bounce) {
+    PathState ps = path_load_shading(P, slot, bounce);
+    ps.org = path_get_org(P, slot);
+    ps.eta_scale = path_get_eta_scale(P, slot);
+    return ps;
+}
+
 /* Store the next ray of a path and what the next bounce needs to weight it
  * (path_init and sample_bsdf). */
 static inline void path_store_ray(const PathStore* P, int slot, const PathState* ps) {
