@@ -258,9 +258,12 @@ def test_render_too_large_for_memory_fails_before_allocating(device, cornell_box
     with pytest.raises(DeviceMemoryError) as info:
         pyclpt.Renderer(cornell_box, device=small, width=256, height=256)
     msg = str(info.value)
-    assert "needs 3 MiB" in msg and "frame buffer 256x256 0 MiB" not in msg
+    # a batch of 4 frames (the wave size holds 4 frames of 256x256: pyclpt/rendering/memory.py, batch_frames)
+    assert "needs 6 MiB" in msg and "frame buffer 256x256, 4 frames 3 MiB" in msg
+    assert "dropped-sample marks 0 MiB" not in msg  # parts under half a MiB are not listed
     assert "accumulation sum (double) 2 MiB" in msg and "more than the 1 MiB available" in msg
     assert "lower the resolution (width, height) or sum in single precision (precision='single'" in msg
+    assert "or use a smaller wave_size" in msg
     with pytest.raises(DeviceMemoryError, match="path state and queues .* use a smaller wave_size"):
         pyclpt.Renderer(cornell_box, device=small, width=128, height=128, integrator="wavefront",
                         precision="single")
@@ -270,7 +273,8 @@ def test_render_memory_parts(cornell_box):
     single = render_memory(cornell_box, 100, 50, precision="single", integrator="megakernel")
     double = render_memory(cornell_box, 100, 50, precision="double", integrator="wavefront", wave_size=1000,
                            max_depth=4)
-    assert single["frame buffer 100x50"] == single["accumulated image"] == 12 * 5000
+    assert single["frame buffer 100x50, 52 frames"] == 52 * single["accumulated image"] == 52 * 12 * 5000
+    assert double["frame buffer 100x50"] == 12 * 5000  # a wave of 1000 paths: one frame of 5000 pixels
     assert single["accumulation sum (single)"] == 12 * 5000 and double["accumulation sum (double)"] == 24 * 5000
     assert not any(k.startswith("path state") for k in single)
     assert double["path state and queues (1000 paths)"] > 1000 * 6 * 4

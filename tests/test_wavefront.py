@@ -250,14 +250,16 @@ def test_launch_sequence_per_bounce(cornell_box):
         assert row["mean_ms"] == pytest.approx(row["total_ms"] / row["launches"])
         assert row["share"] == pytest.approx(row["total_ms"] / sum(x["total_ms"] for x in table.values()))
     # the readback schedule stops when no path is left: under a sky, with the only shape behind the
-    # camera, every camera ray misses, so there is one bounce of launches whatever max_depth allows
+    # camera, every camera ray misses, so there is one bounce of launches whatever max_depth allows;
+    # both samples of the 8x8 image are in one wave (a batch of two frames)
     sky = pyclpt.load_dict({"type": "scene", "sensor": sensor([{"look_at": {
         "origin": [0, 0, 0], "target": [0, 0, -1], "up": [0, 1, 0]}}], size=8),
         "sky": {"type": "constant", "radiance": 1.0},
         "behind": {"type": "rectangle", "to_world": [{"translate": [0, 0, 5]}]}})
     r = pyclpt.Renderer(sky, integrator="wavefront", max_depth=5, width=8, height=8, tail_paths=0)
     assert np.all(r.render(2, progress=False) == 1.0)
-    assert r.integrator.profile.sequence == (["path_init"] + per_bounce) * 2
+    assert r.film.batch == 64 and r.integrator.capacity == 64 * 64  # 64 frames of 8x8 pixels
+    assert r.integrator.profile.sequence == ["path_init"] + per_bounce
 
 
 def test_path_state_is_declared_once():
@@ -355,3 +357,18 @@ def test_every_path_ends_once_with_a_tail(cornell_box):
     ended = sum(row["misses"] + row["hits"] - nxt["rays"] for row, nxt in zip(rows[:-1], rows[1:]))
     assert ended + tail["tail"] == 32 * 32
     assert r.integrator.profile.sequence.count("finish_paths") == 1
+
+
+@pytest.mark.parametrize("integrator", ["megakernel", "wavefront"])
+def test_batches_of_frames_change_no_pixel(cornell_box, integrator):
+    """A small image renders several samples per wave or launch (a batch of frames: film slot f is pixel
+    f % pixels of sample first + f / pixels, pyclpt/film/film.py). The image is bit-identical to the
+    one rendered a frame at a time: the same paths, and the frames added in sample order."""
+    kw = dict(integrator=integrator, max_depth=5, width=20, height=12)
+    one = pyclpt.Renderer(cornell_box, wave_size=240, **kw)  # 240 paths: one frame of 20x12 at a time
+    many = pyclpt.Renderer(cornell_box, **kw)
+    assert one.film.batch == 1 and many.film.batch == 64
+    a = one.render(70, seed=3, first_sample=5, progress=False)  # a batch of 64 frames, then one of 6
+    b = many.render(70, seed=3, first_sample=5, progress=False)
+    assert a.max() > 0 and one.film.frames == many.film.frames == 70
+    np.testing.assert_array_equal(a, b)

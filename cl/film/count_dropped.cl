@@ -1,10 +1,11 @@
-/* count_dropped: adds up the frame's dropped (NaN/inf) samples and clears their marks.
+/* count_dropped: adds up a batch's dropped (NaN/inf) samples and clears their marks.
  *
  * The integrators' film_commit (integrators/path.h) writes 0 to the frame for a NaN/inf sample
- * and adds 1 to marks[pixel] (a plain add: one path owns a pixel per frame), so the stages that
+ * and adds 1 to marks[film slot] (a plain add: one path owns a slot per batch), so the stages that
  * commit need no atomic. One work-item sums COUNT_CHUNK marks; integer sums do not depend on
  * the order the work-items run in.
- * Consumes: marks[0 .. pixels-1] (uchar, dropped samples per pixel since the last count).
+ * Consumes: marks[0 .. pixels-1] (uchar, dropped samples per film slot since the last count;
+ *           pixels = the batch's frames times the image's pixels).
  * Produces: dropped[0] += their sum; marks zeroed. */
 
 #ifndef COUNT_CHUNK /* -DCOUNT_CHUNK from pyclpt/film/film.py, which sizes the launch by it */

@@ -43,6 +43,14 @@ typedef struct {
 
 static inline bool depth_allows(int depth, int max_depth) { return max_depth < 0 || depth < max_depth; }
 
+/* A launch renders a batch of frames: samples first_sample, first_sample + 1, ... of every pixel. The
+ * path of film slot f = j * pixels + pixel is sample first_sample + j of that pixel, and commits to
+ * frame j of the film's frame buffer (frames stacked: film_commit writes frame[3 f], drop_marks[f]). */
+static inline int film_pixel(const Scene* sc, int f) { return f % scene_pixels(sc); }
+static inline uint film_sample(const Scene* sc, uint first_sample, int f) {
+    return first_sample + (uint)(f / scene_pixels(sc));
+}
+
 /* path init: the camera ray of (pixel, sample) with a jittered position in the pixel. */
 static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
     __global const float* c = sc->consts;
@@ -162,16 +170,16 @@ static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int
     }
 }
 
-/* The end of a path: its radiance goes to the frame; a NaN or inf sample is dropped (0 is
- * written) and marked in drop_marks[pixel], which the film counts after the frame
- * (cl/film/count_dropped.cl). A plain add, not an atomic: one path owns its pixel in a frame,
+/* The end of a path: its radiance goes to its film slot f (see film_pixel); a NaN or inf sample is
+ * dropped (0 is written) and marked in drop_marks[f], which the film counts after the batch
+ * (cl/film/count_dropped.cl). A plain add, not an atomic: one path owns its slot in a batch,
  * so the stages that commit can vectorize; a path committed twice would count twice. */
-static inline void film_commit(__global float* frame, __global uchar* drop_marks, int pixel, vec3 L) {
+static inline void film_commit(__global float* frame, __global uchar* drop_marks, int f, vec3 L) {
     bool bad = !all_finite3(L);
-    drop_marks[pixel] += bad ? (uchar)1 : (uchar)0;
-    frame[3 * pixel + 0] = bad ? 0.0f : L.x;
-    frame[3 * pixel + 1] = bad ? 0.0f : L.y;
-    frame[3 * pixel + 2] = bad ? 0.0f : L.z;
+    drop_marks[f] += bad ? (uchar)1 : (uchar)0;
+    frame[3 * f + 0] = bad ? 0.0f : L.x;
+    frame[3 * f + 1] = bad ? 0.0f : L.y;
+    frame[3 * f + 2] = bad ? 0.0f : L.z;
 }
 
 #endif

@@ -77,6 +77,10 @@ typedef struct {
 
 static inline Material scene_material(const Scene* sc, int id) { return sc->materials + MAT_STRIDE * id; }
 
+static inline int scene_pixels(const Scene* sc) {
+    return (int)sc->consts[CONST_WIDTH] * (int)sc->consts[CONST_HEIGHT];
+}
+
 /* The material of a surface with its textures looked up at the surface's uv. */
 static inline Bsdf bsdf_at(const Scene* sc, const Surface* s) {
     Material m = scene_material(sc, s->material);

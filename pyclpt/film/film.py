@@ -1,8 +1,9 @@
-"""The film: one frame buffer that an integrator fills with one sample per
-pixel, averaged on the device by an :class:`~pyclpt.film.accumulator.Accumulator`.
+"""The film: a frame buffer of ``batch`` frames that an integrator fills with one sample per
+pixel each (frame j: sample ``first + j`` of a batch, so small images fill a wave with several
+samples), averaged on the device by an :class:`~pyclpt.film.accumulator.Accumulator`.
 
 Frames are added in sample order, so the sum does not depend on the order in
-which paths finished. NaN/inf samples never reach the frame: the integrators'
+which paths finished, nor on how many frames a batch held. NaN/inf samples never reach the frame: the integrators'
 kernels write 0 instead and mark the pixel in ``drop_marks`` (one byte a pixel,
 a plain add, so no kernel that commits a path needs an atomic), and
 :meth:`count_dropped`, run by the integrator after each frame, adds the marks to
@@ -24,15 +25,27 @@ DEFAULT_PRECISION = "double"
 COUNT_CHUNK = 1024  # marks summed per work-item of cl/film/count_dropped.cl (-DCOUNT_CHUNK)
 
 
+MAX_BATCH = 64  # frames a batch holds at most (frames_per_batch)
+
+
+def frames_per_batch(pixels: int, paths: int) -> int:
+    """Frames of a batch: as many as ``paths`` (an integrator's launch or wave size) holds, 1 to
+    MAX_BATCH."""
+    return max(1, min(MAX_BATCH, paths // max(pixels, 1)))
+
+
 class Film:
     def __init__(self, device: Device, width: int, height: int, precision: str = DEFAULT_PRECISION,
-                 **accumulator_options) -> None:
+                 batch: int = 1, **accumulator_options) -> None:
+        if not 1 <= batch <= MAX_BATCH:
+            raise ValueError(f"a film batch holds 1 to {MAX_BATCH} frames, got {batch}")
         self.device = device
         self.width, self.height = width, height
         self.pixels = width * height
-        self.frame = alloc(device, 4 * self.pixels * 3, f"frame buffer {width}x{height}")
+        self.batch = batch
+        self.frame = alloc(device, 4 * self.pixels * 3 * batch, f"frame buffer {width}x{height}x{batch}")
         self.dropped = alloc(device, 4, "dropped-sample counter")
-        self.drop_marks = alloc(device, self.pixels, "dropped-sample marks")
+        self.drop_marks = alloc(device, self.pixels * batch, "dropped-sample marks")
         program = build_program(device, ["film/count_dropped.cl"], defines={"COUNT_CHUNK": COUNT_CHUNK})
         self._count_kernel = cl.Kernel(program, "count_dropped")
         self.accumulator = Accumulator(device, width, height, channels=3, precision=precision,
@@ -47,26 +60,33 @@ class Film:
     def clear(self) -> None:
         q = self.device.queue
         self.accumulator.reset()
-        cl.enqueue_fill_buffer(q, self.frame, np.float32(0), 0, 4 * self.pixels * 3)
+        cl.enqueue_fill_buffer(q, self.frame, np.float32(0), 0, 4 * self.pixels * 3 * self.batch)
         cl.enqueue_fill_buffer(q, self.dropped, np.int32(0), 0, 4)
-        cl.enqueue_fill_buffer(q, self.drop_marks, np.uint8(0), 0, self.pixels)
+        cl.enqueue_fill_buffer(q, self.drop_marks, np.uint8(0), 0, self.pixels * self.batch)
 
-    def count_dropped(self) -> cl.Event:
-        """Add the frame's dropped-sample marks to the counter and clear them (after each frame)."""
-        chunks = -(-self.pixels // COUNT_CHUNK)
-        return self._count_kernel(self.device.queue, (chunks,), None, self.drop_marks,
-                                  np.int32(self.pixels), self.dropped)
+    def count_dropped(self, frames: int = 1) -> cl.Event:
+        """Add the dropped-sample marks of the first ``frames`` frames to the counter and clear them
+        (after each batch)."""
+        n = self.pixels * frames
+        chunks = -(-n // COUNT_CHUNK)
+        return self._count_kernel(self.device.queue, (chunks,), None, self.drop_marks, np.int32(n), self.dropped)
+
+    def add_frames(self, count: int) -> cl.Event | None:
+        """Add the first ``count`` frames of the buffer to the accumulation, in order (None when the
+        accumulator has stopped)."""
+        return self.accumulator.add_batch(self.frame, count)
 
     def add_frame(self) -> cl.Event | None:
-        """Add the frame buffer to the accumulation (None when the accumulator has stopped)."""
-        return self.accumulator.add(self.frame)
+        """Add the first frame of the buffer to the accumulation (None when the accumulator has stopped)."""
+        return self.add_frames(1)
 
     def warm_up(self) -> None:
         self.accumulator.warm_up()
 
-    def read_frame(self) -> np.ndarray:
+    def read_frame(self, j: int = 0) -> np.ndarray:
+        """Frame ``j`` of the buffer, (H, W, 3) float32."""
         out = np.empty((self.height, self.width, 3), np.float32)
-        cl.enqueue_copy(self.device.queue, out, self.frame)
+        cl.enqueue_copy(self.device.queue, out, self.frame, src_offset=4 * 3 * self.pixels * j)
         return out
 
     def image(self) -> np.ndarray:

@@ -35,7 +35,7 @@ class Field:
 
 
 FIELDS: tuple[Field, ...] = (
-    Field("pixel", "int", 1, "film pixel of the path"),
+    Field("film_slot", "int", 1, "film slot of the path: j * pixels + pixel for sample first + j of a batch"),
     Field("depth", "int", 1, "bounce index of the current ray"),
     Field("flags", "int", 1, "PATH_* flags"),
     Field("org", "float", 3, "current ray origin"),

@@ -2,7 +2,8 @@
 kernels that pass paths to each other through compacted queues (``cl/*.cl``,
 one file per stage; see docs/wavefront.md).
 
-Per wave (a chunk of at most ``wave_size`` pixels of one sample index):
+Per wave (a chunk of at most ``wave_size`` film slots of a batch of frames: slot f is pixel
+f % pixels of sample first + f / pixels, so small images fill a wave with several samples):
 
     path_init -> [ intersect, C -> miss -> process_hit, C -> shadow_test, C
                    -> light_contribution -> sample_bsdf, C ] per bounce -> finish_paths
@@ -61,7 +62,7 @@ class Wavefront:
         self.device, self.scene, self.film = device, scene, film
         self.max_depth, self.layout, self.schedule = max_depth, layout, schedule
         self.local_size = local_size
-        self.capacity = min(wave_size, film.pixels)
+        self.capacity = min(wave_size, film.pixels * film.batch)
         # paths left at which finish_paths takes over (the readback schedule; 0: never)
         self.tail_paths = self.capacity // TAIL_FRACTION if tail_paths is None else int(tail_paths)
         if self.tail_paths < 0:
@@ -103,10 +104,10 @@ class Wavefront:
     def _common(self, bounce: int) -> tuple:
         return (*self.paths.buffers, self.counters, np.int32(bounce))
 
-    def path_init(self, n: int, seed: int, sample: int, offset: int) -> None:
+    def path_init(self, n: int, seed: int, first_sample: int, offset: int) -> None:
         f = self.film
         self._launch("path_init", n, *self._scene_args, *self._common(0), self.ray_queues[0], f.frame,
-                     f.drop_marks, np.uint32(seed), np.uint32(sample), np.int32(offset), np.int32(n),
+                     f.drop_marks, np.uint32(seed), np.uint32(first_sample), np.int32(offset), np.int32(n),
                      np.int32(self.max_depth))
 
     def intersect(self, n: int, bounce: int, seed: int, sample: int) -> None:
@@ -184,17 +185,25 @@ class Wavefront:
         self.bounce(1, 0, 0, 0)
         cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
         self.finish_paths(1, 0, 0, 0)  # an empty queue: compiled, nothing run
-        cl.enqueue_fill_buffer(q, self.film.frame, np.float32(0), 0, 4 * 3 * self.film.pixels)
+        cl.enqueue_fill_buffer(q, self.film.frame, np.float32(0), 0, 4 * 3 * self.film.pixels * self.film.batch)
         q.finish()
         self.profile.clear()
 
     # -- the host loop -------------------------------------------------------------
     def render_frame(self, seed: int, sample: int) -> None:
-        """Render sample ``sample`` of every pixel into the film's frame buffer, wave by wave."""
+        """Render sample ``sample`` of every pixel into the film's first frame, wave by wave."""
+        self.render_frames(seed, sample, 1)
+
+    def render_frames(self, seed: int, first_sample: int, frames: int) -> None:
+        """Render samples ``first_sample .. first_sample + frames - 1`` of every pixel into the film's
+        frames 0 .. frames - 1, wave by wave over the film slots (``sample`` below is the first)."""
+        if not 1 <= frames <= self.film.batch:
+            raise ValueError(f"frames must be 1..{self.film.batch} (the film's batch), got {frames}")
         self._scene_args = self.scene.args(self.film.width, self.film.height)
         q = self.device.queue
-        for offset in range(0, self.film.pixels, self.capacity):
-            n = min(self.capacity, self.film.pixels - offset)
+        sample, total = first_sample, self.film.pixels * frames
+        for offset in range(0, total, self.capacity):
+            n = min(self.capacity, total - offset)
             cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
             self.path_init(n, seed, sample, offset)
             rays = n if self.max_depth != 0 else 0
@@ -216,7 +225,7 @@ class Wavefront:
                 self.bounce(rays, bounce, seed, sample)
             cl.enqueue_copy(q, self._counts, self.counters)
             self._bounce_totals += self._counts
-        self.film.count_dropped()
+        self.film.count_dropped(frames)
 
     def _read_count(self, bounce: int, queue: int) -> int:
         out = np.zeros(1, np.int32)

@@ -31,10 +31,10 @@ class FramePacer:
         self.pending = 0  # frames enqueued since the last wait
         self._since = time.perf_counter()
 
-    def frame(self, queue: Any) -> int:
-        """Call after enqueueing a frame on ``queue``. Waits for the queue when ``batch`` frames are
-        pending; returns how many frames that wait completed (0 when it did not wait)."""
-        self.pending += 1
+    def frame(self, queue: Any, count: int = 1) -> int:
+        """Call after enqueueing ``count`` frames on ``queue``. Waits for the queue when ``batch`` frames
+        are pending; returns how many frames that wait completed (0 when it did not wait)."""
+        self.pending += count
         return self.wait(queue) if self.pending >= self.batch else 0
 
     def wait(self, queue: Any) -> int:

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import fields, is_dataclass
 
 from pyclpt.device.context import Device, check_alloc, check_memory
+from pyclpt.film.film import frames_per_batch
 from pyclpt.scene.model import Bitmap, Checkerboard, Envmap, Scene
 
 # Bytes of one value of the accumulation sum (pyclpt.film.accumulator): a float, or two words.
@@ -61,13 +62,22 @@ def scene_bytes(scene: Scene) -> int:
     return total
 
 
+def batch_frames(pixels: int, wave_size: int | None) -> int:
+    """Frames a render's film batches (pyclpt/film/film.py): as many as the wave size (the
+    wavefront's default for both integrators) holds, so that small images fill a wave."""
+    from pyclpt.integrators.wavefront import DEFAULT_WAVE_SIZE
+
+    return frames_per_batch(pixels, wave_size or DEFAULT_WAVE_SIZE)
+
+
 def render_memory(scene: Scene, width: int, height: int, *, precision: str, integrator: str,
                   wave_size: int | None = None, max_depth: int = 0) -> dict[str, int]:
     """{what: bytes} of the device buffers of a render (see the module docstring)."""
     pixels = width * height
+    batch = batch_frames(pixels, wave_size)
     parts = {
-        f"frame buffer {width}x{height}": 12 * pixels,
-        "dropped-sample marks": pixels,
+        f"frame buffer {width}x{height}" + (f", {batch} frames" if batch > 1 else ""): 12 * pixels * batch,
+        "dropped-sample marks": pixels * batch,
         f"accumulation sum ({precision})": SUM_VALUE_BYTES.get(precision, 8) * 3 * pixels,
         "accumulated image": 12 * pixels,
         "scene buffers (estimate)": scene_bytes(scene),
@@ -76,7 +86,7 @@ def render_memory(scene: Scene, width: int, height: int, *, precision: str, inte
         from pyclpt.integrators.path_state import bytes_per_path
         from pyclpt.integrators.wavefront import DEFAULT_WAVE_SIZE, Q_COUNT, QUEUE_BYTES_PER_PATH
 
-        capacity = min(wave_size or DEFAULT_WAVE_SIZE, pixels)
+        capacity = min(wave_size or DEFAULT_WAVE_SIZE, pixels * batch)
         parts[f"path state and queues ({capacity} paths)"] = (capacity * (bytes_per_path() + QUEUE_BYTES_PER_PATH)
                                                               + 4 * Q_COUNT * (max_depth + 2))
     return parts
@@ -93,7 +103,7 @@ def check_render_memory(device: Device, scene: Scene, width: int, height: int, *
     lower = ["lower the resolution (width, height)"]
     if precision != "single":
         lower.append("sum in single precision (precision='single', --precision single)")
-    if integrator == "wavefront":
+    if integrator == "wavefront" or batch_frames(width * height, wave_size) > 1:
         lower.append("use a smaller wave_size")
     hint = "to fit, " + " or ".join(lower)
     for what in FILM_BUFFERS:  # single buffers: refused before anything is allocated, as later by alloc()

@@ -27,7 +27,7 @@ from pyclpt.film.accumulator import check_options
 from pyclpt.film.film import DEFAULT_PRECISION, Film
 from pyclpt.integrators.megakernel import Megakernel
 from pyclpt.rendering.frame_loop import FramePacer, progress_bar
-from pyclpt.rendering.memory import check_render_memory
+from pyclpt.rendering.memory import batch_frames, check_render_memory
 from pyclpt.scene.model import Scene
 
 log = logging.getLogger("pyclpt")
@@ -98,7 +98,9 @@ class Renderer:
         self.scene_buffers = SceneBuffers(scene, self.device)
         self.device.queue.finish()
         t1 = time.perf_counter()
-        self.film = Film(self.device, self.width, self.height, precision=precision)
+        # small images: a batch of frames (samples) per wave or launch (rendering/memory.py: batch_frames)
+        self.film = Film(self.device, self.width, self.height, precision=precision,
+                         batch=batch_frames(self.width * self.height, wave_size))
         options: dict = {"wave_size": wave_size} if wave_size else {}
         if local_size:
             options["local_size"] = int(local_size)
@@ -136,10 +138,13 @@ class Renderer:
             self.integrator.reset_stats()
         start = time.perf_counter()
         with progress_bar(spp, f"{self.scene.name} {self.integrator.name}", "spp", progress) as bar:
-            for s in range(first_sample, first_sample + spp):
-                self.integrator.render_frame(int(seed), s)
-                self.film.add_frame()
-                bar.update(self.pacer.frame(self.device.queue))
+            s, end = first_sample, first_sample + spp
+            while s < end:  # batches of frames (samples s, s + 1, ...), added in sample order
+                frames = min(self.film.batch, end - s)
+                self.integrator.render_frames(int(seed), s, frames)
+                self.film.add_frames(frames)
+                bar.update(self.pacer.frame(self.device.queue, frames))
+                s += frames
         image = self.film.image()
         self.collect_stats(spp, time.perf_counter() - start)
         return image

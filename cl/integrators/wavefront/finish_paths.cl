@@ -2,12 +2,12 @@
  * runs it (path_continue, integrators/path.h): once few paths remain, the launches of a bounce's
  * stages cost more than they save (pyclpt/integrators/wavefront.py: tail_paths).
  * Consumes: the ray queue of this bounce (the paths' state as sample_bsdf stored it).
- * Produces: each path's radiance in frame[pixel] (0 and a mark in drop_marks for NaN/inf); the
+ * Produces: each path's radiance in frame[film slot] (0 and a mark in drop_marks for NaN/inf); the
  *           queues of later bounces stay empty. */
 #include "integrators/wavefront/wavefront.h"
 
 __kernel SCALAR_KERNEL void finish_paths(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* ray_queue,
-                                         __global float* frame, __global uchar* drop_marks, uint seed, uint sample,
+                                         __global float* frame, __global uchar* drop_marks, uint seed, uint first_sample,
                                          int max_depth) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_RAY)) return;
@@ -15,6 +15,6 @@ __kernel SCALAR_KERNEL void finish_paths(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, 
     PathStore P = PATH_INIT;
     int slot = ray_queue[i];
     PathState ps = path_load_ray(&P, slot, bounce);
-    path_continue(&sc, path_key(&P, slot, seed, sample), &ps, max_depth);
-    film_commit(frame, drop_marks, path_get_pixel(&P, slot), ps.L);
+    path_continue(&sc, path_key(&P, &sc, slot, seed, first_sample), &ps, max_depth);
+    film_commit(frame, drop_marks, path_get_film_slot(&P, slot), ps.L);
 }

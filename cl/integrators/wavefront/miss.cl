@@ -1,6 +1,6 @@
 /* miss: environment radiance for paths that left the scene (MIS-weighted); the path ends.
  * Consumes: the miss queue of this bounce.
- * Produces: the path's radiance in frame[pixel] (0 and a mark in drop_marks for NaN/inf). */
+ * Produces: the path's radiance in frame[film slot] (0 and a mark in drop_marks for NaN/inf). */
 #include "integrators/wavefront/wavefront.h"
 
 __kernel void miss(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* miss_queue,
@@ -12,5 +12,5 @@ __kernel void miss(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* mi
     int slot = miss_queue[i];
     PathState ps = path_load_shading(&P, slot, bounce);
     path_miss(&sc, &ps);
-    film_commit(frame, drop_marks, path_get_pixel(&P, slot), ps.L);
+    film_commit(frame, drop_marks, path_get_film_slot(&P, slot), ps.L);
 }

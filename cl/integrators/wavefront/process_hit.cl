@@ -8,7 +8,7 @@
 #include "integrators/wavefront/wavefront.h"
 
 __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* hit_queue,
-                          __global uchar* flags, uint seed, uint sample, int max_depth) {
+                          __global uchar* flags, uint seed, uint first_sample, int max_depth) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_HIT)) return;
     Scene sc = SCENE_INIT;
@@ -22,7 +22,7 @@ __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     if (depth_allows(bounce + 1, max_depth)) {
         ShadowRay sr;
         Bsdf b = bsdf_at(&sc, &s);
-        shadow = path_sample_light(&sc, path_key(&P, slot, seed, sample), &s, &b, &ps, &sr);
+        shadow = path_sample_light(&sc, path_key(&P, &sc, slot, seed, first_sample), &s, &b, &ps, &sr);
         if (shadow) {
             path_set_shadow_org(&P, slot, sr.org);
             path_set_shadow_dir(&P, slot, sr.dir);

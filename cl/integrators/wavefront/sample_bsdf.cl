@@ -2,12 +2,12 @@
  * Consumes: the hit queue of this bounce (after hit processing and light contribution).
  * Produces: for survivors the next ray and flags[i] = 1 (compaction then builds the next
  *           bounce's ray queue); paths that end (depth limit, invalid sample, roulette) get
- *           flags[i] = 0 and commit their radiance to frame[pixel]. */
+ *           flags[i] = 0 and commit their radiance to frame[film slot]. */
 #include "integrators/wavefront/wavefront.h"
 
 __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* hit_queue,
                           __global uchar* flags, __global float* frame, __global uchar* drop_marks,
-                          uint seed, uint sample, int max_depth) {
+                          uint seed, uint first_sample, int max_depth) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_HIT)) return;
     Scene sc = SCENE_INIT;
@@ -20,8 +20,8 @@ __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     ps.depth = bounce;
     Surface s = surface_at(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
     Bsdf b = bsdf_at(&sc, &s);
-    bool alive = path_sample_bsdf(path_key(&P, slot, seed, sample), &s, &b, &ps, max_depth);
+    bool alive = path_sample_bsdf(path_key(&P, &sc, slot, seed, first_sample), &s, &b, &ps, max_depth);
     if (alive) path_store_ray(&P, slot, &ps);
-    else film_commit(frame, drop_marks, path_get_pixel(&P, slot), path_get_L(&P, slot));
+    else film_commit(frame, drop_marks, path_get_film_slot(&P, slot), path_get_L(&P, slot));
     flags[i] = alive ? 1 : 0;
 }

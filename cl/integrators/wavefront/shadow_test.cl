@@ -5,13 +5,13 @@
 #include "integrators/wavefront/wavefront.h"
 
 __kernel SCALAR_KERNEL void shadow_test(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* shadow_queue,
-                          __global uchar* flags, uint seed, uint sample) {
+                          __global uchar* flags, uint seed, uint first_sample) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_SHADOW)) return;
     Scene sc = SCENE_INIT;
     PathStore P = PATH_INIT;
     int slot = shadow_queue[i];
-    bool occluded = scene_occluded(&sc, path_key(&P, slot, seed, sample), bounce, path_get_shadow_org(&P, slot),
+    bool occluded = scene_occluded(&sc, path_key(&P, &sc, slot, seed, first_sample), bounce, path_get_shadow_org(&P, slot),
                                    path_get_shadow_dir(&P, slot), path_get_shadow_tmax(&P, slot));
     flags[i] = occluded ? 0 : 1;
 }

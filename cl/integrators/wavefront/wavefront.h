@@ -33,9 +33,10 @@ static inline int queue_count(__global const int* counters, int bounce, int q) {
 #error "COMPACT_BLOCK must be defined (-DCOMPACT_BLOCK=...)"
 #endif
 
-/* The random-number key of the path in a slot: (seed, pixel, sample). */
-static inline RngKey path_key(const PathStore* P, int slot, uint seed, uint sample) {
-    return rng_key(seed, (uint)path_get_pixel(P, slot), sample);
+/* The random-number key of the path in a slot: (seed, pixel, sample), from its film slot. */
+static inline RngKey path_key(const PathStore* P, const Scene* sc, int slot, uint seed, uint first_sample) {
+    int f = path_get_film_slot(P, slot);
+    return rng_key(seed, (uint)film_pixel(sc, f), film_sample(sc, first_sample, f));
 }
 
 /* What shading needs of a path: the incoming ray, throughput, radiance and the
