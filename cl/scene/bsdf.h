@@ -163,17 +163,18 @@ static inline float mean3(vec3 v) { return (v.x + v.y + v.z) * (1.0f / 3.0f); }
  * dispatch below compiles only those, so a stage shading one kind has no branch on the kind and can be
  * vectorized. Without it every kind is compiled. */
 #ifdef SCENE_MATERIALS
-#define HAS_MATERIAL(t) (((SCENE_MATERIALS) >> (t)) & 1)
+#define HAS_MATERIAL(t) ((bool)(((SCENE_MATERIALS) >> (t)) & 1))
 #else
-#define HAS_MATERIAL(t) 1
+#define HAS_MATERIAL(t) true
 #endif
 
 /* True when the material has only delta lobes (no light sampling there). */
 static inline bool bsdf_is_delta(const Bsdf* b) {
-    int t = b->type;
-    return (HAS_MATERIAL(MAT_CONDUCTOR) && t == MAT_CONDUCTOR) || (HAS_MATERIAL(MAT_DIELECTRIC) && t == MAT_DIELECTRIC) ||
-           (HAS_MATERIAL(MAT_THINDIELECTRIC) && t == MAT_THINDIELECTRIC) ||
-           (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC && bsdf_index_matched(b));
+    int t = b->type; /* one test per kind, each compiled only for a kind the scene has */
+    if (HAS_MATERIAL(MAT_CONDUCTOR) && t == MAT_CONDUCTOR) return true;
+    if (HAS_MATERIAL(MAT_DIELECTRIC) && t == MAT_DIELECTRIC) return true;
+    if (HAS_MATERIAL(MAT_THINDIELECTRIC) && t == MAT_THINDIELECTRIC) return true;
+    return HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC && bsdf_index_matched(b);
 }
 
 /* Flip both directions to the front side for two-sided materials. */

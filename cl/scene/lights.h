@@ -53,9 +53,9 @@
 /* -DSCENE_LIGHTS=mask (pyclpt/buffers/lights.py) lists the emitter kinds a scene has (bit LIGHT_*): only
  * those are compiled (no branch on a kind the scene lacks). Without it every kind is compiled. */
 #ifdef SCENE_LIGHTS
-#define HAS_LIGHT(t) (((SCENE_LIGHTS) >> (t)) & 1)
+#define HAS_LIGHT(t) ((bool)(((SCENE_LIGHTS) >> (t)) & 1))
 #else
-#define HAS_LIGHT(t) 1
+#define HAS_LIGHT(t) true
 #endif
 
 /* envmap block in light_data */
@@ -192,7 +192,9 @@ static inline vec3 env_sample(const Scene* sc, __global const float* e, vec2 u, 
  * *pdf is the solid-angle density with which light_sample produces dir, emitter choice included. */
 static inline vec3 env_eval(const Scene* sc, vec3 dir, bool want_pdf, float* pdf) {
     *pdf = 0.0f;
-    if (!HAS_LIGHT(LIGHT_CONSTANT) && !HAS_LIGHT(LIGHT_ENVMAP)) return v3_splat(0.0f);
+#if defined(SCENE_LIGHTS) && !((SCENE_LIGHTS) & ((1 << LIGHT_CONSTANT) | (1 << LIGHT_ENVMAP)))
+    return v3_splat(0.0f); /* no environment in the scene */
+#endif
     int env = (int)sc->consts[CONST_ENV_LIGHT];
     if (env < 0) return v3_splat(0.0f);
     /* (env > 0 ? env : 0) is env here; it keeps the record's address in the buffer even where a compiler
