@@ -179,7 +179,7 @@ MUTANTS: list[Mutant] = [
            "shadow rays long enough to hit the light they test"),
     Mutant("bsdf-pdf-not-kept", "ps->prev_pdf = bs.pdf;", "ps->prev_pdf = 1.0f;", (T_ANALYTIC_QUAD,),
            "MIS weights of emission hits computed with a wrong BSDF pdf"),
-    Mutant("wavefront-miss-not-committed", "film_commit(frame, drop_marks, path_get_pixel(&P, slot), ps.L);",
+    Mutant("wavefront-miss-not-committed", "film_commit(frame, drop_marks, path_get_film_slot(&P, slot), ps.L);",
            "(void)frame;", ("tests/test_wavefront.py::test_every_pixel_is_committed_once_per_sample",),
            "the wavefront's miss stage ends paths without writing their pixel", after="path_miss(&sc, &ps);"),
     Mutant("finish-paths-depth-off-by-one", "PathState ps = path_load_ray(&P, slot, bounce);",
@@ -188,7 +188,7 @@ MUTANTS: list[Mutant] = [
            "the wavefront's tail runs its paths on one bounce ahead (depth limit, roulette, random numbers)"),
     Mutant("wavefront-committed-twice", "if (alive) path_store_ray(&P, slot, &ps);",
            "if (alive) { path_store_ray(&P, slot, &ps); "
-           "film_commit(frame, drop_marks, path_get_pixel(&P, slot), path_get_L(&P, slot)); }",
+           "film_commit(frame, drop_marks, path_get_film_slot(&P, slot), path_get_L(&P, slot)); }",
            ("tests/test_wavefront.py::test_every_pixel_is_committed_once_per_sample",),
            "the wavefront commits surviving paths too (the final commit overwrites it: the image is unchanged)",
            after="__kernel void sample_bsdf("),
