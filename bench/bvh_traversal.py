@@ -49,7 +49,7 @@ sys.path.insert(0, str(ROOT))
 import pyopencl as cl  # noqa: E402
 
 import pyclpt  # noqa: E402
-from bench.embree_ceiling import _cosine_directions, camera_rays, scene_triangles  # noqa: E402
+from bench.embree_ceiling import bounce_and_shadow_rays, camera_rays, scene_triangles  # noqa: E402
 from bench.machine import cpu_model  # noqa: E402
 from pyclpt.accel import bvh as bvh_mod  # noqa: E402
 from pyclpt.accel.bvh import DEFAULT_SETTINGS, DEFAULT_WIDTH, build_bvh, leaf_packet_buffer  # noqa: E402
@@ -159,27 +159,8 @@ def make_rays(tracer: Tracer, scene, size: int, seed: int):
     hit = prim >= 0
     p = org[hit].astype(np.float64) + t[hit, None].astype(np.float64) * dirs[hit]
     tri = binary.tris[prim[hit]].astype(np.float64)
-    n = np.cross(tri[:, 3:6], tri[:, 6:9])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-    n *= -np.sign(np.sum(n * dirs[hit], axis=1, keepdims=True) + 1e-30)
-    extent = float(np.linalg.norm(hi - lo)) or 1.0
-    p += 1e-4 * extent * n
-    bounce = _cosine_directions(n, rng)
-    if emissive.any():
-        et = np.flatnonzero(emissive)
-        v = pos[idx[et]].astype(np.float64)
-        area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-        pick = rng.choice(len(et), size=len(p), p=area / area.sum()) if area.sum() > 0 else \
-            rng.integers(0, len(et), len(p))
-        u1, u2 = np.sqrt(rng.random(len(p))), rng.random(len(p))
-        target = ((1 - u1)[:, None] * v[pick, 0] + (u1 * (1 - u2))[:, None] * v[pick, 1]
-                  + (u1 * u2)[:, None] * v[pick, 2])
-        to = target - p
-        dist = np.linalg.norm(to, axis=1)
-        shadow = to / np.maximum(dist[:, None], 1e-30)
-        smax = 0.999 * dist
-    else:
-        shadow, smax = _cosine_directions(n, rng), np.full(len(p), extent)
+    p, bounce, shadow, smax = bounce_and_shadow_rays(p, np.cross(tri[:, 3:6], tri[:, 6:9]), dirs[hit], pos, idx,
+                                                     emissive, rng)
     f32 = np.float32
     return (pos, idx, (lo, hi), p.astype(f32), bounce.astype(f32), shadow.astype(f32), smax.astype(f32),
             float(hit.mean()))

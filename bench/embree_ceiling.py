@@ -121,6 +121,33 @@ class EmbreeTracer:
                 "mrays_per_s": len(org) / best / 1e6}
 
 
+def bounce_and_shadow_rays(p: np.ndarray, n: np.ndarray, dirs: np.ndarray, pos: np.ndarray, idx: np.ndarray,
+                           emissive: np.ndarray, rng: np.random.Generator):
+    """Rays leaving hit points ``p`` (float64) with geometric normals ``n`` of rays ``dirs``: the normals
+    turned to face the incoming rays, the points offset along them by 1e-4 of the scene's extent, a
+    cosine-distributed bounce direction each, and a shadow ray each towards a point on the emitters
+    (chosen by area; cosine-distributed directions of the scene's extent without emitters). Returns
+    (origins, bounce directions, shadow directions, shadow lengths), float64."""
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    n *= -np.sign(np.sum(n * dirs, axis=1, keepdims=True) + 1e-30)  # face the incoming ray
+    extent = float(np.linalg.norm(pos.max(0) - pos.min(0))) or 1.0
+    p = p + 1e-4 * extent * n
+    bounce = _cosine_directions(n, rng)
+    if not emissive.any():
+        return p, bounce, _cosine_directions(n, rng), np.full(len(p), extent)
+    tri = np.flatnonzero(emissive)
+    v = pos[idx[tri]].astype(np.float64)
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    pick = rng.choice(len(tri), size=len(p), p=area / area.sum()) if area.sum() > 0 else \
+        rng.integers(0, len(tri), len(p))
+    u1, u2 = np.sqrt(rng.random(len(p))), rng.random(len(p))
+    target = (1 - u1)[:, None] * v[pick, 0] + (u1 * (1 - u2))[:, None] * v[pick, 1] + \
+        (u1 * u2)[:, None] * v[pick, 2]
+    to = target - p
+    dist = np.linalg.norm(to, axis=1)
+    return p, bounce, to / np.maximum(dist[:, None], 1e-30), 0.999 * dist
+
+
 def measure(scene, width: int, height: int, *, threads: int | None = None, repeats: int = 3,
             seed: int = 0, min_rays: int = 1 << 18) -> dict:
     """Embree's primary, secondary and shadow ray throughput on ``scene`` (see the module docstring)."""
@@ -139,28 +166,9 @@ def measure(scene, width: int, height: int, *, threads: int | None = None, repea
         if not mask.any():
             return out
         p = org[mask].astype(np.float64) + hit["tfar"][mask, None].astype(np.float64) * dirs[mask]
-        n = hit["Ng"][mask].astype(np.float64)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-        n *= -np.sign(np.sum(n * dirs[mask], axis=1, keepdims=True) + 1e-30)  # face the incoming ray
-        extent = float(np.linalg.norm(pos.max(0) - pos.min(0))) or 1.0
-        p += 1e-4 * extent * n
-        sdirs = _cosine_directions(n, rng)
+        p, sdirs, to, dists = bounce_and_shadow_rays(p, hit["Ng"][mask].astype(np.float64), dirs[mask], pos, idx,
+                                                     emissive, rng)
         out["secondary"] = tracer.throughput(p.astype(np.float32), sdirs.astype(np.float32), repeats=repeats)
-        if emissive.any():
-            tri = np.flatnonzero(emissive)
-            v = pos[idx[tri]].astype(np.float64)
-            area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-            pick = rng.choice(len(tri), size=len(p), p=area / area.sum()) if area.sum() > 0 else \
-                rng.integers(0, len(tri), len(p))
-            u1, u2 = np.sqrt(rng.random(len(p))), rng.random(len(p))
-            target = (1 - u1)[:, None] * v[pick, 0] + (u1 * (1 - u2))[:, None] * v[pick, 1] + \
-                (u1 * u2)[:, None] * v[pick, 2]
-            to = target - p
-            dist = np.linalg.norm(to, axis=1)
-            to /= np.maximum(dist[:, None], 1e-30)
-            dists = 0.999 * dist
-        else:
-            to, dists = _cosine_directions(n, rng), np.full(len(p), extent)
         out["shadow"] = tracer.throughput(p.astype(np.float32), to.astype(np.float32),
                                           dists.astype(np.float32), query="OCCLUDED", repeats=repeats)
         return out

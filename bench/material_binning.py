@@ -27,7 +27,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import pyclpt  # noqa: E402
 from bench.machine import cpu_model  # noqa: E402
 from pyclpt.buffers.materials import MAT_TYPE, MAT_TYPES  # noqa: E402
-from pyclpt.integrators.path_state import FIELDS, _components  # noqa: E402
 from pyclpt.integrators.wavefront import Q_HIT, Q_LIGHT, Q_MISS, Q_RAY, Q_SHADOW  # noqa: E402
 
 TRI_MAT_MASK = 0x00FFFFFF
@@ -67,9 +66,8 @@ def main(argv: list[str] | None = None) -> int:
     queue = np.empty(w.capacity, np.int32)
     cl.enqueue_copy(q, queue, w.hit_queue)
     queue = queue[:hits]
-    names = [c for f in FIELDS for c in _components(f)]
     prims = np.empty(w.capacity, np.int32)
-    cl.enqueue_copy(q, prims, w.paths.buffers[names.index("hit_prim")])
+    cl.enqueue_copy(q, prims, w.paths.component("hit_prim"))
     arrays = r.scene_buffers.arrays
     kinds = arrays.materials[arrays.tri_info[prims[queue], 0] & TRI_MAT_MASK, MAT_TYPE].astype(np.int32)
     order = np.argsort(kinds, kind="stable")

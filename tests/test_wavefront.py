@@ -372,3 +372,16 @@ def test_batches_of_frames_change_no_pixel(cornell_box, integrator):
     b = many.render(70, seed=3, first_sample=5, progress=False)
     assert a.max() > 0 and one.film.frames == many.film.frames == 70
     np.testing.assert_array_equal(a, b)
+
+
+def test_path_state_component_buffers(cornell_box):
+    """PathStorage.component names an SoA buffer by its component, as the accessors do."""
+    r = pyclpt.Renderer(cornell_box, integrator="wavefront", width=8, height=8)
+    paths = r.integrator.paths
+    names = [c for f in FIELDS for c in ([f.name] if f.width == 1 else [f"{f.name}_{a}" for a in "xyz"])]
+    assert [paths.component(n) for n in names] == paths.buffers
+    with pytest.raises(KeyError, match="no path state component 'pixel'"):
+        paths.component("pixel")
+    aos = pyclpt.Renderer(cornell_box, integrator="wavefront", layout="aos", width=8, height=8)
+    with pytest.raises(ValueError, match="keeps records"):
+        aos.integrator.paths.component("hit_prim")

@@ -125,10 +125,8 @@ static inline vec3 v3_mul(vec3 a, vec3 b) { return v3(a.x * b.x, a.y * b.y, a.z 
 static inline vec3 v3_div(vec3 a, vec3 b) { return v3(a.x / b.x, a.y / b.y, a.z / b.z); }
 static inline vec3 v3_scale(vec3 a, float s) { return v3(a.x * s, a.y * s, a.z * s); }
 static inline vec3 v3_divs(vec3 a, float s) { return v3(a.x / s, a.y / s, a.z / s); }
-static inline vec3 v3_adds(vec3 a, float s) { return v3(a.x + s, a.y + s, a.z + s); }
 static inline vec3 v3_rsubs(float s, vec3 a) { return v3(s - a.x, s - a.y, s - a.z); } /* s - a */
 static inline vec3 v3_neg(vec3 a) { return v3(-a.x, -a.y, -a.z); }
-static inline vec3 v3_select(bool c, vec3 a, vec3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z); }
 static inline bool v3_is_zero(vec3 v) { return v.x == 0.0f && v.y == 0.0f && v.z == 0.0f; }
 static inline vec4 v4_add(vec4 a, vec4 b) { return v4(a.x + b.x, a.y + b.y, a.z + b.z, a.w + b.w); }
 static inline vec4 v4_scale(vec4 a, float s) { return v4(a.x * s, a.y * s, a.z * s, a.w * s); }
@@ -144,7 +142,6 @@ static inline vec3 m_normalize(vec3 v) {
     float inv = 1.0f / m_sqrt(l2);
     return v3_scale(v, l2 > 0.0f ? inv : 1.0f); /* one select, not one per component */
 }
-static inline vec3 m_sqrt3(vec3 v) { return v3(m_sqrt(v.x), m_sqrt(v.y), m_sqrt(v.z)); }
 static inline vec3 m_max3s(vec3 v, float s) { return v3(m_max(v.x, s), m_max(v.y, s), m_max(v.z, s)); }
 
 /* A half float's bits to float, exactly, for finite halves (vload_half is a call on PoCL): the

@@ -139,6 +139,15 @@ class PathStorage:
         else:
             self.buffers = [alloc(device, bytes_per_path() * capacity, f"path state ({capacity} paths)")]
 
+    def component(self, name: str) -> cl.Buffer:
+        """The SoA buffer of one scalar component (``"hit_prim"``, ``"L_x"``, ...)."""
+        if self.layout != "soa":
+            raise ValueError(f"path state component {name!r}: the {self.layout!r} layout keeps records, not components")
+        names = [c for f in FIELDS for c in _components(f)]
+        if name not in names:
+            raise KeyError(f"no path state component {name!r} ({', '.join(names)})")
+        return self.buffers[names.index(name)]
+
     @property
     def nbytes(self) -> int:
         return bytes_per_path() * self.capacity

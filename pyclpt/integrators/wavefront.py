@@ -110,34 +110,34 @@ class Wavefront:
                      f.drop_marks, np.uint32(seed), np.uint32(first_sample), np.int32(offset), np.int32(n),
                      np.int32(self.max_depth))
 
-    def intersect(self, n: int, bounce: int, seed: int, sample: int) -> None:
+    def intersect(self, n: int, bounce: int, seed: int, first_sample: int) -> None:
         self._launch("intersect", n, *self._scene_args, *self._common(bounce), self.ray_queues[bounce % 2],
-                     self.flags, np.uint32(seed), np.uint32(sample))
+                     self.flags, np.uint32(seed), np.uint32(first_sample))
 
     def miss(self, n: int, bounce: int) -> None:
         self._launch("miss", n, *self._scene_args, *self._common(bounce), self.miss_queue, self.film.frame,
                      self.film.drop_marks)
 
-    def process_hit(self, n: int, bounce: int, seed: int, sample: int) -> None:
+    def process_hit(self, n: int, bounce: int, seed: int, first_sample: int) -> None:
         self._launch("process_hit", n, *self._scene_args, *self._common(bounce), self.hit_queue,
-                     self.flags, np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
+                     self.flags, np.uint32(seed), np.uint32(first_sample), np.int32(self.max_depth))
 
-    def shadow_test(self, n: int, bounce: int, seed: int, sample: int) -> None:
+    def shadow_test(self, n: int, bounce: int, seed: int, first_sample: int) -> None:
         self._launch("shadow_test", n, *self._scene_args, *self._common(bounce), self.shadow_queue,
-                     self.flags, np.uint32(seed), np.uint32(sample))
+                     self.flags, np.uint32(seed), np.uint32(first_sample))
 
     def light_contribution(self, n: int, bounce: int) -> None:
         self._launch("light_contribution", n, *self._common(bounce), self.light_queue)
 
-    def sample_bsdf(self, n: int, bounce: int, seed: int, sample: int) -> None:
+    def sample_bsdf(self, n: int, bounce: int, seed: int, first_sample: int) -> None:
         self._launch("sample_bsdf", n, *self._scene_args, *self._common(bounce), self.hit_queue,
                      self.flags, self.film.frame, self.film.drop_marks,
-                     np.uint32(seed), np.uint32(sample), np.int32(self.max_depth))
+                     np.uint32(seed), np.uint32(first_sample), np.int32(self.max_depth))
 
-    def finish_paths(self, n: int, bounce: int, seed: int, sample: int) -> None:
+    def finish_paths(self, n: int, bounce: int, seed: int, first_sample: int) -> None:
         """Run the ``n`` paths of the ray queue of ``bounce`` to their ends, one per work-item."""
         self._launch("finish_paths", n, *self._scene_args, *self._common(bounce), self.ray_queues[bounce % 2],
-                     self.film.frame, self.film.drop_marks, np.uint32(seed), np.uint32(sample),
+                     self.film.frame, self.film.drop_marks, np.uint32(seed), np.uint32(first_sample),
                      np.int32(self.max_depth))
 
     def compact_count(self, n: int, bounce: int, src_q: int) -> None:
@@ -159,18 +159,18 @@ class Wavefront:
         self.compact_scatter(n, bounce, src_q, src, out, out_q, bounce if out_bounce is None else out_bounce,
                              rest, rest_q)
 
-    def bounce(self, rays: int, bounce: int, seed: int, sample: int) -> None:
+    def bounce(self, rays: int, bounce: int, seed: int, first_sample: int) -> None:
         """The launches of one bounce; ``rays`` bounds every queue of the bounce."""
-        self.intersect(rays, bounce, seed, sample)
+        self.intersect(rays, bounce, seed, first_sample)
         self.compact(rays, bounce, Q_RAY, self.ray_queues[bounce % 2], self.hit_queue, Q_HIT,
                      rest=self.miss_queue, rest_q=Q_MISS)
         self.miss(rays, bounce)
-        self.process_hit(rays, bounce, seed, sample)
+        self.process_hit(rays, bounce, seed, first_sample)
         self.compact(rays, bounce, Q_HIT, self.hit_queue, self.shadow_queue, Q_SHADOW)
-        self.shadow_test(rays, bounce, seed, sample)
+        self.shadow_test(rays, bounce, seed, first_sample)
         self.compact(rays, bounce, Q_SHADOW, self.shadow_queue, self.light_queue, Q_LIGHT)
         self.light_contribution(rays, bounce)
-        self.sample_bsdf(rays, bounce, seed, sample)
+        self.sample_bsdf(rays, bounce, seed, first_sample)
         self.compact(rays, bounce, Q_HIT, self.hit_queue, self.ray_queues[(bounce + 1) % 2], Q_RAY,
                      out_bounce=bounce + 1)
 
@@ -196,16 +196,17 @@ class Wavefront:
 
     def render_frames(self, seed: int, first_sample: int, frames: int) -> None:
         """Render samples ``first_sample .. first_sample + frames - 1`` of every pixel into the film's
-        frames 0 .. frames - 1, wave by wave over the film slots (``sample`` below is the first)."""
+        frames 0 .. frames - 1, wave by wave over the film slots. The stages get the batch's first sample
+        and derive each path's own from its film slot."""
         if not 1 <= frames <= self.film.batch:
             raise ValueError(f"frames must be 1..{self.film.batch} (the film's batch), got {frames}")
         self._scene_args = self.scene.args(self.film.width, self.film.height)
         q = self.device.queue
-        sample, total = first_sample, self.film.pixels * frames
+        total = self.film.pixels * frames
         for offset in range(0, total, self.capacity):
             n = min(self.capacity, total - offset)
             cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
-            self.path_init(n, seed, sample, offset)
+            self.path_init(n, seed, first_sample, offset)
             rays = n if self.max_depth != 0 else 0
             for bounce in range(self.max_depth):
                 if self.schedule == "readback":
@@ -213,7 +214,7 @@ class Wavefront:
                     if rays == 0:
                         break
                     if bounce > 0 and rays <= self.tail_paths:
-                        self.finish_paths(rays, bounce, seed, sample)
+                        self.finish_paths(rays, bounce, seed, first_sample)
                         self._tail_totals[bounce] += rays
                         break
                 else:
@@ -222,7 +223,7 @@ class Wavefront:
                     rays = n
                     if bounce and bounce % CAPACITY_CHECK == 0 and self._read_count(bounce, 0) == 0:
                         break
-                self.bounce(rays, bounce, seed, sample)
+                self.bounce(rays, bounce, seed, first_sample)
             cl.enqueue_copy(q, self._counts, self.counters)
             self._bounce_totals += self._counts
         self.film.count_dropped(frames)

@@ -14,11 +14,6 @@ __kernel SCALAR_KERNEL void intersect(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __g
     Hit hit;
     bool found = scene_closest(&sc, path_key(&P, &sc, slot, seed, first_sample), bounce, path_get_org(&P, slot),
                                path_get_dir(&P, slot), &hit);
-    if (found) {
-        path_set_hit_t(&P, slot, hit.t);
-        path_set_hit_u(&P, slot, hit.u);
-        path_set_hit_v(&P, slot, hit.v);
-        path_set_hit_prim(&P, slot, hit.prim);
-    }
+    if (found) path_store_hit(&P, slot, &hit);
     flags[i] = found ? 1 : 0;
 }

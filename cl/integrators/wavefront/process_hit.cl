@@ -23,12 +23,7 @@ __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
         ShadowRay sr;
         Bsdf b = bsdf_at(&sc, &s);
         shadow = path_sample_light(&sc, path_key(&P, &sc, slot, seed, first_sample), &s, &b, &ps, &sr);
-        if (shadow) {
-            path_set_shadow_org(&P, slot, sr.org);
-            path_set_shadow_dir(&P, slot, sr.dir);
-            path_set_shadow_tmax(&P, slot, sr.tmax);
-            path_set_shadow_contrib(&P, slot, sr.contrib);
-        }
+        if (shadow) path_store_shadow(&P, slot, &sr);
     }
     flags[i] = shadow ? 1 : 0;
 }

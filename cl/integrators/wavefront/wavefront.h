@@ -60,6 +60,22 @@ static inline PathState path_load_ray(const PathStore* P, int slot, int bounce) 
     return ps;
 }
 
+/* The closest hit of a path's ray (intersect), for process_hit and sample_bsdf. */
+static inline void path_store_hit(const PathStore* P, int slot, const Hit* hit) {
+    path_set_hit_t(P, slot, hit->t);
+    path_set_hit_u(P, slot, hit->u);
+    path_set_hit_v(P, slot, hit->v);
+    path_set_hit_prim(P, slot, hit->prim);
+}
+
+/* A path's shadow ray (process_hit), for shadow_test and light_contribution. */
+static inline void path_store_shadow(const PathStore* P, int slot, const ShadowRay* sr) {
+    path_set_shadow_org(P, slot, sr->org);
+    path_set_shadow_dir(P, slot, sr->dir);
+    path_set_shadow_tmax(P, slot, sr->tmax);
+    path_set_shadow_contrib(P, slot, sr->contrib);
+}
+
 /* Store the next ray of a path and what the next bounce needs to weight it
  * (path_init and sample_bsdf). */
 static inline void path_store_ray(const PathStore* P, int slot, const PathState* ps) {
