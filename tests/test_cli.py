@@ -273,7 +273,7 @@ def test_version(capsys):
 def test_interrupted_render_writes_nothing_and_exits_130(tmp_path, capsys, monkeypatch):
     import pyclpt.rendering.progressive
 
-    def interrupted(self, frames, progress=None):
+    def interrupted(self, frames, progress=None, on_frame=None):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(pyclpt.rendering.progressive.ProgressiveRenderer, "run", interrupted)

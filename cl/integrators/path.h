@@ -17,6 +17,7 @@
 #include "scene/scene.h"
 #include "scene/lights.h"
 #include "scene/bvh.h"
+#include "integrators/gbuffer.h"
 
 /* Russian roulette starts on rays of this bounce index. */
 #ifndef RR_DEPTH
@@ -24,6 +25,12 @@
 #endif
 
 #define PATH_PREV_DELTA 1
+/* The flags a BSDF sample keeps: the G-buffer's (gbuffer.h), and only when it is recorded. */
+#ifdef AOVS
+#define PATH_KEPT_FLAGS(flags) ((flags) & PATH_ALBEDO_DONE)
+#else
+#define PATH_KEPT_FLAGS(flags) 0
+#endif
 
 typedef struct {
     vec3 org, dir;    /* current ray; dir is unit length */
@@ -135,7 +142,7 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     ps->beta = v3_mul(ps->beta, bs.weight);
     ps->eta_scale *= bs.eta;
     ps->prev_pdf = bs.pdf;
-    ps->flags = bs.delta ? PATH_PREV_DELTA : 0;
+    ps->flags = PATH_KEPT_FLAGS(ps->flags) | (bs.delta ? PATH_PREV_DELTA : 0);
     ps->org = spawn_origin(s, dir);
     ps->dir = dir;
     ps->depth += 1;
@@ -151,15 +158,21 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
 
 /* The rest of a path from its current ray, bounce after bounce, until it leaves the scene, reaches the
  * depth limit or ends by roulette: the megakernel's loop, which the wavefront's finish_paths stage also
- * runs for the last paths of a wave. */
-static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int max_depth) {
+ * runs for the last paths of a wave. With -DAOVS it records the G-buffer in aov (gbuffer.h). */
+static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int max_depth, AovOut aov) {
     for (;;) {
         Hit hit;
         if (!scene_closest(sc, key, ps->depth, ps->org, ps->dir, &hit)) {
+#ifdef AOVS
+            gbuffer_miss(sc, aov, ps->depth, ps->dir);
+#endif
             path_miss(sc, ps);
             return;
         }
         Surface s = surface_at(sc, hit.prim, hit.u, hit.v);
+#ifdef AOVS
+        gbuffer_hit(sc, aov, hit.prim, &s, hit.t, ps->depth, ps->beta, &ps->flags);
+#endif
         path_hit_emission(sc, &s, hit.t, ps);
         if (!depth_allows(ps->depth + 1, max_depth)) return;
         Bsdf b = bsdf_at(sc, &s); /* the material at the hit, textures looked up once */

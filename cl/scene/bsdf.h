@@ -177,6 +177,32 @@ static inline bool bsdf_is_delta(const Bsdf* b) {
     return HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC && bsdf_index_matched(b);
 }
 
+/* The G-buffer's albedo (film/aovs.h), what a denoiser demodulates by: the diffuse reflectance of
+ * diffuse and plastic materials, a rough conductor's specular reflectance times its Fresnel
+ * reflectance at normal incidence, a rough dielectric's specular transmittance. Delta materials
+ * have none: the G-buffer takes the next non-delta vertex's. */
+static inline vec3 bsdf_albedo(const Bsdf* b) {
+    int t = b->type;
+    if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && t == MAT_ROUGHCONDUCTOR) {
+        vec3 e = b->eta, k = b->k;
+        vec3 k2 = v3_mul(k, k);
+        vec3 em = v3_sub(e, v3_splat(1.0f)), ep = v3_add(e, v3_splat(1.0f));
+        vec3 f0 = v3_div(v3_add(v3_mul(em, em), k2), v3_add(v3_mul(ep, ep), k2));
+        return v3_mul(b->spec, f0);
+    }
+    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC) return b->trans;
+    return b->color;
+}
+
+/* The G-buffer's linear roughness: the microfacet alpha of rough conductors and dielectrics, 1 for
+ * diffuse and plastic materials (their diffuse base), 0 for smooth conductors and dielectrics. */
+static inline float bsdf_roughness(const Bsdf* b) {
+    int t = b->type;
+    if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && t == MAT_ROUGHCONDUCTOR) return b->alpha;
+    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC) return b->alpha;
+    return bsdf_is_delta(b) ? 0.0f : 1.0f;
+}
+
 /* Flip both directions to the front side for two-sided materials. */
 static inline void bsdf_orient(const Bsdf* b, vec3* wi, vec3* wo) {
     if (bsdf_twosided(b) && wi->z < 0.0f) {

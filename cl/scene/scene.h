@@ -33,7 +33,12 @@
 #define CONST_ENV_LIGHT 17 /* index of the environment in `lights`, or -1 */
 #define CONST_NUM_LIGHTS 18
 #define CONST_UNIT 19 /* 1.0: the stride of record reads, opaque to the compiler (rgb_at, core/common.h) */
-#define CONST_COUNT 20
+/* the previous frame's camera, as CONST_CAM_*: motion vectors (film/aovs.h); the current one when none moved */
+#define CONST_PREV_CAM_ORIGIN 20
+#define CONST_PREV_CAM_FORWARD 23
+#define CONST_PREV_CAM_RIGHT 26
+#define CONST_PREV_CAM_UP 29
+#define CONST_COUNT 32
 
 typedef struct {
     __global const float* nodes;

@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.buffers.materials import TextureTable
-from pyclpt.scene.model import Bitmap, Envmap, Scene
+from pyclpt.scene.model import Bitmap, Camera, Envmap, Scene
 
 LIGHT_STRIDE = 8
-CONST_COUNT = 20
+CONST_COUNT = 32
 # record offsets and types (cl/scene/lights.h)
 LIGHT_PRIM, LIGHT_PMF, LIGHT_AREA, LIGHT_RADIANCE, LIGHT_CDF, LIGHT_TYPE = 0, 1, 2, 3, 6, 7
 LIGHT_TRIANGLE, LIGHT_POINT, LIGHT_CONSTANT, LIGHT_ENVMAP = 0, 1, 2, 3
@@ -217,11 +217,14 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
     return LightArrays(lights, light_data, env_light, tri_light)
 
 
-def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int) -> np.ndarray:
-    """The CONST_* block of cl/scene/scene.h for one film resolution."""
+def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int,
+                  previous: Camera | None = None) -> np.ndarray:
+    """The CONST_* block of cl/scene/scene.h for one film resolution; ``previous``: the previous frame's
+    camera, for motion vectors (None: the scene's camera, no motion)."""
     c = np.zeros(CONST_COUNT, np.float32)
     origin, forward, right, up = scene.camera.basis(width, height)
     c[0:3], c[3:6], c[6:9], c[9:12] = origin, forward, right, up
+    c[20:23], c[23:26], c[26:29], c[29:32] = (previous or scene.camera).basis(width, height)
     c[12], c[13] = width, height
     if scene.environment is not None and not isinstance(scene.environment, Envmap):
         c[14:17] = scene.environment

@@ -18,7 +18,7 @@ from pyclpt.accel.bvh import FlatBVH, build_bvh, leaf_packet_buffer
 from pyclpt.buffers.lights import LightArrays, camera_consts, pack_lights
 from pyclpt.buffers.materials import MAT_STRIDE, TextureTable, pack_material, pack_materials  # noqa: F401
 from pyclpt.device.context import Device, upload
-from pyclpt.scene.model import Scene
+from pyclpt.scene.model import Camera, Scene
 
 #: Test an 8-wide BVH's leaf triangles 8 at a time (cl/scene/bvh.h BVH_LEAF_PACKETS, docs/bvh.md);
 #: the same hits as the scalar loop, faster on PoCL and Intel's runtime (measured for width 8 only).
@@ -122,21 +122,24 @@ class SceneBuffers:
         self.pack_seconds = time.perf_counter() - start
         self._buffers = [upload(device, a, f"scene {scene.name!r} {n}") for n, a in arrays.device_arrays()]
         self._consts: dict[tuple[int, int], cl.Buffer] = {}
+        self.previous_camera: Camera | None = None  # the previous frame's, for motion vectors (None: no motion)
 
     @property
     def defines(self) -> dict:
         """-D specialisations the kernels need for this scene."""
         return self.arrays.defines
 
-    def refresh_camera(self) -> None:
-        """Re-read the scene's camera: the constants are rebuilt on the next args() call."""
+    def refresh_camera(self, previous: Camera | None = None) -> None:
+        """Re-read the scene's camera: the constants are rebuilt on the next args() call. ``previous``:
+        the camera of the frame before, whose view the motion vectors point back to (None: none moved)."""
+        self.previous_camera = previous
         self._consts.clear()
 
     def args(self, width: int, height: int) -> tuple[cl.Buffer, ...]:
         """The SCENE_PARAMS kernel arguments for a film of width x height."""
         key = (width, height)
         if key not in self._consts:
-            self._consts[key] = upload(self.device, camera_consts(self.scene, self.arrays.lights, width, height),
-                                       "camera constants")
+            consts = camera_consts(self.scene, self.arrays.lights, width, height, self.previous_camera)
+            self._consts[key] = upload(self.device, consts, "camera constants")
         b = self._buffers
         return (*b[:9], self._consts[key], *b[9:])

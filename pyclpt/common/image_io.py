@@ -16,6 +16,7 @@ import os
 import secrets
 import stat
 import tempfile
+from collections.abc import Sequence
 from numbers import Real
 from pathlib import Path
 
@@ -152,6 +153,64 @@ def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def write_layers(path: str | os.PathLike, image: np.ndarray,
+                 layers: dict[str, tuple[np.ndarray, Sequence[str]]]) -> Path:
+    """Write an (H, W, 3) linear image and named layers into one multi-layer OpenEXR file: channels
+    ``R, G, B`` and, per layer ``name -> (array, channel names)``, ``name.X``, ``name.Y`` ... (an (H, W)
+    array is one channel; integer arrays are stored as float, exact below 2^24). Atomic, as
+    :func:`write_image`; ValueError for a path that is not .exr, mismatched shapes or NaN values."""
+    path = Path(path)
+    if path.suffix.lower() != ".exr":
+        raise ValueError(f"{path}: AOV layers need an OpenEXR file (.exr), not {path.suffix or 'no extension'!r}")
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
+    check_output_path(path)
+    _check_pixels(path, img)
+    planes, names = [img], ["R", "G", "B"]
+    for layer, (array, channels) in layers.items():
+        a = np.asarray(array)
+        a = a[..., None] if a.ndim == 2 else a
+        if a.shape[:2] != img.shape[:2] or a.shape[2] != len(channels):
+            raise ValueError(f"{path}: layer {layer!r} has shape {a.shape}, expected {img.shape[:2]} and "
+                             f"{len(channels)} channel(s) {', '.join(channels)}")
+        a = a.astype(np.float32)
+        if np.isnan(a).any():
+            raise ValueError(f"{path}: layer {layer!r} holds NaN values; nothing written")
+        planes.append(a)
+        names += [f"{layer}.{c}" for c in channels]
+    pixels = np.ascontiguousarray(np.concatenate(planes, axis=2))
+    out = oiio.ImageOutput.create(str(path))
+    if out is None:
+        raise OSError(f"{path}: no image writer for .exr: {oiio.geterror()}")
+    spec = oiio.ImageSpec(img.shape[1], img.shape[0], len(names), "float")
+    spec.channelnames = tuple(names)
+    tmp = _temporary_path(path)
+    try:
+        _write(out, tmp, path, spec, pixels)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_layers(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Every channel of an image by its name (``R``, ``albedo.R`` ...), each (H, W) float32."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(f"{path}: cannot read image: {oiio.geterror()}")
+    try:
+        names = list(inp.spec().channelnames)
+        pixels = inp.read_image("float")
+        if pixels is None:
+            raise OSError(f"{path}: cannot read image: {inp.geterror()}")
+    finally:
+        inp.close()
+    pixels = np.asarray(pixels, np.float32)
+    return {name: pixels[..., i] for i, name in enumerate(names)}
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:

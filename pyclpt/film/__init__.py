@@ -1,5 +1,6 @@
 """The film: the frame buffer integrators write one sample per pixel into (``film``) and the
 accumulator that averages frames on the device in single, Kahan-compensated or double precision
-(``accumulator``, ``cl/film/``).
+(``accumulator``, ``cl/film/``), and the G-buffer (AOVs) the integrators record beside the
+radiance, averaged per pixel (``aovs``).
 
 May import: :mod:`pyclpt.common`, :mod:`pyclpt.device`."""

@@ -17,6 +17,7 @@ import pyopencl as cl
 from pyclpt.device.context import Device, alloc
 from pyclpt.device.program import build_program
 from pyclpt.film.accumulator import Accumulator
+from pyclpt.film.aovs import AovFilm
 
 # Renderer.render's precision: the sum of the samples in double (emulated double-float on a device
 # without cl_khr_fp64), so a long render's mean is as exact as its float samples allow; the
@@ -36,7 +37,7 @@ def frames_per_batch(pixels: int, paths: int) -> int:
 
 class Film:
     def __init__(self, device: Device, width: int, height: int, precision: str = DEFAULT_PRECISION,
-                 batch: int = 1, **accumulator_options) -> None:
+                 batch: int = 1, aovs: bool = False, **accumulator_options) -> None:
         if not 1 <= batch <= MAX_BATCH:
             raise ValueError(f"a film batch holds 1 to {MAX_BATCH} frames, got {batch}")
         self.device = device
@@ -50,7 +51,20 @@ class Film:
         self._count_kernel = cl.Kernel(program, "count_dropped")
         self.accumulator = Accumulator(device, width, height, channels=3, precision=precision,
                                        input_type="float", **accumulator_options)
+        # the G-buffer, when the integrators record one (-DAOVS: pyclpt/film/aovs.py)
+        self.aov = AovFilm(device, width, height, batch) if aovs else None
+        self._no_aovs = None if aovs else alloc(device, 4, "no G-buffer")
         self.clear()
+
+    @property
+    def defines(self) -> dict:
+        """-D options of the integrators' programs for this film: AOVS when it has a G-buffer."""
+        return {"AOVS": 1} if self.aov is not None else {}
+
+    def aov_args(self) -> tuple:
+        """The integrators' last two kernel arguments (aovs, aov_n): the G-buffer records, or an unused
+        placeholder."""
+        return self.aov.args() if self.aov is not None else (self._no_aovs, np.int32(0))
 
     @property
     def frames(self) -> int:
@@ -63,6 +77,8 @@ class Film:
         cl.enqueue_fill_buffer(q, self.frame, np.float32(0), 0, 4 * self.pixels * 3 * self.batch)
         cl.enqueue_fill_buffer(q, self.dropped, np.int32(0), 0, 4)
         cl.enqueue_fill_buffer(q, self.drop_marks, np.uint8(0), 0, self.pixels * self.batch)
+        if self.aov is not None:
+            self.aov.clear()
 
     def count_dropped(self, frames: int = 1) -> cl.Event:
         """Add the dropped-sample marks of the first ``frames`` frames to the counter and clear them
@@ -73,7 +89,9 @@ class Film:
 
     def add_frames(self, count: int) -> cl.Event | None:
         """Add the first ``count`` frames of the buffer to the accumulation, in order (None when the
-        accumulator has stopped)."""
+        accumulator has stopped), and their G-buffer records to the G-buffer."""
+        if self.aov is not None:
+            self.aov.add_frames(count)
         return self.accumulator.add_batch(self.frame, count)
 
     def add_frame(self) -> cl.Event | None:

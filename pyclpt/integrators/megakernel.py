@@ -26,7 +26,7 @@ class Megakernel:
         self.max_depth = max_depth
         self.wave_size = wave_size
         self.local_size = local_size
-        program = build_program(device, ["integrators/megakernel.cl"], defines=scene.defines)
+        program = build_program(device, ["integrators/megakernel.cl"], defines={**scene.defines, **film.defines})
         self.kernel = cl.Kernel(program, "megakernel")
         self.profile = KernelProfile()
 
@@ -35,7 +35,7 @@ class Megakernel:
         args = self.scene.args(self.film.width, self.film.height)
         self.kernel(self.device.queue, (self.local_size,), (self.local_size,), *args, self.film.frame,
                     self.film.drop_marks, np.uint32(0), np.uint32(0), np.int32(0), np.int32(0),
-                    np.int32(self.max_depth))
+                    np.int32(self.max_depth), *self.film.aov_args())
         self.device.queue.finish()
 
     def render_frame(self, seed: int, sample: int) -> None:
@@ -56,6 +56,6 @@ class Megakernel:
             g = -(-count // self.local_size) * self.local_size
             ev = self.kernel(self.device.queue, (g,), (self.local_size,), *args, self.film.frame, self.film.drop_marks,
                              np.uint32(seed), np.uint32(first_sample), np.int32(offset), np.int32(count),
-                             np.int32(self.max_depth))
+                             np.int32(self.max_depth), *self.film.aov_args())
             self.profile.record("megakernel", ev)
         self.film.count_dropped(frames)

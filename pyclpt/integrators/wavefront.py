@@ -78,7 +78,7 @@ class Wavefront:
         self.block_counts = alloc(device, 4 * -(-self.capacity // COMPACT_BLOCK), "compaction block counts")
         self.counters = alloc(device, 4 * Q_COUNT * (max_depth + 2), "queue counters")
         generated = {"path_state.h": opencl_header(layout)}
-        defines = {**scene.defines, "COMPACT_BLOCK": COMPACT_BLOCK}
+        defines = {**scene.defines, **film.defines, "COMPACT_BLOCK": COMPACT_BLOCK}
         self.kernels = {s: cl.Kernel(build_program(device, [f"integrators/wavefront/{s}.cl"], generated=generated,
                                                    defines=defines), s) for s in STAGES}
         self.profile = KernelProfile()
@@ -116,11 +116,12 @@ class Wavefront:
 
     def miss(self, n: int, bounce: int) -> None:
         self._launch("miss", n, *self._scene_args, *self._common(bounce), self.miss_queue, self.film.frame,
-                     self.film.drop_marks)
+                     self.film.drop_marks, *self.film.aov_args())
 
     def process_hit(self, n: int, bounce: int, seed: int, first_sample: int) -> None:
         self._launch("process_hit", n, *self._scene_args, *self._common(bounce), self.hit_queue,
-                     self.flags, np.uint32(seed), np.uint32(first_sample), np.int32(self.max_depth))
+                     self.flags, np.uint32(seed), np.uint32(first_sample), np.int32(self.max_depth),
+                     *self.film.aov_args())
 
     def shadow_test(self, n: int, bounce: int, seed: int, first_sample: int) -> None:
         self._launch("shadow_test", n, *self._scene_args, *self._common(bounce), self.shadow_queue,
@@ -138,7 +139,7 @@ class Wavefront:
         """Run the ``n`` paths of the ray queue of ``bounce`` to their ends, one per work-item."""
         self._launch("finish_paths", n, *self._scene_args, *self._common(bounce), self.ray_queues[bounce % 2],
                      self.film.frame, self.film.drop_marks, np.uint32(seed), np.uint32(first_sample),
-                     np.int32(self.max_depth))
+                     np.int32(self.max_depth), *self.film.aov_args())
 
     def compact_count(self, n: int, bounce: int, src_q: int) -> None:
         """Count the flagged entries per block of the queue ``src_q`` (at most ``n`` entries)."""

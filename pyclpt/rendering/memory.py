@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import fields, is_dataclass
 
 from pyclpt.device.context import Device, check_alloc, check_memory
+from pyclpt.film.aovs import AOV_COUNT
 from pyclpt.film.film import frames_per_batch
 from pyclpt.scene.model import Bitmap, Checkerboard, Envmap, Scene
 
@@ -71,7 +72,7 @@ def batch_frames(pixels: int, wave_size: int | None) -> int:
 
 
 def render_memory(scene: Scene, width: int, height: int, *, precision: str, integrator: str,
-                  wave_size: int | None = None, max_depth: int = 0) -> dict[str, int]:
+                  wave_size: int | None = None, max_depth: int = 0, aovs: bool = False) -> dict[str, int]:
     """{what: bytes} of the device buffers of a render (see the module docstring)."""
     pixels = width * height
     batch = batch_frames(pixels, wave_size)
@@ -82,6 +83,8 @@ def render_memory(scene: Scene, width: int, height: int, *, precision: str, inte
         "accumulated image": 12 * pixels,
         "scene buffers (estimate)": scene_bytes(scene),
     }
+    if aovs:  # pyclpt/film/aovs.py: a record per film slot, the per-pixel sums and means
+        parts["G-buffer"] = 4 * AOV_COUNT * pixels * (batch + 2)
     if integrator == "wavefront":
         from pyclpt.integrators.path_state import bytes_per_path
         from pyclpt.integrators.wavefront import DEFAULT_WAVE_SIZE, Q_COUNT, QUEUE_BYTES_PER_PATH
@@ -93,11 +96,12 @@ def render_memory(scene: Scene, width: int, height: int, *, precision: str, inte
 
 
 def check_render_memory(device: Device, scene: Scene, width: int, height: int, *, precision: str,
-                        integrator: str, wave_size: int | None = None, max_depth: int = 0) -> dict[str, int]:
+                        integrator: str, wave_size: int | None = None, max_depth: int = 0,
+                        aovs: bool = False) -> dict[str, int]:
     """Raise :class:`~pyclpt.device.context.DeviceMemoryError` (a MemoryError) naming what is needed,
     what is available and what to lower, unless the render fits; returns the parts counted."""
     parts = render_memory(scene, width, height, precision=precision, integrator=integrator,
-                          wave_size=wave_size, max_depth=max_depth)
+                          wave_size=wave_size, max_depth=max_depth, aovs=aovs)
     host = {f"image read back {width}x{height}": 12 * width * height,
             "scene arrays on the host (estimate)": parts["scene buffers (estimate)"]}
     lower = ["lower the resolution (width, height)"]

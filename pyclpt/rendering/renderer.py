@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +25,7 @@ from pyclpt.buffers.scene import SceneBuffers
 from pyclpt.common.checks import check_choice, check_int, check_optional_bool, check_optional_int
 from pyclpt.device.context import Device, get_device
 from pyclpt.film.accumulator import check_options
+from pyclpt.film.aovs import check_aovs, unpack
 from pyclpt.film.film import DEFAULT_PRECISION, Film
 from pyclpt.integrators.megakernel import Megakernel
 from pyclpt.rendering.frame_loop import FramePacer, progress_bar
@@ -50,6 +52,7 @@ class RenderStats:
     bounces: list[dict] = field(default_factory=list)
     memory: dict = field(default_factory=dict)  # wavefront: wave size, bytes per path, path-state bytes
     accumulation: dict = field(default_factory=dict)  # Accumulator.stats(): precision, frames, counters
+    denoise: list[dict] = field(default_factory=list)  # the denoiser's passes (ProgressiveRenderer with one)
 
 
 def check_scene(scene: object) -> Scene:
@@ -69,8 +72,9 @@ class Renderer:
                  max_depth: int | None = None, width: int | None = None, height: int | None = None,
                  device: Device | str | None = None, wave_size: int | None = None,
                  local_size: int | None = None, schedule: str | None = None, tail_paths: int | None = None,
-                 precision: str = DEFAULT_PRECISION) -> None:
+                 precision: str = DEFAULT_PRECISION, aovs: Sequence[str] | str | bool | None = None) -> None:
         check_scene(scene)
+        self.aov_names = check_aovs(aovs)
         check_choice(integrator, "integrator", INTEGRATORS)
         check_choice(layout, "layout", LAYOUTS)
         max_depth = check_optional_int(max_depth, "max_depth", lo=-1, note=" (-1 = unlimited)")
@@ -92,7 +96,8 @@ class Renderer:
         self.depth_limit = UNLIMITED_DEPTH if self.max_depth == -1 else self.max_depth
         # all the buffers below together, before any is made (alloc() checks each on its own)
         check_render_memory(self.device, scene, self.width, self.height, precision=precision,
-                            integrator=integrator, wave_size=wave_size, max_depth=self.depth_limit)
+                            integrator=integrator, wave_size=wave_size, max_depth=self.depth_limit,
+                            aovs=bool(self.aov_names))
         self.stats = RenderStats()
         t0 = time.perf_counter()
         self.scene_buffers = SceneBuffers(scene, self.device)
@@ -100,7 +105,7 @@ class Renderer:
         t1 = time.perf_counter()
         # small images: a batch of frames (samples) per wave or launch (rendering/memory.py: batch_frames)
         self.film = Film(self.device, self.width, self.height, precision=precision,
-                         batch=batch_frames(self.width * self.height, wave_size))
+                         batch=batch_frames(self.width * self.height, wave_size), aovs=bool(self.aov_names))
         options: dict = {"wave_size": wave_size} if wave_size else {}
         if local_size:
             options["local_size"] = int(local_size)
@@ -149,6 +154,18 @@ class Renderer:
         self.collect_stats(spp, time.perf_counter() - start)
         return image
 
+    def aovs(self, names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+        """The G-buffer of the samples rendered since the film was last cleared (:meth:`render`: all its
+        samples; a progressive frame: that frame's), by name (``names``: those asked for when made, by
+        default): (H, W, 3) albedo and normal, (H, W, 2) motion, (H, W) roughness, depth and hitdist,
+        (H, W) int32 ids (-1 where the camera ray left the scene); see :mod:`pyclpt.film.aovs`."""
+        if self.film.aov is None:
+            raise ValueError("this renderer records no AOVs: make it with aovs=[...] (or aovs=True)")
+        wanted = self.aov_names if names is None else check_aovs(names)
+        arrays = self.scene_buffers.arrays
+        starts = np.cumsum([0] + [m.triangle_count for m in self.scene.meshes[:-1]])
+        return unpack(self.film.aov.read(), wanted, arrays.bvh.tri_order, starts)
+
     def collect_stats(self, spp: int, seconds: float) -> RenderStats:
         """Fill ``stats`` after frames were rendered (profile, bounces, memory, counters); returns it."""
         self.stats.spp = spp
@@ -169,7 +186,8 @@ class Renderer:
 def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = None, seed: int = 0,
            integrator: str = "megakernel", width: int | None = None, height: int | None = None,
            device: Device | str | None = None, layout: str = "soa", progress: bool | None = None,
-           wave_size: int | None = None, precision: str = DEFAULT_PRECISION) -> np.ndarray:
+           wave_size: int | None = None, precision: str = DEFAULT_PRECISION,
+           aovs: Sequence[str] | str | bool | None = None) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
     """Render ``scene`` (a Scene or a built-in scene name / file) to a (H, W, 3) float32 linear image.
 
     ``spp`` and ``max_depth`` default to the scene's; ``width``/``height`` override its film.
@@ -177,6 +195,8 @@ def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = N
     False show none. Ctrl-C stops the render within about a second (KeyboardInterrupt; no image).
     ``precision``: how the frames are summed (``single``, ``compensated``, ``double``; see
     :mod:`pyclpt.film.accumulator`).
+    ``aovs``: AOV names (or True: all; :data:`pyclpt.film.aovs.AOV_NAMES`); then the result is
+    ``(image, {name: array})``, the G-buffer averaged over the same samples (:meth:`Renderer.aovs`).
     """
     spp = check_optional_int(spp, "spp", lo=1, hi=2**32, note=" (None: the scene's)")
     check_int(seed, "seed", lo=0, hi=2**32 - 1)
@@ -187,5 +207,6 @@ def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = N
         scene = load(scene)
     check_scene(scene)
     r = Renderer(scene, integrator=integrator, layout=layout, max_depth=max_depth, width=width,
-                 height=height, device=device, wave_size=wave_size, precision=precision)
-    return r.render(scene.spp if spp is None else spp, seed=seed, progress=progress)
+                 height=height, device=device, wave_size=wave_size, precision=precision, aovs=aovs)
+    image = r.render(scene.spp if spp is None else spp, seed=seed, progress=progress)
+    return (image, r.aovs()) if r.aov_names else image

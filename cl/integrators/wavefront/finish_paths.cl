@@ -3,18 +3,20 @@
  * stages cost more than they save (pyclpt/integrators/wavefront.py: tail_paths).
  * Consumes: the ray queue of this bounce (the paths' state as sample_bsdf stored it).
  * Produces: each path's radiance in frame[film slot] (0 and a mark in drop_marks for NaN/inf); the
- *           queues of later bounces stay empty. */
+ *           queues of later bounces stay empty; with -DAOVS the G-buffer values of its later bounces
+ *           (integrators/gbuffer.h) in aovs. */
 #include "integrators/wavefront/wavefront.h"
 
 __kernel SCALAR_KERNEL void finish_paths(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const int* ray_queue,
                                          __global float* frame, __global uchar* drop_marks, uint seed, uint first_sample,
-                                         int max_depth) {
+                                         int max_depth, __global float* aovs, int aov_n) {
     int i = get_global_id(0);
     if (i >= queue_count(counters, bounce, Q_RAY)) return;
     Scene sc = SCENE_INIT;
     PathStore P = PATH_INIT;
     int slot = ray_queue[i];
     PathState ps = path_load_ray(&P, slot, bounce);
-    path_continue(&sc, path_key(&P, &sc, slot, seed, first_sample), &ps, max_depth);
-    film_commit(frame, drop_marks, path_get_film_slot(&P, slot), ps.L);
+    int f = path_get_film_slot(&P, slot);
+    path_continue(&sc, path_key(&P, &sc, slot, seed, first_sample), &ps, max_depth, aov_out(aovs, aov_n, f));
+    film_commit(frame, drop_marks, f, ps.L);
 }

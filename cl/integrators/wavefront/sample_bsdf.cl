@@ -18,6 +18,9 @@ __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     ps.beta = path_get_beta(&P, slot);
     ps.eta_scale = path_get_eta_scale(&P, slot);
     ps.depth = bounce;
+#ifdef AOVS
+    ps.flags = path_get_flags(&P, slot); /* PATH_ALBEDO_DONE carries on (PATH_KEPT_FLAGS, path.h) */
+#endif
     Surface s = surface_at(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
     Bsdf b = bsdf_at(&sc, &s);
     bool alive = path_sample_bsdf(path_key(&P, &sc, slot, seed, first_sample), &s, &b, &ps, max_depth);
