@@ -11,7 +11,10 @@
 - :mod:`.document`: a report as blocks, written as Markdown and self-contained HTML;
 - :mod:`.report`: the ``pyclpt bench`` command (runs everything, writes the report folder);
 - :mod:`.versus`: ``pyclpt bench --versus mitsuba``, pyclpt against Mitsuba 3 on the same files,
-  whose Mitsuba side ``mitsuba_driver.py`` runs in Mitsuba's own environment (never imported here).
+  whose Mitsuba side ``mitsuba_driver.py`` runs in Mitsuba's own environment (never imported here);
+- :mod:`.denoise_eval` (with :mod:`.denoise_metrics` and :mod:`.denoise_references`): the denoisers
+  against 4096-spp references (relMSE, SSIM, FLIP, flicker, lag, cost at 1280x720; docs/denoising-eval.md);
+  ``denoise_passes.py`` times and tunes the SVGF passes (docs/denoising-passes.md).
 
 The scripts ``frame_time.py``, ``variants.py``, ``bvh_build.py`` and ``inline_math.py`` run from a checkout
 (``python bench/frame_time.py``).

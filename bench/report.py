@@ -73,16 +73,24 @@ def _positive(text: str) -> int:
     return v
 
 
-def _resolution(text: str) -> str:
-    if text == "scene":
-        return text
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT or 'scene', got {text!r}") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"resolution must be positive, got {text!r}")
-    return f"{w}x{h}"
+def size_type(keyword: str, minimum: int = 1):
+    """An argparse type: ``WIDTHxHEIGHT`` (each at least ``minimum``), or ``keyword`` as it is."""
+
+    def parse(text: str) -> str:
+        if text == keyword:
+            return text
+        try:
+            w, h = (int(x) for x in text.lower().split("x"))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT or {keyword!r}, got {text!r}") from None
+        if w < minimum or h < minimum:
+            raise argparse.ArgumentTypeError(f"the size must be at least {minimum}x{minimum}, got {text!r}")
+        return f"{w}x{h}"
+
+    return parse
+
+
+_resolution = size_type("scene")
 
 
 def build_parser() -> argparse.ArgumentParser:

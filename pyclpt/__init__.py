@@ -8,13 +8,15 @@
 Data flow, one subpackage per step (lower layers never import higher ones; docs/architecture.md):
 scene file -> scene model (:mod:`pyclpt.scene`) -> BVH (:mod:`pyclpt.accel`) -> device buffers
 (:mod:`pyclpt.buffers`) -> integrator (:mod:`pyclpt.integrators`) -> film and accumulation
-(:mod:`pyclpt.film`) -> image (:mod:`pyclpt.common.image_io`). OpenCL devices and programs:
+(:mod:`pyclpt.film`, with the G-buffer: :mod:`pyclpt.film.aovs`) -> denoiser (:mod:`pyclpt.denoise`)
+-> image (:mod:`pyclpt.common.image_io`). Camera motion: :mod:`pyclpt.scene.camera_path`. OpenCL devices and programs:
 :mod:`pyclpt.device`; rendering sessions: :mod:`pyclpt.rendering`; the command line: :mod:`pyclpt.cli`.
 """
 from __future__ import annotations
 
 from pyclpt.common.env import EnvironmentVariableError
 from pyclpt.common.image_io import read_image, write_image
+from pyclpt.denoise import Denoiser, DenoiserSettings
 from pyclpt.device.context import (
     Device,
     DeviceError,
@@ -28,6 +30,7 @@ from pyclpt.device.program import KernelBuildError
 from pyclpt.film.accumulator import Accumulator, AccumulatorError
 from pyclpt.rendering.progressive import ProgressiveRenderer
 from pyclpt.rendering.renderer import Renderer, RenderStats, render
+from pyclpt.scene.camera_path import CameraPath, Keyframe
 from pyclpt.scene.library import builtin_scenes, load
 from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
 from pyclpt.scene.mitsuba_xml import SceneXMLError, load_xml
@@ -52,10 +55,10 @@ from pyclpt.scene.model import (
 __version__ = "0.1.0"
 
 __all__ = [
-    "Accumulator", "AccumulatorError", "Bitmap", "builtin_scenes", "BumpMap", "Camera", "Checkerboard",
-    "Conductor", "default_device", "Device", "DeviceError", "DeviceMemoryError", "Dielectric", "Diffuse",
-    "EnvironmentVariableError", "Envmap", "Film", "get_device", "KernelBuildError", "list_devices", "load",
-    "load_dict", "load_xml", "Mask", "Mesh", "open_device", "Plastic", "PointLight", "ProgressiveRenderer",
-    "read_image", "render", "Renderer", "RenderStats", "Scene", "SceneDictError", "SceneXMLError",
-    "ThinDielectric", "write_image",
+    "Accumulator", "AccumulatorError", "Bitmap", "builtin_scenes", "BumpMap", "Camera", "CameraPath", "Checkerboard",
+    "Conductor", "default_device", "Denoiser", "DenoiserSettings", "Device", "DeviceError", "DeviceMemoryError",
+    "Dielectric", "Diffuse", "EnvironmentVariableError", "Envmap", "Film", "get_device", "Keyframe",
+    "KernelBuildError", "list_devices", "load", "load_dict", "load_xml", "Mask", "Mesh", "open_device", "Plastic",
+    "PointLight", "ProgressiveRenderer", "read_image", "render", "Renderer", "RenderStats", "Scene", "SceneDictError",
+    "SceneXMLError", "ThinDielectric", "write_image",
 ]

@@ -56,6 +56,29 @@ def _exposure(text: str) -> float:
     return v
 
 
+def _degrees(text: str) -> float:
+    """An argparse type: an orbit angle in degrees, a finite number."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of degrees, got {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be a finite number of degrees, got {text!r}")
+    return v
+
+
+def sequence_path(pattern: str, frame: int) -> str:
+    """The file of frame ``frame`` of a --sequence: the last run of # in ``pattern`` replaced by the
+    frame number, zero-padded to its length (``out_####.exr`` -> ``out_0007.exr``); a name without #
+    gets ``_####`` before its extension."""
+    runs = list(re.finditer(r"#+", pattern))
+    if not runs:
+        p = Path(pattern)
+        return str(p.with_name(f"{p.stem}_{frame:04d}{p.suffix}"))
+    m = runs[-1]
+    return f"{pattern[:m.start()]}{frame:0{len(m.group())}d}{pattern[m.end():]}"
+
+
 def _version() -> str:
     from pyclpt import __version__
 
@@ -97,6 +120,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--device", default=None, help="OpenCL device: pocl, gpu, cpu, P:D or a name substring")
     r.add_argument("--exposure", type=_exposure, default=0.0,
                    help=f"exposure in stops for PNG/JPEG output, within +-{MAX_EXPOSURE:g} (default 0)")
+    r.add_argument("--aov", default=None, metavar="NAMES",
+                   help="comma-separated AOVs written beside R,G,B into one multi-layer .exr (albedo.R, normal.X, "
+                        "depth.Z, motion.X, ...): albedo, normal, roughness, depth, hitdist, motion, emission, "
+                        "prim_id, mesh_id, material_id")
+    r.add_argument("--denoise", nargs="?", const="svgf", default=None, choices=("svgf", "blend", "oidn"),
+                   help="denoise every frame (default svgf; blend: the 70/30 history blend; oidn: Intel Open "
+                        "Image Denoise, the [oidn] extra); the output is the denoised last frame")
+    r.add_argument("--orbit", type=_degrees, default=None, metavar="DEGREES",
+                   help="the camera orbits its look-at target by this many degrees over --frames")
+    r.add_argument("--sequence", action="store_true",
+                   help="write every frame: -o out_####.exr (#### is the frame number; added before the "
+                        "extension when the name has no #)")
     r.add_argument("--stats", action="store_true", help="print per-kernel and per-bounce statistics")
     r.add_argument("--quiet", action="store_true", help="no progress bar (shown on renders longer than a "
                                                        "couple of seconds otherwise)")
@@ -109,8 +144,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_render(a: argparse.Namespace) -> int:
-    from pyclpt.common.image_io import check_output_path, write_image
+    from pyclpt.common.image_io import check_output_path, write_image, write_layers
+    from pyclpt.film.aovs import AOV_CHANNELS, check_aovs
     from pyclpt.rendering.progressive import ProgressiveRenderer
+    from pyclpt.scene.camera_path import CameraPath
     from pyclpt.scene.library import load
 
     if a.frames and a.spp and a.frames != a.spp:
@@ -118,23 +155,39 @@ def _cmd_render(a: argparse.Namespace) -> int:
     if a.overflow != "stop" and not a.max_frames:
         raise ValueError(f"--overflow {a.overflow} acts once --max-frames frames are accumulated; "
                          f"give --max-frames > 0")
+    aovs = check_aovs(a.aov.split(",") if a.aov is not None else None)
     # Fail before loading and rendering (possibly long) rather than when writing the result.
     if a.output:
-        check_output_path(a.output)
+        check_output_path(sequence_path(a.output, 0) if a.sequence else a.output)
+    if aovs and a.output and not a.output.lower().endswith(".exr"):
+        raise ValueError(f"--aov writes its layers into a multi-layer OpenEXR file: give -o NAME.exr, not {a.output}")
     scene = load(a.scene, **dict(a.define))
-    out = a.output or f"{scene.name}.png"
+    out = a.output or f"{scene.name}.{'exr' if aovs else 'png'}"
     if not a.output:
         check_output_path(out)
     t0 = time.perf_counter()
     size = {"width": a.width or scene.film.width, "height": a.height or scene.film.height}
+    frames = a.frames or a.spp or scene.spp
+    path = CameraPath.orbit(scene, a.orbit, frames) if a.orbit is not None else None
     pr = ProgressiveRenderer(scene, seed=a.seed, integrator=a.integrator, layout=a.layout, max_depth=a.max_depth,
                              device=a.device, precision=a.precision, max_frame_count=a.max_frames,
-                             overflow=a.overflow, **size)
-    frames = a.frames or a.spp or scene.spp
+                             overflow=a.overflow, aovs=aovs or None, denoiser=a.denoise, camera_path=path, **size)
+
+    def write(target: str, image) -> None:
+        if aovs:
+            layers = pr.aovs(aovs)
+            write_layers(target, image, {n: (layers[n], AOV_CHANNELS[n]) for n in aovs})
+        else:
+            write_image(target, image, exposure=a.exposure)
+        a.written = target
+
+    def write_frame(k: int) -> None:
+        write(sequence_path(out, k), pr.denoised() if pr.denoiser is not None else pr.image())
+
     log.info("rendering %d frame(s) of %dx%d into %s", frames, pr.width, pr.height, out)
-    image = pr.run(frames, progress=not a.quiet)
-    write_image(out, image, exposure=a.exposure)
-    a.written = out
+    image = pr.run(frames, progress=not a.quiet, on_frame=write_frame if a.sequence else None)
+    if not a.sequence:
+        write(out, image)
     r, st = pr.renderer, pr.stats
     spp = pr.sample_index
     print(f"{out}: {r.width}x{r.height}, {spp} spp, max depth {r.max_depth}, {a.integrator}"
@@ -149,9 +202,15 @@ def _cmd_render(a: argparse.Namespace) -> int:
         print(f"dropped {st.dropped_samples} NaN/inf samples")
     if acc.get("overflowed_samples"):
         print(f"{acc['overflowed_samples']} pixel samples not added: the {a.precision} sum would overflow float")
+    if a.sequence:
+        print(f"wrote {frames} frames: {sequence_path(out, 0)} .. {sequence_path(out, frames - 1)}")
+    if pr.denoiser is not None:
+        print(f"denoised ({a.denoise}): {sum(row['total_ms'] for row in st.denoise) / 1000:.3f} s on the device"
+              + (f", {pr.reprojections} camera moves reprojected" if pr.reprojections else ""))
     if a.stats:
         print(json.dumps({"kernels": st.kernels, "bounces": st.bounces, "memory": st.memory,
-                          "dropped_samples": st.dropped_samples, "accumulation": acc}, indent=1))
+                          "dropped_samples": st.dropped_samples, "accumulation": acc, "denoise": st.denoise},
+                         indent=1))
     return 0
 
 
@@ -191,14 +250,15 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     line with exit status 1. Anything else is a bug in pyclpt and keeps its traceback."""
     import pyopencl as cl
 
-    return (OSError, ValueError, RuntimeError, MemoryError, OverflowError, cl.Error)
+    # ImportError: an optional extra that is not installed (--denoise oidn without pyoidn)
+    return (OSError, ValueError, RuntimeError, MemoryError, OverflowError, ImportError, cl.Error)
 
 
 def _message(exc: BaseException) -> str:
     """The exception's own message (pyclpt's errors name the file, element or setting), with the type's
     name where the message alone says too little (``math range error``)."""
     text = str(exc)
-    if isinstance(exc, (OSError, ValueError, RuntimeError, MemoryError)) and text:
+    if isinstance(exc, (OSError, ValueError, RuntimeError, MemoryError, ImportError)) and text:
         return text
     if type(exc).__module__.startswith("pyopencl"):
         return f"OpenCL: {text}"

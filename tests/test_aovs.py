@@ -305,3 +305,29 @@ def test_camera_path_interpolation():
         CameraPath.orbit(a, 10, 3)
     with pytest.raises(ValueError, match="interpolation"):
         CameraPath([Keyframe(0, a)], interpolation="cubic")
+
+
+def test_emission_is_what_the_first_vertex_gathers(device):
+    """max_depth 1 renders exactly what the camera ray's first vertex emits (or the sky it sees), which is
+    the emission AOV, bit for bit, on both integrators."""
+    for integrator in ("megakernel", "wavefront"):
+        image, aov = pyclpt.render("cornell-box", spp=1, max_depth=1, width=W, height=H, device=device,
+                                   integrator=integrator, aovs=["emission"])
+        assert image.max() > 1.0  # the light is in view
+        np.testing.assert_array_equal(aov["emission"], image)
+    _, lit = pyclpt.render(plane_and_sphere(), spp=1, width=W, height=H, device=device, aovs=["emission", "depth"])
+    sky = lit["depth"] == 0
+    assert sky.any() and np.all(lit["emission"][sky] == 1.0) and np.all(lit["emission"][~sky] == 0.0)
+
+
+def test_layout_matches_the_header():
+    """pyclpt/film/aovs.py and cl/film/aovs.h describe the same channels."""
+    import re
+
+    from pyclpt.device.program import cl_dir
+    from pyclpt.film import aovs
+
+    header = dict(re.findall(r"#define (AOV_\w+) (\d+)\b", (cl_dir() / "film" / "aovs.h").read_text()))
+    for name in ("AOV_ALBEDO", "AOV_NORMAL", "AOV_ROUGHNESS", "AOV_DEPTH", "AOV_HITDIST", "AOV_MOTION",
+                 "AOV_EMISSION", "AOV_PRIM", "AOV_MATERIAL", "AOV_COUNT", "AOV_FLOATS"):
+        assert int(header[name]) == getattr(aovs, name), name

@@ -84,7 +84,7 @@ def test_subpackage_docstring_says_what_it_may_import(name):
 
 def test_cl_tree_mirrors_the_package():
     root = cl_dir()
-    for folder in ("core", "scene", "integrators", "integrators/wavefront", "film"):
+    for folder in ("core", "scene", "integrators", "integrators/wavefront", "film", "denoise"):
         assert (root / folder).is_dir(), folder
     assert not list(root.glob("*.h")) and not list(root.glob("*.cl")), "sources belong in a subfolder of cl/"
 
@@ -109,6 +109,19 @@ def test_stage_has_one_name(stage):
     assert "Consumes:" in text.split("*/")[0] and "Produces:" in text.split("*/")[0], \
         f"{src}: the header comment says what the kernel consumes and produces"
     assert callable(getattr(Wavefront, stage, None)), f"Wavefront.{stage}"
+
+
+@pytest.mark.parametrize("src", sorted(p.name for p in (cl_dir() / "denoise").glob("*.cl")))
+def test_denoiser_pass_has_one_name(src):
+    """A denoiser pass: its .cl file under cl/denoise/, its kernel and the method of pyclpt.denoise's
+    Svgf or Blend that launches it share a name."""
+    from pyclpt.denoise.blend import Blend
+    from pyclpt.denoise.svgf import Svgf
+
+    name = src[:-3]
+    text = (cl_dir() / "denoise" / src).read_text()
+    assert re.search(rf"__kernel\s+void\s+{name}\s*\(", text), f"cl/denoise/{src}: no kernel named {name}"
+    assert callable(getattr(Svgf, name, None)) or callable(getattr(Blend, name, None)), f"no Svgf/Blend.{name}"
 
 
 def test_kernel_files_say_what_they_consume_and_produce():

@@ -14,6 +14,9 @@
  *   AOV_MOTION    2  screen-space motion in pixels, x right, y down: where the first hit point (a miss: its
  *                    direction, a point at infinity) was in the previous frame (previous camera) minus
  *                    where it is now; AOV_OFFSCREEN (both) when it was behind the previous camera
+ *   AOV_EMISSION  3  radiance emitted towards the camera at the first hit (an emitter seen directly; a miss:
+ *                    the environment along the camera ray): the part of the pixel's radiance a denoiser
+ *                    must not filter, exactly what the path gathers at its first vertex
  *   AOV_PRIM      1  triangle of the first hit, BVH leaf order, as int bits (as_float); -1 on a miss
  *   AOV_MATERIAL  1  material index of the first hit, as int bits; -1 on a miss
  * Averaged per pixel: all but the two ids, which are the pixel's first sample's. */
@@ -26,10 +29,11 @@
 #define AOV_DEPTH 7
 #define AOV_HITDIST 8
 #define AOV_MOTION 9
-#define AOV_PRIM 11
-#define AOV_MATERIAL 12
-#define AOV_COUNT 13
-#define AOV_FLOATS 11 /* channels 0 .. AOV_FLOATS - 1 are averaged; the rest are ids */
+#define AOV_EMISSION 11
+#define AOV_PRIM 14
+#define AOV_MATERIAL 15
+#define AOV_COUNT 16
+#define AOV_FLOATS 14 /* channels 0 .. AOV_FLOATS - 1 are averaged; the rest are ids */
 #define AOV_OFFSCREEN 1.0e6f
 
 #endif

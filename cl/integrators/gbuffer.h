@@ -1,6 +1,6 @@
 /* gbuffer.h: what the integrators record for the G-buffer (film/aovs.h) beside the radiance, when
  * the program is built with -DAOVS: at the first hit its normal, view depth, roughness, ids and
- * motion vector; at the second ray's hit its distance; at the first non-delta vertex its albedo
+ * motion vector and emitted radiance; at the second ray's hit its distance; at the first non-delta vertex its albedo
  * times the throughput of the specular chain before it. The megakernel (path_continue) and the
  * wavefront's stages (process_hit, miss) call the same functions with the same values, so both give
  * the same G-buffer. Without -DAOVS nothing here is called and the kernels are unchanged.
@@ -12,6 +12,7 @@
 
 #include "film/aovs.h"
 #include "scene/bsdf.h"
+#include "scene/lights.h"
 #include "scene/scene.h"
 
 /* A path flag (beside path.h's PATH_PREV_DELTA): the path's albedo is recorded. */
@@ -66,10 +67,10 @@ static inline vec2 gbuffer_motion(const Scene* sc, vec3 p, bool at_infinity) {
     return seen ? v2(prev.x - cur.x, prev.y - cur.y) : v2(AOV_OFFSCREEN, AOV_OFFSCREEN);
 }
 
-/* A path's ray of bounce `depth` hit triangle `prim` at distance t, surface s; beta is the path's
- * throughput and *flags its PATH_* flags (PATH_ALBEDO_DONE is set once the albedo is recorded). */
+/* A path's ray of bounce `depth` along dir hit triangle `prim` at distance t, surface s; beta is the
+ * path's throughput and *flags its PATH_* flags (PATH_ALBEDO_DONE is set once the albedo is recorded). */
 static inline void gbuffer_hit(const Scene* sc, AovOut o, int prim, const Surface* s, float t, int depth,
-                               vec3 beta, int* flags) {
+                               vec3 dir, vec3 beta, int* flags) {
     bool albedo = !(*flags & PATH_ALBEDO_DONE);
     if (depth == 1) aov_put(o, AOV_HITDIST, t);
     if (depth != 0 && !albedo) return;
@@ -87,17 +88,21 @@ static inline void gbuffer_hit(const Scene* sc, AovOut o, int prim, const Surfac
     vec2 mv = gbuffer_motion(sc, s->p, false);
     aov_put(o, AOV_MOTION, mv.x);
     aov_put(o, AOV_MOTION + 1, mv.y);
+    aov_put3(o, AOV_EMISSION, light_emitted(sc, s->light, s->ng, dir)); /* path_hit_emission's, w = 1 */
     aov_put(o, AOV_PRIM, as_float(prim));
     aov_put(o, AOV_MATERIAL, as_float(s->material));
 }
 
 /* A path's ray of bounce `depth` along dir left the scene: the camera ray's motion vector (a point at
- * infinity); every other channel keeps its cleared value. */
+ * infinity) and the environment it sees (path_miss's, without MIS); every other channel keeps its
+ * cleared value. */
 static inline void gbuffer_miss(const Scene* sc, AovOut o, int depth, vec3 dir) {
     if (depth != 0) return;
     vec2 mv = gbuffer_motion(sc, dir, true);
     aov_put(o, AOV_MOTION, mv.x);
     aov_put(o, AOV_MOTION + 1, mv.y);
+    float pdf;
+    aov_put3(o, AOV_EMISSION, env_eval(sc, dir, false, &pdf));
 }
 
 #endif

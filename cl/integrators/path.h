@@ -171,7 +171,7 @@ static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int
         }
         Surface s = surface_at(sc, hit.prim, hit.u, hit.v);
 #ifdef AOVS
-        gbuffer_hit(sc, aov, hit.prim, &s, hit.t, ps->depth, ps->beta, &ps->flags);
+        gbuffer_hit(sc, aov, hit.prim, &s, hit.t, ps->depth, ps->dir, ps->beta, &ps->flags);
 #endif
         path_hit_emission(sc, &s, hit.t, ps);
         if (!depth_allows(ps->depth + 1, max_depth)) return;

@@ -316,6 +316,17 @@ def upload(device: Device, array, what: str) -> cl.Buffer:
     return cl.Buffer(device.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=arr)
 
 
+def take_count(device: Device, counter: cl.Buffer) -> int:
+    """The int32 a kernel counts into ``counter`` (its first word), read and reset to 0."""
+    import numpy as np
+
+    value = np.zeros(1, np.int32)
+    cl.enqueue_copy(device.queue, value, counter)
+    if value[0]:
+        cl.enqueue_fill_buffer(device.queue, counter, np.int32(0), 0, 4)
+    return int(value[0])
+
+
 def alloc(device: Device, nbytes: int, what: str) -> cl.Buffer:
     """An uninitialised read-write device buffer (checked against the allocation limit)."""
     check_alloc(device, nbytes, what)

@@ -6,7 +6,8 @@ Channels (``cl/film/aovs.h`` has the same layout): the first non-specular vertex
 the throughput of the specular chain before it), the first hit's world-space shading normal, linear
 roughness, view-space depth (viewZ, 0 where the camera ray leaves the scene), the second ray's hit
 distance, the screen-space motion vector to the previous frame (pixels, x right, y down), and the
-first hit's triangle and material. A pixel's channels are the mean over its samples, in sample
+first hit's emitted radiance (an emitter or the environment seen directly: the part of the radiance a
+denoiser must not filter), triangle and material. A pixel's channels are the mean over its samples, in sample
 order (so the megakernel and the wavefront give the same G-buffer for a seed); its ids are those of
 its first sample. :class:`AovFilm` keeps one record per film slot on the device and the per-pixel
 sums and means; the mean buffer is what a denoiser reads (planar floats: channel c of pixel p at
@@ -30,13 +31,19 @@ AOV_LAYOUT: dict[str, tuple[int, tuple[str, ...]]] = {
     "depth": (7, ("Z",)),
     "hitdist": (8, ("Y",)),
     "motion": (9, ("X", "Y")),
-    "prim_id": (11, ("Y",)),
-    "material_id": (12, ("Y",)),
+    "emission": (11, ("R", "G", "B")),
+    "prim_id": (14, ("Y",)),
+    "material_id": (15, ("Y",)),
 }
-AOV_COUNT = 13  # channels of a record
-AOV_FLOATS = 11  # channels averaged; the rest (prim, material) are int bits
+# The first channel of each, as AOV_* in cl/film/aovs.h (tests/test_aovs.py checks them against it).
+AOV_ALBEDO, AOV_NORMAL, AOV_ROUGHNESS, AOV_DEPTH, AOV_HITDIST, AOV_MOTION, AOV_EMISSION, AOV_PRIM, AOV_MATERIAL = (
+    AOV_LAYOUT[name][0] for name in ("albedo", "normal", "roughness", "depth", "hitdist", "motion", "emission",
+                                     "prim_id", "material_id"))
+AOV_COUNT = 16  # channels of a record
+AOV_FLOATS = 14  # channels averaged; the rest (prim, material) are int bits
 #: What a render can return: the channels above, plus the mesh a triangle belongs to (from prim_id).
-AOV_NAMES = ("albedo", "normal", "roughness", "depth", "hitdist", "motion", "prim_id", "mesh_id", "material_id")
+AOV_NAMES = ("albedo", "normal", "roughness", "depth", "hitdist", "motion", "emission", "prim_id", "mesh_id",
+             "material_id")
 #: EXR channel names of every AOV (``NAME.X`` ...).
 AOV_CHANNELS = {**{name: chans for name, (_, chans) in AOV_LAYOUT.items()}, "mesh_id": ("Y",)}
 #: AOV_OFFSCREEN of cl/film/aovs.h: the motion of a point the previous camera did not see.

@@ -8,6 +8,15 @@ scene changes.
         show(pr.image())          # the average so far
     pr.set_camera(pyclpt.Camera.look_at(...))   # resets: the next frame is sample 0 again
 
+With a denoiser (``denoiser="svgf"``, ``"blend"`` or ``"oidn"``; :mod:`pyclpt.denoise`) every frame
+also records its G-buffer (:mod:`pyclpt.film.aovs`) and is denoised; :meth:`denoised` is the result:
+
+    pr = pyclpt.ProgressiveRenderer(scene, denoiser="svgf",
+                                    camera_path=pyclpt.CameraPath.orbit(scene, 30, frames=16))
+    for _ in range(16):
+        pr.step()                 # frame k: the path's camera k, one sample per pixel, denoised
+        show(pr.denoised())
+
 Sample indices: the k-th frame rendered since the last reset uses sample index k, so the
 image after N frames equals ``Renderer(scene).render(N, seed)`` bit for bit (same precision),
 and a run is reproducible from its seed. With ``overflow="reset"`` or ``"ema"`` the sample
@@ -24,6 +33,15 @@ Changing the scene dataclasses directly is detected the same way as the setters
 (:meth:`set_camera`, :meth:`set_material`,
 :meth:`set_emission`, :meth:`set_environment`, :meth:`set_meshes`, :meth:`set_resolution`).
 A resolution change always resets (the buffers change size).
+
+Camera motion: a :class:`~pyclpt.scene.camera_path.CameraPath` (``camera_path=``) sets the camera of
+every frame (frame k of the renderer's life: ``camera_path.camera(k)``), and :meth:`set_camera` moves
+it between frames. The frame after a move records motion vectors back to the camera before it (the
+scene buffers hold both cameras), the frames without one record zero motion. Without a denoiser a
+move resets as any camera change does. With one, a move (and any other scene change but the
+resolution) restarts only the plain average (:meth:`image`): the sample index goes on, so frames
+never repeat their random numbers, and the denoiser keeps its history, which it reprojects along the
+motion vectors (SVGF) and clips where the scene changed; ``reprojections`` counts those moves.
 """
 from __future__ import annotations
 
@@ -32,20 +50,27 @@ import logging
 import time
 import zlib
 from collections import Counter
-from collections.abc import Hashable, Sequence
-from typing import Any
+from collections.abc import Callable, Hashable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from pyclpt.common.checks import check_bool, check_int, check_optional_bool, check_optional_int, is_int
 from pyclpt.device.context import Device
 from pyclpt.film.accumulator import Accumulator, check_options
+from pyclpt.film.aovs import AOV_NAMES, check_aovs
 from pyclpt.film.film import DEFAULT_PRECISION
 from pyclpt.rendering.frame_loop import progress_bar
 from pyclpt.rendering.renderer import MAX_RESOLUTION, Renderer, RenderStats
+from pyclpt.scene.camera_path import CameraPath
 from pyclpt.scene.model import Camera, Mesh, Scene, check_material, rgb
 
+if TYPE_CHECKING:
+    from pyclpt.denoise import Denoiser, DenoiserSettings
+
 log = logging.getLogger("pyclpt.rendering.progressive")
+# The denoisers (pyclpt.denoise.MODES; imported with the denoiser, when one is asked for).
+DENOISER_MODES = ("svgf", "blend", "oidn")
 
 # What each change of the scene is called; fields not listed are "scene", spp/name/source are ignored.
 SCENE_FIELDS = {"camera": "camera", "materials": "material", "environment": "emitter", "lights": "emitter",
@@ -109,7 +134,9 @@ class ProgressiveRenderer:
                  device: Device | str | None = None, precision: str = DEFAULT_PRECISION,
                  max_frame_count: int = 0, overflow: str = "stop", enabled: bool = True,
                  auto_reset: bool = True, wave_size: int | None = None, local_size: int | None = None,
-                 schedule: str | None = None) -> None:
+                 schedule: str | None = None, aovs: Sequence[str] | str | bool | None = None,
+                 denoiser: str | None = None, denoiser_settings: DenoiserSettings | None = None,
+                 camera_path: CameraPath | None = None) -> None:
         seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
         width = check_optional_int(width, "width", lo=1, hi=MAX_RESOLUTION, note=" (None: the scene's)")
         height = check_optional_int(height, "height", lo=1, hi=MAX_RESOLUTION, note=" (None: the scene's)")
@@ -117,9 +144,22 @@ class ProgressiveRenderer:
             raise ValueError(f"give both width and height or neither, got width={width}, height={height}")
         auto_reset = check_bool(auto_reset, "auto_reset")
         check_options(precision=precision, overflow=overflow, max_frame_count=max_frame_count, enabled=enabled)
+        if denoiser is not None and denoiser not in DENOISER_MODES:
+            raise ValueError(f"unknown denoiser {denoiser!r}; the denoisers are {', '.join(DENOISER_MODES)}")
+        if camera_path is not None and not isinstance(camera_path, CameraPath):
+            raise TypeError(f"camera_path must be a pyclpt.CameraPath, got {type(camera_path).__name__}")
         self.scene = scene
         self.seed = int(seed)
         self.auto_reset = bool(auto_reset)
+        # the G-buffer: the AOVs asked for, every one when denoising (the denoisers' guides)
+        self.aov_names = AOV_NAMES if denoiser else check_aovs(aovs)
+        self.denoiser_mode = denoiser
+        self._denoiser_settings = denoiser_settings
+        self.camera_path = camera_path
+        self.frame_index = 0  # frames rendered since this renderer was made: the camera path's time
+        self.reprojections = 0  # camera moves the denoiser reprojected across instead of a reset
+        self._last_camera: Camera | None = None  # the camera of the last frame rendered
+        self._camera_moved = False  # the camera changed since the last frame
         self._max_depth = max_depth
         self._size = (int(width), int(height)) if width is not None else None
         self._renderer_options = dict(integrator=integrator, layout=layout, device=device, wave_size=wave_size,
@@ -130,15 +170,27 @@ class ProgressiveRenderer:
         self.resets: Counter[str] = Counter()  # resets by reason (a change kind, or "explicit")
         self.last_reset_reason: str | None = None
         self.stats = RenderStats()
+        if camera_path is not None:
+            scene.camera = camera_path.camera(0)
         self.renderer: Renderer = self._make_renderer()
+        self.denoiser: Denoiser | None = self._make_denoiser()
         self._fingerprint = self.fingerprint()
 
     # -- the device side -------------------------------------------------------------------------
     def _make_renderer(self) -> Renderer:
         w, h = self._size if self._size else (None, None)
-        r = Renderer(self.scene, max_depth=self._max_depth, width=w, height=h, **self._renderer_options)
+        r = Renderer(self.scene, max_depth=self._max_depth, width=w, height=h, aovs=self.aov_names or None,
+                     **self._renderer_options)
         r.film.accumulator.configure(**self._accumulation)
         return r
+
+    def _make_denoiser(self) -> Denoiser | None:
+        if self.denoiser_mode is None:
+            return None
+        from pyclpt.denoise import Denoiser
+
+        return Denoiser(self.device, self.width, self.height, mode=self.denoiser_mode,
+                        settings=self._denoiser_settings)
 
     @property
     def device(self) -> Device:
@@ -175,15 +227,26 @@ class ProgressiveRenderer:
         old = self.renderer
         if changed == ["camera"]:  # only the per-resolution constants depend on the camera
             self.scene.camera.validate()  # (a rebuild validates the whole scene)
-            self.renderer.scene_buffers.refresh_camera()
         else:
             self.renderer = self._make_renderer()  # scene buffers, integrator (its specialisation), film
+        if "camera" in changed:  # the next frame's motion vectors point back to the last frame's camera
+            self.renderer.scene_buffers.refresh_camera(previous=self._last_camera)
+            self._camera_moved = True
         self._fingerprint = fp
+        if self.denoiser is not None and "resolution" not in changed:
+            # the denoiser carries its history over (reprojection, clipping); only the plain average restarts
+            self.renderer.film.clear()
+            self.reprojections += "camera" in changed
+            log.info("scene change (%s): device side updated in %.3f s, plain average restarted, denoiser "
+                     "history kept", ", ".join(changed), time.perf_counter() - t)
+            return changed
         keep = not self.auto_reset and "resolution" not in changed
         if keep:  # accumulate on: the old sum continues under the new scene
             self.renderer.film.accumulator = old.film.accumulator
         log.info("scene change (%s): device side rebuilt in %.3f s%s", ", ".join(changed),
                  time.perf_counter() - t, "" if keep else ", accumulation reset")
+        if "resolution" in changed and self.denoiser is not None:
+            self.denoiser = self._make_denoiser()
         if not keep:
             self._restart(",".join(changed))
         return changed
@@ -196,8 +259,10 @@ class ProgressiveRenderer:
         self.last_reset_reason = reason
 
     def reset(self) -> None:
-        """Start the accumulation over, from sample index 0."""
+        """Start the accumulation over, from sample index 0, and the denoiser's history."""
         self._restart("explicit")
+        if self.denoiser is not None:
+            self.denoiser.reset()
 
     # -- setters: change the scene, then sync ------------------------------------------------------
     def set_camera(self, camera: Camera) -> None:
@@ -275,22 +340,60 @@ class ProgressiveRenderer:
         return done
 
     def _frame(self) -> bool:
-        """Render and accumulate the next sample index; False once the accumulator has stopped."""
-        if self.accumulator.stopped:
+        """Render and accumulate the next sample index (the camera path's camera first), denoise it;
+        False once the accumulator has stopped."""
+        if self.accumulator.stopped and self.denoiser is None:
             return False
         if self.sample_index >= 2**32:
             raise OverflowError(f"sample index {self.sample_index} does not fit the 32-bit counter; reset()")
+        if self.camera_path is not None:
+            self.scene.camera = self.camera_path.camera(self.frame_index)
+            self.sync()
+        buffers, film = self.renderer.scene_buffers, self.renderer.film
+        if not self._camera_moved and buffers.previous_camera is not None:
+            buffers.refresh_camera(previous=None)  # the camera stood still since the last frame: no motion
+        self._camera_moved = False
+        if film.aov is not None and self.denoiser_mode in ("svgf", "blend"):
+            film.aov.restart()  # the G-buffer of this frame alone: the real-time denoisers' guides
         self.renderer.integrator.render_frame(self.seed, self.sample_index)
-        self.renderer.film.add_frame()
+        film.add_frame()
+        if self.denoiser is not None:
+            if self.denoiser_mode == "oidn":  # the offline anchor: the plain average and its averaged guides
+                guides = self.renderer.aovs(["albedo", "normal"])
+                self.denoiser.denoise(self.image(), albedo=guides["albedo"], normal=guides["normal"])
+            else:
+                self.denoiser.denoise_buffers(film.frame, film.aov.mean)
+        self._last_camera = dataclasses.replace(self.scene.camera, to_world=np.array(self.scene.camera.to_world))
         self.sample_index += 1
+        self.frame_index += 1
         return True
 
     def image(self) -> np.ndarray:
-        """The current average, (H, W, 3) float32."""
+        """The current plain average, (H, W, 3) float32."""
         return self.renderer.film.image()
 
-    def run(self, frames: int, progress: bool | None = None) -> np.ndarray:
-        """Render ``frames`` frames and return the image; ``stats`` describes the run.
+    def frame_image(self) -> np.ndarray:
+        """The last frame's own samples (one per pixel), (H, W, 3) float32: the denoiser's input."""
+        return self.renderer.film.read_frame(0)
+
+    def denoised(self) -> np.ndarray:
+        """The denoiser's output for the last frame, (H, W, 3) float32."""
+        if self.denoiser is None:
+            raise ValueError("no denoiser: make the ProgressiveRenderer with denoiser='svgf' (or 'blend', 'oidn')")
+        if self.frame_index == 0:
+            raise ValueError("no frame rendered yet: step() first")
+        return self.denoiser.image()
+
+    def aovs(self, names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+        """The G-buffer by name (:meth:`Renderer.aovs`): averaged over the frames of the plain average, as
+        its image; with the ``svgf`` or ``blend`` denoiser, the last frame's (their guides)."""
+        return self.renderer.aovs(names)
+
+    def run(self, frames: int, progress: bool | None = None,
+            on_frame: Callable[[int], None] | None = None) -> np.ndarray:
+        """Render ``frames`` frames and return the image (the denoised last frame with a denoiser, else
+        the plain average); ``stats`` describes the run. ``on_frame(k)`` is called after the k-th frame
+        of the run (0-based), e.g. to write every frame of a sequence.
         ``progress``: True shows a bar once the run has lasted a couple of seconds; None or False show
         none. Ctrl-C raises KeyboardInterrupt within about a second and returns no image (the
         accumulation then holds part of the run; :meth:`reset` starts over)."""
@@ -308,8 +411,12 @@ class ProgressiveRenderer:
                 if not self._frame():
                     self.accumulator.ignored_frames += int(frames) - done
                     break
+                if on_frame is not None:
+                    on_frame(done)
                 done += 1
-                bar.update(r.pacer.frame(self.device.queue))
-        image = self.image()
+                bar.update(self.renderer.pacer.frame(self.device.queue))
+        image = self.denoised() if self.denoiser is not None and done else self.image()
         self.stats = self.renderer.collect_stats(self.frame_count, time.perf_counter() - start)
+        if self.denoiser is not None:
+            self.stats.denoise = self.denoiser.profile.table()
         return image

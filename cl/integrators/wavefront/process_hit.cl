@@ -21,7 +21,7 @@ __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     Surface s = surface_at(&sc, prim, path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
 #ifdef AOVS
     gbuffer_hit(&sc, aov_out(aovs, aov_n, path_get_film_slot(&P, slot)), prim, &s, path_get_hit_t(&P, slot), bounce,
-                ps.beta, &ps.flags);
+                ps.dir, ps.beta, &ps.flags);
     path_set_flags(&P, slot, ps.flags);
 #endif
     path_hit_emission(&sc, &s, path_get_hit_t(&P, slot), &ps);

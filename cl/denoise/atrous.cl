@@ -1,0 +1,77 @@
+/* atrous: one iteration of SVGF's edge-avoiding a-trous wavelet filter (Falcor's SVGFAtrous).
+ * One work-item per pixel, 2D range; pyclpt/denoise/svgf.py runs `iterations` of them with
+ * step = 2^i, ping-ponging, iteration feedback_tap writing into the colour history.
+ *
+ * A 5x5 B3-spline kernel (1/16, 1/4, 3/8, 1/4, 1/16, normalised to the centre: 1/6, 2/3, 1, 2/3,
+ * 1/6) at taps p + step (dx, dy), each weighted by
+ *   depth      exp(-|z - zq| / (phi_depth max(GEO_GRAD, 1e-8) step |(dx, dy)|))
+ *   normal     max(0, cos)^phi_normal (svgf.h, normal_weight; 1 where p's normal is unknown)
+ *   luminance  exp(-|l - lq| / (phi_color sqrt(g3x3(var) + 1e-10)))
+ * (g3x3: the 3x3 Gaussian 1/4, 1/8, 1/16 of the variance around p, renormalised over the pixels
+ * inside the image). The centre counts with weight 1;
+ * taps outside the image or on the background count 0. The illumination is averaged with the weights
+ * w, the variance with w^2 (/ (sum w)^2): the variance of the filtered value. Background pixels
+ * (depth 0) pass through.
+ *
+ * Consumes: src[c * pixels + p] (c < 3 illumination, c = 3 variance: variance or the previous
+ *           iteration), geo (GEO_*, reproject); both padded (svgf.h, PAD).
+ * Produces: dst[c * pixels + p] (padded), the same four channels filtered. */
+#include "denoise/svgf.h"
+
+__kernel void atrous(__global const float* src, __global const float* geo, __global float* dst,
+                     int width, int height, int step, float phi_color, float phi_normal, float phi_depth) {
+    int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    int n = width * height, p = y * width + x;
+    src += PAD;
+    geo += PAD;
+    dst += PAD;
+
+    vec3 c = planar3(src, n, p);
+    float var = src[3 * n + p];
+    float z = geo[GEO_DEPTH * n + p];
+    vec3 nrm = planar3(geo + GEO_NORMAL * n, n, p);
+    float l = luminance(c);
+    /* an unknown (zero) centre normal: no normal weight; an unknown tap normal: cos 0 */
+    float phi_n = v3_is_zero(nrm) ? 0.0f : phi_normal;
+
+    float gvar = 0.0f, gw = 0.0f;
+    UNROLL for (int dy = -1; dy <= 1; ++dy) {
+        UNROLL for (int dx = -1; dx <= 1; ++dx) {
+            const float k = (dx == 0 ? 0.5f : 0.25f) * (dy == 0 ? 0.5f : 0.25f);
+            int tx = x + dx, ty = y + dy;
+            float kin = (tx >= 0 && tx < width && ty >= 0 && ty < height) ? k : 0.0f;
+            gvar += kin * src[3 * n + row_at(y, dy, width, height) + tx];
+            gw += kin;
+        }
+    }
+    gvar /= gw;
+    float inv_l = 1.0f / (phi_color * m_sqrt(gvar + VARIANCE_EPS));
+    float inv_z = 1.0f / (phi_depth * m_max(geo[GEO_GRAD * n + p], 1e-8f) * (float)step);
+
+    float sw = 1.0f, sv = var;
+    vec3 sum = c;
+    UNROLL for (int dy = -2; dy <= 2; ++dy) {
+        UNROLL for (int dx = -2; dx <= 2; ++dx) {
+            if (dx == 0 && dy == 0) continue;
+            const float k = (dx == 0 ? 1.0f : (dx == 1 || dx == -1) ? 2.0f / 3.0f : 1.0f / 6.0f)
+                            * (dy == 0 ? 1.0f : (dy == 1 || dy == -1) ? 2.0f / 3.0f : 1.0f / 6.0f);
+            const float inv_dist = 1.0f / m_sqrt((float)(dx * dx + dy * dy));
+            int tx = x + dx * step, ty = y + dy * step;
+            bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
+            int q = row_at(y, dy * step, width, height) + tx;
+            vec3 cq = planar3(src, n, q);
+            float zq = geo[GEO_DEPTH * n + q];
+            float wn = normal_weight(m_dot(nrm, planar3(geo + GEO_NORMAL * n, n, q)), phi_n);
+            float e = -m_abs(l - luminance(cq)) * inv_l - m_abs(z - zq) * inv_z * inv_dist;
+            float w = (inside && zq > 0.0f) ? k * wn * exp_weight(e) : 0.0f;
+            sw += w;
+            sum = v3_add(sum, v3_scale(cq, w));
+            sv += w * w * src[3 * n + q];
+        }
+    }
+    bool surface = z > 0.0f;
+    float inv = 1.0f / sw;
+    store_planar3(dst, n, p, surface ? v3_scale(sum, inv) : c);
+    dst[3 * n + p] = surface ? sv * inv * inv : var;
+}

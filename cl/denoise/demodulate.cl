@@ -1,0 +1,41 @@
+/* demodulate: the frame's input as the other passes read it. One work-item per pixel, 2D range.
+ *
+ * The colour with NaN/inf replaced by 0 (all three channels; marked), divided by the albedo per
+ * channel where the albedo is > ALBEDO_MIN and finite (else by 1; a non-finite albedo is marked
+ * too), clamped to +-MAX_RADIANCE: the illumination that the history accumulates, and its
+ * luminance. The geometry record of this frame (svgf.h, GEO_*) but its depth gradient: depth
+ * (non-finite or <= 0: 0, the background), the unit normal (0 where unknown), the material id.
+ * A pass of its own, without neighbours, so that it vectorizes and reproject reads its
+ * neighbours' values from padded planes instead of demodulating each of them again.
+ *
+ * Consumes: color[3 p + c] (interleaved RGB, read through the opaque stride unit = 1); aovs[c *
+ *           pixels + p] (cl/film/aovs.h: albedo, normal, depth, material).
+ * Produces: sample[c * pixels + p] (padded, svgf.h): c < 3 the illumination, c = 3 its luminance;
+ *           geo[GEO_DEPTH, GEO_NORMAL.., GEO_MATERIAL] (padded); marks[p] = 1 if the colour was
+ *           not finite + 1 if the albedo was not (a plain store, summed by film/count_dropped.cl). */
+#include "denoise/svgf.h"
+
+__kernel void demodulate(__global const float* color, __global const float* aovs, __global float* sample,
+                         __global float* geo, __global uchar* marks, int width, int height, int unit) {
+    int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    int n = width * height, p = y * width + x;
+    sample += PAD;
+    geo += PAD;
+
+    bool bad_color;
+    vec3 c = load_color(color, p, unit, &bad_color);
+    vec3 albedo = planar3(aovs + AOV_ALBEDO * n, n, p);
+    bool bad_albedo = !all_finite3(albedo);
+    vec3 s = clamp_radiance(v3_div(c, albedo_divisors(albedo)));
+    store_planar3(sample, n, p, s);
+    sample[3 * n + p] = luminance(s);
+
+    float z = aovs[AOV_DEPTH * n + p];
+    vec3 nrm = planar3(aovs + AOV_NORMAL * n, n, p);
+    float l2 = m_dot(nrm, nrm);
+    geo[GEO_DEPTH * n + p] = (z > 0.0f && z < INFINITY) ? z : 0.0f;
+    store_planar3(geo + GEO_NORMAL * n, n, p, (l2 > 1e-20f && l2 < INFINITY) ? v3_scale(nrm, m_rsqrt(l2)) : v3_splat(0.0f));
+    geo[GEO_MATERIAL * n + p] = aovs[AOV_MATERIAL * n + p];
+    marks[p] = (uchar)((bad_color ? 1 : 0) + (bad_albedo ? 1 : 0));
+}

@@ -1,0 +1,187 @@
+/* reproject: SVGF's temporal pass (Schied et al. 2017; Falcor's SVGFReproject), with the fast
+ * history of NRD's RELAX. One work-item per pixel, 2D range; after demodulate.
+ *
+ * 1. The frame's sample (demodulate's illumination) firefly-clamped: its luminance is scaled down to
+ *    at most firefly_ratio x a reference, the larger of the mean luminance of its neighbours in the
+ *    3x3 around p inside the image (centre excluded) and, where the history is valid, the
+ *    reprojected history's luminance (firefly_ratio 0: no clamp).
+ * 2. The previous frame's history at p + motion: the 2x2 bilinear taps around it, each accepted only
+ *    if inside the image, holding a history (length >= 1) and the same surface (consistent(): same
+ *    material id; both background, or both surfaces with |z - z_prev| <= depth_threshold x (GEO_GRAD
+ *    + 0.01 z) and normals with cos >= min(normal_threshold, cos_spread), cos_spread the smallest
+ *    normal cosine from p to its surface neighbours, as Falcor scales its normal test by fwidth);
+ *    the bilinear weights renormalised over the
+ *    accepted taps (accepted if their weight sums to more than 0.01). Else the 3x3 pixels around the
+ *    rounded previous position (itself inside the image), equally weighted (Falcor's fallback: a
+ *    branch, taken at disocclusions only). Else a disocclusion: the history restarts.
+ * 3. History length N = min(N_prev + 1, max_history) (N_prev: the accepted taps' weighted mean,
+ *    rounded), 1 at a disocclusion; moments of luminance blended with max(moments_alpha_min, 1/N),
+ *    the fast history with max(fast_alpha, 1/N). The long history is blended by clip_history.
+ * The depth gradient GEO_GRAD: |dz/dx| + |dz/dy|, each the smaller of the one-sided differences to
+ * the surface neighbours (a depth edge on one side does not count).
+ *
+ * Consumes: sample (demodulate: illumination, luminance); geo (this frame's record from demodulate:
+ *           depth, normal, material); aovs[c * pixels + p] (cl/film/aovs.h: the motion); the
+ *           previous frame's geo_prev (GEO_*), hist_prev (long history colour, channels 0..2),
+ *           fast_prev (3), moments_prev (2), len_prev (history length; 0 = none, after a reset).
+ *           All but aovs padded (svgf.h, PAD).
+ * Produces: geo[GEO_GRAD]; temporal[0..2] the sample clamped, temporal[3..5] the long history
+ *           reprojected (0 at a disocclusion); fast (the fast history accumulated), moments
+ *           (luminance mean and mean of squares), len (N, a float); all padded. */
+#include "denoise/svgf.h"
+
+/* Whether pixel q of the previous frame is the surface that the current pixel (depth z, unit
+ * normal nrm, material mat; z = 0: background) shows. */
+static inline bool consistent(__global const float* geo_prev, int n, int q, float z, vec3 nrm, int mat,
+                              float ztol, float cos_min) {
+    float zq = geo_prev[GEO_DEPTH * n + q];
+    int mq = as_int(geo_prev[GEO_MATERIAL * n + q]);
+    vec3 nq = planar3(geo_prev + GEO_NORMAL * n, n, q);
+    bool surface = z > 0.0f, surface_q = zq > 0.0f;
+    bool same = (m_abs(z - zq) <= ztol) & (normal_agreement(nrm, nq) >= cos_min);
+    return (mq == mat) & (surface == surface_q) & (!surface | same);
+}
+
+/* |z - zn| for a surface neighbour, INFINITY for a background one. */
+static inline float depth_step(float z, float zn) { return zn > 0.0f ? m_abs(z - zn) : INFINITY; }
+
+/* The previous frame's history, summed over accepted taps with their weights. */
+typedef struct {
+    vec3 color, fast;
+    float m1, m2, len, weight;
+} history_t;
+
+static inline void add_tap(history_t* h, __global const float* hist_prev, __global const float* fast_prev,
+                           __global const float* moments_prev, __global const float* len_prev, int n, int q,
+                           float w) {
+    h->color = v3_add(h->color, v3_scale(planar3(hist_prev, n, q), w));
+    h->fast = v3_add(h->fast, v3_scale(planar3(fast_prev, n, q), w));
+    h->m1 += w * moments_prev[q];
+    h->m2 += w * moments_prev[n + q];
+    h->len += w * len_prev[q];
+    h->weight += w;
+}
+
+__kernel void reproject(__global const float* sample, __global float* geo, __global const float* aovs,
+                        __global const float* geo_prev, __global const float* hist_prev,
+                        __global const float* fast_prev, __global const float* moments_prev,
+                        __global const float* len_prev, __global float* temporal, __global float* fast,
+                        __global float* moments, __global float* len, int width, int height,
+                        float depth_threshold, float normal_threshold, float firefly_ratio,
+                        float max_history, float moments_alpha_min, float fast_alpha) {
+    int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    int n = width * height, p = y * width + x;
+    sample += PAD;
+    geo += PAD;
+    geo_prev += PAD;
+    hist_prev += PAD;
+    fast_prev += PAD;
+    moments_prev += PAD;
+    len_prev += PAD;
+    temporal += PAD;
+    fast += PAD;
+    moments += PAD;
+    len += PAD;
+
+    /* this frame's geometry and depth gradient */
+    float z = geo[GEO_DEPTH * n + p];
+    vec3 nrm = planar3(geo + GEO_NORMAL * n, n, p);
+    int mat = as_int(geo[GEO_MATERIAL * n + p]);
+    __global const float* depth = geo + GEO_DEPTH * n;
+    float zl = depth[p - 1], zr = depth[p + 1]; /* in the padding at the ends: never out of bounds */
+    float zu = depth[row_at(y, -1, width, height) + x], zd = depth[row_at(y, 1, width, height) + x];
+    float gx = m_min(depth_step(z, x > 0 ? zl : 0.0f), depth_step(z, x < width - 1 ? zr : 0.0f));
+    float gy = m_min(depth_step(z, y > 0 ? zu : 0.0f), depth_step(z, y < height - 1 ? zd : 0.0f));
+    float grad = (gx < INFINITY ? gx : 0.0f) + (gy < INFINITY ? gy : 0.0f);
+
+    /* the spread of the normals around p (as Falcor scales its normal test by fwidth): the smallest
+     * cosine to the surface neighbours. A pixel on a crease sees both faces there, and as the film's
+     * sample positions are jittered frame to frame, its previous sample may have been on the other
+     * face: the test allows what its neighbours already show. (The depth test keeps the smaller
+     * one-sided gradient: widened to the largest, as Falcor's fwidth does, it let the history leak
+     * across depth edges and changed nothing on a jittered render, where the 3x3 fallback finds the
+     * right side of a silhouette.) */
+    int row[4] = {p - 1, p + 1, row_at(y, -1, width, height) + x, row_at(y, 1, width, height) + x};
+    bool there[4] = {x > 0, x < width - 1, y > 0, y < height - 1};
+    float cos_spread = 1.0f;
+    UNROLL for (int k = 0; k < 4; ++k) {
+        bool use = there[k] & (depth[row[k]] > 0.0f) & (z > 0.0f);
+        cos_spread = m_min(cos_spread, use ? normal_agreement(nrm, planar3(geo + GEO_NORMAL * n, n, row[k])) : 1.0f);
+    }
+
+    /* the sample and its neighbours' mean luminance */
+    vec3 s = planar3(sample, n, p);
+    float around = 0.0f, count = 0.0f;
+    UNROLL for (int dy = -1; dy <= 1; ++dy) {
+        UNROLL for (int dx = -1; dx <= 1; ++dx) {
+            if (dx == 0 && dy == 0) continue;
+            int tx = x + dx, ty = y + dy;
+            float w = (tx >= 0 && tx < width && ty >= 0 && ty < height) ? 1.0f : 0.0f;
+            around += w * sample[3 * n + row_at(y, dy, width, height) + tx];
+            count += w;
+        }
+    }
+    around = count > 0.0f ? around / count : 0.0f;
+
+    /* the previous position (pixel-centre coordinates), far outside when it was not visible */
+    float mx = aovs[AOV_MOTION * n + p], my = aovs[(AOV_MOTION + 1) * n + p];
+    bool seen = m_abs(mx) < 0.5f * AOV_OFFSCREEN && m_abs(my) < 0.5f * AOV_OFFSCREEN; /* false for NaN */
+    float px = seen ? m_clamp((float)x + mx, -2.0f, (float)width + 1.0f) : -2.0f;
+    float py = seen ? m_clamp((float)y + my, -2.0f, (float)height + 1.0f) : -2.0f;
+    float ztol = depth_threshold * (grad + 0.01f * z);
+    float cos_min = m_min(normal_threshold, cos_spread);
+
+    /* the 2x2 bilinear taps */
+    float fx0 = m_floor(px), fy0 = m_floor(py);
+    float fx = px - fx0, fy = py - fy0;
+    int x0 = (int)fx0, y0 = (int)fy0;
+    history_t h = {v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
+    UNROLL for (int t = 0; t < 4; ++t) {
+        int tx = x0 + (t & 1), ty = y0 + (t >> 1);
+        bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
+        int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
+        bool ok = inside & (len_prev[q] >= 1.0f) & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
+        float bw = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
+        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, n, q, ok ? bw : 0.0f);
+    }
+    /* none (a weight below 0.01): Falcor's fallback, the 3x3 pixels around the rounded position,
+     * equally weighted; a branch, taken at disocclusions only */
+    if (!(h.weight > 0.01f)) {
+        int rx = (int)m_floor(px + 0.5f), ry = (int)m_floor(py + 0.5f);
+        history_t f = {v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
+        if (rx >= 0 && rx < width && ry >= 0 && ry < height) {
+            for (int dy = -1; dy <= 1; ++dy) {
+                for (int dx = -1; dx <= 1; ++dx) {
+                    int tx = rx + dx, ty = ry + dy;
+                    bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
+                    int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
+                    bool ok = inside & (len_prev[q] >= 1.0f)
+                              & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
+                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, n, q, ok ? 1.0f : 0.0f);
+                }
+            }
+        }
+        h = f;
+    }
+    bool valid = h.weight > 0.01f;
+    float inv = valid ? 1.0f / h.weight : 0.0f;
+    vec3 hist = v3_scale(h.color, inv), hist_fast = v3_scale(h.fast, inv);
+    float N = valid ? m_min(m_floor(h.len * inv + 0.5f) + 1.0f, max_history) : 1.0f;
+
+    /* firefly clamp */
+    float reference = m_max(around, valid ? luminance(hist) : 0.0f);
+    float cap = firefly_ratio * reference, ls = luminance(s);
+    s = v3_scale(s, (firefly_ratio > 0.0f && ls > cap) ? cap / ls : 1.0f);
+
+    /* accumulation (N = 1: the sample alone) */
+    float l = luminance(s);
+    float am = m_max(moments_alpha_min, 1.0f / N), af = m_max(fast_alpha, 1.0f / N);
+    store_planar3(fast, n, p, lerp3(hist_fast, s, af));
+    moments[p] = lerpf(h.m1 * inv, l, am);
+    moments[n + p] = lerpf(h.m2 * inv, l * l, am);
+    len[p] = N;
+    store_planar3(temporal, n, p, s);
+    store_planar3(temporal + 3 * n, n, p, hist);
+    geo[GEO_GRAD * n + p] = grad;
+}

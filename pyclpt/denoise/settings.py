@@ -1,0 +1,140 @@
+"""The parameters of the SVGF denoiser (:class:`DenoiserSettings`), checked when made.
+
+Defaults follow Falcor's SVGFPass (``alpha_min``, ``moments_alpha_min``, ``phi_color``,
+``phi_normal``, ``phi_depth``, ``iterations``) and NRD's RELAX (the fast history and its clipping);
+where this implementation departs from them (``variance_of_mean``, ``feedback_tap``, ``clip_gamma``)
+the default was measured with ``bench/denoise_passes.py quality``: the relMSE against the noise-free
+image of a static synthetic scene after 4, 8 and 16 frames, its steady decrease, and how fast a
+lighting change is followed (docs/denoising-passes.md has the tables); ``firefly_ratio`` was chosen on
+real renders against 4096-spp references.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+from pyclpt.common.checks import check_bool, check_float, check_int
+
+#: ``clip_radius`` values: the fast-history box is 3x3 or 5x5 pixels.
+CLIP_RADII = (1, 2)
+
+
+@dataclass
+class DenoiserSettings:
+    """Every parameter of the SVGF denoiser. Change a field and pass the object again (or call
+    :meth:`validate`); a bad value raises ValueError (TypeError for the wrong kind) naming the field."""
+
+    #: Smallest weight of the frame in the long colour history, max(alpha_min, 1/N): the history is
+    #: the plain mean of the first 1/alpha_min frames, then an exponential moving average.
+    #: Falcor's 0.05 (about 39 effective frames at convergence).
+    alpha_min: float = 0.05
+    #: The same for the luminance moments that estimate the variance (Falcor's 0.2: the variance
+    #: follows changes within a few frames).
+    moments_alpha_min: float = 0.2
+    #: The same for the fast history that bounds the long one (RELAX keeps about 6 frames in it).
+    #: Chosen with clip_gamma, measured together (docs/denoising-passes.md): 0.5 with clip_gamma 3
+    #: follows a drop of the lighting twice as fast as RELAX-like 0.2 with 2, and converges as well
+    #: on a static scene.
+    fast_alpha: float = 0.5
+    #: Clip the reprojected long history into mean +- clip_gamma sigma of the fast history around the
+    #: pixel, per channel (RELAX's history clamping; what removes ghosting when the lighting
+    #: changes). Negative: no clipping. At >= sqrt(8) (with clip_radius 1) a pixel whose history
+    #: equals its own fast history is never clipped, whatever its neighbours.
+    clip_gamma: float = 3.0
+    #: Half-size of the fast-history box: 1 (3x3) or 2 (5x5). Compiled in (-DCLIP_RADIUS).
+    clip_radius: int = 1
+    #: The frame's demodulated luminance is clamped to firefly_ratio x the larger of its 3x3
+    #: neighbours' mean (centre excluded) and the history's luminance. 0: no clamp (a 1000x
+    #: firefly then spreads over the whole filter footprint). Chosen on real renders at 1 sample per
+    #: pixel and frame (docs/denoising-passes.md, "The firefly clamp on real renders"): relMSE / the plain
+    #: average's after 8 frames, cornell-box 120x120 and living-room 160x90, for 10 / 5 / 4 / 3 / 2:
+    #: 0.17 / 0.18 / 0.19 / 0.23 / 0.33 and 1.97 / 0.62 / 0.50 / 0.39 / 0.30. The living room's
+    #: light arrives in rare, bright samples (through windows, as caustics), which a looser clamp
+    #: spreads as blotches; the price is a darker image (a few % of energy, more near lights).
+    firefly_ratio: float = 4.0
+    #: A-trous iterations (steps 1, 2, 4, ...): the filter reaches 2 (2^iterations - 1) pixels.
+    #: Falcor's 5; at most 8.
+    iterations: int = 5
+    #: The a-trous iteration whose output becomes the colour history (Falcor: 1, SVGF's paper: 0);
+    #: -1: the history keeps the unfiltered temporal accumulation. Measured: with a filtered history
+    #: the error stops falling after 8 frames (tap 0) or grows again (taps 1, 2), the filter's bias
+    #: being fed back; -1 keeps converging (relMSE 3x (tap 0) to 6x (tap 1) lower after 32 frames).
+    feedback_tap: int = -1
+    #: sigma_l of the luminance edge-stopping weight exp(-|l_p - l_q| / (phi_color sqrt(var))).
+    #: Falcor's 10 (the paper's 4).
+    phi_color: float = 10.0
+    #: Exponent of the normal weight max(0, cos)^phi_normal (Falcor's 128).
+    phi_normal: float = 128.0
+    #: sigma_z of the depth weight exp(-|dz| / (phi_depth |grad z| step |offset|)) (Falcor's 1).
+    phi_depth: float = 1.0
+    #: Reprojection: a previous pixel is the same surface if |z - z_prev| <= depth_threshold x
+    #: (depth gradient + 0.01 z). A bilinear tap is at most one pixel away per axis, so 1 would pass
+    #: any smooth surface at rest; 4 also allows 4 % of depth change a frame along the view.
+    depth_threshold: float = 4.0
+    #: Reprojection: and if the cosine between the normals is at least this (0.8: about 37 degrees).
+    normal_threshold: float = 0.8
+    #: History length cap N (Falcor's 32); the colour weight is max(alpha_min, 1/N), so above
+    #: 1/alpha_min this only bounds the count history_length() reports.
+    max_history: int = 32
+    #: Half-size of the spatial variance estimate on a short history (N < 4): 1 (3x3), 2 (5x5) or 3
+    #: (Falcor's 7x7). The first frame's relMSE on the bench's synthetic scene at 96x64 / 256x192 and
+    #: on the Cornell box at 64x64: 1: 20.3e-3 / 11.5e-3 / 0.033, 2: 19.0e-3 / 9.0e-3 / 0.057, 3:
+    #: 18.6e-3 / 8.0e-3 / 0.093; 2 is the middle, at half the cost of 7x7 (scalar code on PoCL: 149
+    #: instead of 278 ms for a first frame at 1280x720).
+    variance_radius: int = 2
+    #: Steer the a-trous filter by the variance of the accumulated estimate (the per-sample variance
+    #: over min(N, (2 - alpha_min) / alpha_min)) rather than plain SVGF's per-sample variance, so the
+    #: spatial filter weakens as the history converges and the output keeps converging (measured:
+    #: without it the error stalls from 8 frames on, 2.3x higher after 16 and 3.7x after 32).
+    variance_of_mean: bool = True
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> DenoiserSettings:
+        """Check every field; returns self. ValueError/TypeError name the field and the value."""
+        name = type(self).__name__
+        for field in ("alpha_min", "moments_alpha_min", "fast_alpha"):
+            value = check_float(getattr(self, field), f"{name}.{field}", lo=0.0, hi=1.0)
+            if value <= 0.0:
+                raise ValueError(f"{name}.{field} must be in (0, 1] (a blend weight; 0 would never take a "
+                                 f"new frame), got {value}")
+            setattr(self, field, value)
+        self.clip_gamma = check_float(self.clip_gamma, f"{name}.clip_gamma")
+        self.clip_radius = check_int(self.clip_radius, f"{name}.clip_radius", lo=1, hi=2)
+        self.firefly_ratio = check_float(self.firefly_ratio, f"{name}.firefly_ratio", lo=0.0)
+        if 0.0 < self.firefly_ratio < 1.0:
+            raise ValueError(f"{name}.firefly_ratio must be 0 (off) or >= 1 (a clamp below the neighbours' "
+                             f"mean would darken every pixel), got {self.firefly_ratio}")
+        self.iterations = check_int(self.iterations, f"{name}.iterations", lo=0, hi=8,
+                                    note=" (the buffers' padding covers 8)")
+        self.feedback_tap = check_int(self.feedback_tap, f"{name}.feedback_tap", lo=-1, hi=7,
+                                      note=" (-1 = the unfiltered accumulation)")
+        if self.feedback_tap >= self.iterations:
+            raise ValueError(f"{name}.feedback_tap={self.feedback_tap} names an a-trous iteration that does not "
+                             f"run with iterations={self.iterations} (use -1 or 0..{self.iterations - 1})")
+        for field in ("phi_color", "phi_depth"):
+            value = check_float(getattr(self, field), f"{name}.{field}", lo=0.0)
+            if value <= 0.0:
+                raise ValueError(f"{name}.{field} must be > 0 (it divides a difference), got {value}")
+            setattr(self, field, value)
+        self.phi_normal = check_float(self.phi_normal, f"{name}.phi_normal", lo=0.0)
+        self.depth_threshold = check_float(self.depth_threshold, f"{name}.depth_threshold", lo=0.0)
+        self.normal_threshold = check_float(self.normal_threshold, f"{name}.normal_threshold", lo=-1.0, hi=1.0)
+        self.max_history = check_int(self.max_history, f"{name}.max_history", lo=1, hi=1 << 20)
+        self.variance_radius = check_int(self.variance_radius, f"{name}.variance_radius", lo=1, hi=3)
+        self.variance_of_mean = check_bool(self.variance_of_mean, f"{name}.variance_of_mean")
+        return self
+
+    @property
+    def n_eff_max(self) -> float:
+        """What variance.cl divides the variance by at most: (2 - alpha_min) / alpha_min, or 1 (plain
+        SVGF) without variance_of_mean."""
+        return (2.0 - self.alpha_min) / self.alpha_min if self.variance_of_mean else 1.0
+
+    def as_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls))
+
