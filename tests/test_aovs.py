@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from closed_forms import camera_rays
 
 import pyclpt
 from pyclpt.cli import main, sequence_path
 from pyclpt.common.image_io import read_layers
 from pyclpt.film.aovs import AOV_NAMES, OFFSCREEN, check_aovs
 from pyclpt.scene.camera_path import CameraPath, Keyframe
-from tests.closed_forms import camera_rays
-from tests.scenes import FRONT_CAMERA, material_zoo, sensor
+from scenes import FRONT_CAMERA, material_zoo, sensor  # tests/ is on sys.path (conftest.py)
 
 W, H = 24, 16
 
@@ -116,7 +116,7 @@ def test_hit_distance_of_the_second_ray(device):
         "wall": {"type": "rectangle", "to_world": [{"scale": 5.0}], "bsdf": {"type": "diffuse"}}})
     _, aov = pyclpt.render(wall_only, spp=2, width=W, height=H, device=device, aovs=["hitdist", "depth"])
     assert np.all(aov["depth"] > 0) and np.all(aov["hitdist"] == 0)
-    from tests.scenes import interior_furnace
+    from scenes import interior_furnace
 
     _, inside = pyclpt.render(interior_furnace(0.5), spp=2, width=W, height=H, device=device, aovs=["hitdist"])
     assert np.all(inside["hitdist"] > 0) and np.all(inside["hitdist"] <= 6.0 + 1e-4)
