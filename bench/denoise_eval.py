@@ -65,7 +65,7 @@ if not __package__:  # run as a script (python bench/denoise_eval.py): import th
     __package__ = "bench"
 
 from . import denoise_metrics as M  # noqa: E402
-from .report import size_type  # noqa: E402
+from .report import _positive, size_type  # noqa: E402
 
 FORMAT = 1
 MODES = ("none", "blend", "svgf", "oidn")
@@ -103,16 +103,6 @@ GOAL_SCENES = ("cornell-box", "shared/living-room")
 
 # -- command line ------------------------------------------------------------------------------
 _size = size_type("auto", minimum=8)
-
-
-def _positive(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
-    return v
 
 
 def _exposure(text: str) -> str | float:

@@ -51,11 +51,13 @@ import time
 import zlib
 from collections import Counter
 from collections.abc import Callable, Hashable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from pyclpt.common.checks import check_bool, check_int, check_optional_bool, check_optional_int, is_int
+from pyclpt.denoise import MODES as DENOISER_MODES
+from pyclpt.denoise import Denoiser, DenoiserSettings
 from pyclpt.device.context import Device
 from pyclpt.film.accumulator import Accumulator, check_options
 from pyclpt.film.aovs import AOV_NAMES, check_aovs
@@ -65,12 +67,7 @@ from pyclpt.rendering.renderer import MAX_RESOLUTION, Renderer, RenderStats
 from pyclpt.scene.camera_path import CameraPath
 from pyclpt.scene.model import Camera, Mesh, Scene, check_material, rgb
 
-if TYPE_CHECKING:
-    from pyclpt.denoise import Denoiser, DenoiserSettings
-
 log = logging.getLogger("pyclpt.rendering.progressive")
-# The denoisers (pyclpt.denoise.MODES; imported with the denoiser, when one is asked for).
-DENOISER_MODES = ("svgf", "blend", "oidn")
 
 # What each change of the scene is called; fields not listed are "scene", spp/name/source are ignored.
 SCENE_FIELDS = {"camera": "camera", "materials": "material", "environment": "emitter", "lights": "emitter",
@@ -187,8 +184,6 @@ class ProgressiveRenderer:
     def _make_denoiser(self) -> Denoiser | None:
         if self.denoiser_mode is None:
             return None
-        from pyclpt.denoise import Denoiser
-
         return Denoiser(self.device, self.width, self.height, mode=self.denoiser_mode,
                         settings=self._denoiser_settings)
 
