@@ -9,7 +9,8 @@ Data flow, one subpackage per step (lower layers never import higher ones; docs/
 scene file -> scene model (:mod:`pyclpt.scene`) -> BVH (:mod:`pyclpt.accel`) -> device buffers
 (:mod:`pyclpt.buffers`) -> integrator (:mod:`pyclpt.integrators`) -> film and accumulation
 (:mod:`pyclpt.film`, with the G-buffer: :mod:`pyclpt.film.aovs`) -> denoiser (:mod:`pyclpt.denoise`)
--> image (:mod:`pyclpt.common.image_io`). Camera motion: :mod:`pyclpt.scene.camera_path`. OpenCL devices and programs:
+-> image (:mod:`pyclpt.common.image_io`); gradients by path replay: :mod:`pyclpt.gradients`.
+Camera motion: :mod:`pyclpt.scene.camera_path`. OpenCL devices and programs:
 :mod:`pyclpt.device`; rendering sessions: :mod:`pyclpt.rendering`; the command line: :mod:`pyclpt.cli`.
 """
 from __future__ import annotations
@@ -28,6 +29,7 @@ from pyclpt.device.context import (
 )
 from pyclpt.device.program import KernelBuildError
 from pyclpt.film.accumulator import Accumulator, AccumulatorError
+from pyclpt.gradients import SceneParameters, optim, render_backward, render_forward, traverse
 from pyclpt.rendering.progressive import ProgressiveRenderer
 from pyclpt.rendering.renderer import Renderer, RenderStats, render
 from pyclpt.scene.camera_path import CameraPath, Keyframe
@@ -60,5 +62,6 @@ __all__ = [
     "Dielectric", "Diffuse", "EnvironmentVariableError", "Envmap", "Film", "get_device", "Keyframe",
     "KernelBuildError", "list_devices", "load", "load_dict", "load_xml", "Mask", "Mesh", "open_device", "Plastic",
     "PointLight", "ProgressiveRenderer", "read_image", "render", "Renderer", "RenderStats", "Scene", "SceneDictError",
-    "SceneXMLError", "ThinDielectric", "write_image",
+    "SceneXMLError", "ThinDielectric", "write_image", "SceneParameters", "optim", "render_backward", "render_forward",
+    "traverse",
 ]

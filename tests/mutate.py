@@ -58,6 +58,7 @@ T_BACK_BLACK = "tests/test_analytic.py::test_camera_behind_an_area_light_sees_it
 T_GLASS_INSIDE = "tests/test_analytic.py::test_camera_inside_glass_sphere_sees_eta_squared"
 T_FURNACE = "tests/test_render.py::test_interior_furnace"
 T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
+T_GRAD_FD = "tests/test_gradients.py::test_backward_matches_finite_differences"
 
 MUTANTS: list[Mutant] = [
     # ---- the mutants of issue 16: each must be killed -------------------------------------------
@@ -65,7 +66,7 @@ MUTANTS: list[Mutant] = [
            ("tests/test_sampling.py::test_power_heuristic",),
            "the balance heuristic in place of the power heuristic (unbiased: only the unit test sees it)",
            issue=True),
-    Mutant("mis-swapped-light-sample", "power_heuristic(ls.pdf, bsdf_pdf)", "power_heuristic(bsdf_pdf, ls.pdf)",
+    Mutant("mis-swapped-light-sample", "power_heuristic(n->ls.pdf, bsdf_pdf)", "power_heuristic(bsdf_pdf, n->ls.pdf)",
            (T_ANALYTIC_QUAD,), "the power heuristic's arguments swapped for the light sample", issue=True),
     Mutant("mis-swapped-emission-hit", "w = power_heuristic(ps->prev_pdf, light_pdf);",
            "w = power_heuristic(light_pdf, ps->prev_pdf);", (T_ANALYTIC_QUAD,),
@@ -172,8 +173,7 @@ MUTANTS: list[Mutant] = [
            "return max_depth < 0 || depth <= max_depth;", (T_FURNACE,), "max_depth allows one bounce too many"),
     Mutant("miss-always-mis", "bool mis = !(ps->flags & PATH_PREV_DELTA);", "bool mis = true;", (T_SKY_CUBE,),
            "the environment seen by camera rays and delta bounces weighted as if light sampling could find it"),
-    Mutant("light-sample-times-pdf", "vec3 contrib = v3_scale(v3_mul(v3_mul(ps->beta, f), ls.radiance), w / ls.pdf);",
-           "vec3 contrib = v3_scale(v3_mul(v3_mul(ps->beta, f), ls.radiance), w * ls.pdf);", (T_ANALYTIC_QUAD,),
+    Mutant("light-sample-times-pdf", "n->weight = w / n->ls.pdf;", "n->weight = w * n->ls.pdf;", (T_ANALYTIC_QUAD,),
            "a light sample multiplied by its pdf instead of divided"),
     Mutant("shadow-ray-reaches-light", "ls.dist * (1.0f - 1e-4f)", "ls.dist * (1.0f + 1e-4f)", (T_ANALYTIC_QUAD,),
            "shadow rays long enough to hit the light they test"),
@@ -229,6 +229,27 @@ MUTANTS: list[Mutant] = [
     Mutant("ggx-g1-halved", "return 2.0f / (1.0f + m_sqrt(1.0f + tan2));",
            "return 1.0f / (1.0f + m_sqrt(1.0f + tan2));",
            ("tests/test_sampling.py::test_roughconductor_furnace",), "GGX's Smith G1 off by a factor 2"),
+    # ---- differentiable rendering (issue 13) --------------------------------------------------------
+    Mutant("gradient-ignores-gathered-radiance",
+           "BsdfAdjoint g = bsdf_adjoint(&deferred[k].r, v3_mul(dL, v3_sub(L, deferred[k].gathered)));",
+           "BsdfAdjoint g = bsdf_adjoint(&deferred[k].r, v3_mul(dL, L));",
+           (f"{T_GRAD_FD}[diffuse]",), "a BSDF sample's adjoint uses the whole path's radiance, not what came after"),
+    Mutant("gradient-delta-lobe-ratio", "r.spec = safe_div3(v3_splat(1.0f), b->spec);", "r.spec = b->spec;",
+           (f"{T_GRAD_FD}[conductor-spec]",),
+           "a delta lobe's derivative ratio spec instead of 1 / spec"),
+    Mutant("gradient-texel-weights-swapped", "k.w[1] = ax * (1.0f - ay);", "k.w[1] = (1.0f - ax) * ay;",
+           (f"{T_GRAD_FD}[bitmap]",), "a bilinear texel's gradient weight taken from its neighbour"),
+    Mutant("gradient-emission-without-mis", "grad_emitter(sc, gr, s.light, ps.dir, v3_scale(v3_mul(dL, ps.beta), w));",
+           "grad_emitter(sc, gr, s.light, ps.dir, v3_mul(dL, ps.beta));", (f"{T_GRAD_FD}[area-light]",),
+           "the gradient of emission found by a BSDF sample loses its MIS weight"),
+    Mutant("gradient-replay-without-visibility", "if (ps.depth < VIS_BITS) *visible |= 1u << ps.depth;",
+           "if (ps.depth < VIS_BITS) *visible |= 0u;",
+           ("tests/test_gradients.py::test_replay_gives_the_gradients_of_the_deferred_pass",),
+           "the replay sees every shadow ray occluded (its radiance bookkeeping goes wrong)"),
+    Mutant("gradient-alpha-not-moved", "return dataclasses.replace(base, alpha=alpha * factor) if alpha > 0 else base",
+           "return dataclasses.replace(base, alpha=alpha) if alpha > 0 else base",
+           (f"{T_GRAD_FD}[roughconductor-alpha]",), "the roughness records are not moved: no alpha gradient",
+           root="host"),
 ]
 
 

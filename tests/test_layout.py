@@ -84,7 +84,7 @@ def test_subpackage_docstring_says_what_it_may_import(name):
 
 def test_cl_tree_mirrors_the_package():
     root = cl_dir()
-    for folder in ("core", "scene", "integrators", "integrators/wavefront", "film", "denoise"):
+    for folder in ("core", "scene", "integrators", "integrators/wavefront", "film", "denoise", "gradients"):
         assert (root / folder).is_dir(), folder
     assert not list(root.glob("*.h")) and not list(root.glob("*.cl")), "sources belong in a subfolder of cl/"
 
@@ -122,6 +122,18 @@ def test_denoiser_pass_has_one_name(src):
     text = (cl_dir() / "denoise" / src).read_text()
     assert re.search(rf"__kernel\s+void\s+{name}\s*\(", text), f"cl/denoise/{src}: no kernel named {name}"
     assert callable(getattr(Svgf, name, None)) or callable(getattr(Blend, name, None)), f"no Svgf/Blend.{name}"
+
+
+@pytest.mark.parametrize("src", sorted(p.name for p in (cl_dir() / "gradients").glob("*.cl")))
+def test_gradient_kernel_has_one_name(src):
+    """A gradient kernel: its .cl file under cl/gradients/, its kernel and the PathReplay method that
+    launches it share a name."""
+    from pyclpt.gradients.replay import PathReplay
+
+    name = src[:-3]
+    text = (cl_dir() / "gradients" / src).read_text()
+    assert re.search(rf"__kernel\s+(?:SCALAR_KERNEL\s+)?void\s+{name}\s*\(", text), f"cl/gradients/{src}"
+    assert callable(getattr(PathReplay, name, None)), f"no PathReplay.{name}"
 
 
 def test_kernel_files_say_what_they_consume_and_produce():

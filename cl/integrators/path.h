@@ -101,30 +101,50 @@ static inline void path_hit_emission(const Scene* sc, const Surface* s, float t,
     ps->L = v3_add(ps->L, v3_scale(v3_mul(ps->beta, le), w));
 }
 
-/* hit processing, part 2: next-event estimation. Writes a shadow ray only for a
- * sample that can contribute (pdf > 0, non-zero value). */
-static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b,
-                                     const PathState* ps, ShadowRay* sr) {
-    if (bsdf_is_delta(b)) return false;
+/* A light sample seen from a surface: the shadow ray and the factors of its contribution
+ * contrib = beta * f * radiance * weight, kept apart for the gradient kernels (cl/gradients/). */
+typedef struct {
+    ShadowRay sr;
     LightSample ls;
+    vec3 f;         /* bsdf_eval at the light's direction: value * |cos| */
+    vec3 wo;        /* the light's direction in the shading frame */
+    float weight;   /* MIS weight / pdf */
+} NeeSample;
+
+/* hit processing, part 2: next-event estimation, with its factors (NeeSample). Writes a shadow ray
+ * only for a sample that can contribute (pdf > 0, non-zero value). */
+static inline bool path_nee(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, const PathState* ps,
+                            NeeSample* n) {
+    if (bsdf_is_delta(b)) return false;
     float u_sel = rng_1d(key, ps->depth, DIM_LIGHT_SELECT);
     vec2 u = rng_2d(key, ps->depth, DIM_LIGHT_U);
-    if (!light_sample(sc, s->p, u_sel, u, &ls)) return false;
+    if (!light_sample(sc, s->p, u_sel, u, &n->ls)) return false;
     vec3 wi = to_local(s->sh, v3_neg(ps->dir));
-    vec3 wo = to_local(s->sh, ls.wi);
+    n->wo = to_local(s->sh, n->ls.wi);
     float bsdf_pdf;
-    vec3 f = bsdf_eval(b, wi, wo, &bsdf_pdf);
+    n->f = bsdf_eval(b, wi, n->wo, &bsdf_pdf);
     /* the geometric normal must agree with the shading frame about the side */
-    if (m_dot(ls.wi, s->ng) * wo.z <= 0.0f) return false;
+    if (m_dot(n->ls.wi, s->ng) * n->wo.z <= 0.0f) return false;
     /* a delta light (point) cannot be hit by BSDF sampling: its sample takes the whole weight */
-    float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf);
-    vec3 contrib = v3_scale(v3_mul(v3_mul(ps->beta, f), ls.radiance), w / ls.pdf);
+    float w = n->ls.delta ? 1.0f : power_heuristic(n->ls.pdf, bsdf_pdf);
+    n->weight = w / n->ls.pdf;
+    vec3 contrib = v3_scale(v3_mul(v3_mul(ps->beta, n->f), n->ls.radiance), n->weight);
     if (!(max3(contrib) > 0.0f)) return false;
-    sr->org = spawn_origin(s, ls.wi);
-    sr->dir = ls.wi;
-    sr->tmax = m_isinf(ls.dist) ? INF_F : ls.dist * (1.0f - 1e-4f) - m_length(v3_sub(sr->org, s->p));
+    ShadowRay* sr = &n->sr;
+    sr->org = spawn_origin(s, n->ls.wi);
+    sr->dir = n->ls.wi;
+    sr->tmax = m_isinf(n->ls.dist) ? INF_F : n->ls.dist * (1.0f - 1e-4f) - m_length(v3_sub(sr->org, s->p));
     sr->contrib = contrib;
     return sr->tmax > 0.0f;
+}
+
+/* next-event estimation's shadow ray alone (path_nee) */
+static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b,
+                                     const PathState* ps, ShadowRay* sr) {
+    NeeSample n;
+    if (!path_nee(sc, key, s, b, ps, &n)) return false;
+    *sr = n.sr;
+    return true;
 }
 
 /* BSDF sampling: the next direction, throughput update and Russian roulette.

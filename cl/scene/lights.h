@@ -72,6 +72,7 @@ typedef struct {
     vec3 radiance;   /* radiance arriving at the shading point (point light: I / dist^2) */
     float pdf;       /* solid-angle pdf, emitter choice included; for a delta light the choice alone */
     bool delta;      /* a delta light (point): no BSDF sample can hit it, so no MIS */
+    int light;       /* the emitter chosen (its index in `lights`) */
 } LightSample;
 
 static inline int num_lights(const Scene* sc) { return (int)sc->consts[CONST_NUM_LIGHTS]; }
@@ -132,16 +133,51 @@ static inline vec2 env_texel_coords(__global const float* e, vec3 d) {
     return v2(x, y);
 }
 
+/* The bilinear cell of texel coordinates xy: columns i0, i1 (periodic), rows j0, j0 + 1, fractions f. */
+typedef struct {
+    int i0, i1, j0;
+    float fx, fy;
+} EnvCell;
+
+static inline EnvCell env_cell(__global const float* e, vec2 xy) {
+    int w = (int)e[ENV_WIDTH], h = (int)e[ENV_HEIGHT];
+    EnvCell c;
+    c.i0 = m_imin((int)xy.x, w - 1);
+    c.j0 = m_imin((int)xy.y, h - 2);
+    c.fx = xy.x - (float)c.i0;
+    c.fy = xy.y - (float)c.j0;
+    c.i1 = c.i0 + 1 == w ? 0 : c.i0 + 1;
+    return c;
+}
+
 /* The map's radiance (scale applied) at texel coordinates xy: bilinear, periodic in x. */
 static inline vec3 env_lookup(const Scene* sc, __global const float* e, vec2 xy) {
-    int w = (int)e[ENV_WIDTH], h = (int)e[ENV_HEIGHT];
-    int i0 = m_imin((int)xy.x, w - 1), j0 = m_imin((int)xy.y, h - 2);
-    float fx = xy.x - (float)i0, fy = xy.y - (float)j0;
-    int i1 = i0 + 1 == w ? 0 : i0 + 1;
+    EnvCell c = env_cell(e, xy);
     __global const float* t = sc->tex.info + TEX_STRIDE * (int)e[ENV_TEXTURE];
-    vec4 c00 = tex_texel(&sc->tex, t, i0, j0), c10 = tex_texel(&sc->tex, t, i1, j0);
-    vec4 c01 = tex_texel(&sc->tex, t, i0, j0 + 1), c11 = tex_texel(&sc->tex, t, i1, j0 + 1);
-    return v3_scale(v4_xyz(tex_bilerp(c00, c10, c01, c11, fx, fy)), e[ENV_SCALE]);
+    vec4 c00 = tex_texel(&sc->tex, t, c.i0, c.j0), c10 = tex_texel(&sc->tex, t, c.i1, c.j0);
+    vec4 c01 = tex_texel(&sc->tex, t, c.i0, c.j0 + 1), c11 = tex_texel(&sc->tex, t, c.i1, c.j0 + 1);
+    return v3_scale(v4_xyz(tex_bilerp(c00, c10, c01, c11, c.fx, c.fy)), e[ENV_SCALE]);
+}
+
+/* The four texels env_lookup blends at xy (indices into the texels of the map's texture, as TexTaps
+ * in texture.h) and their bilinear weights, the map's scale not included: for gradients. */
+static inline TexTaps env_taps(const Scene* sc, __global const float* e, vec2 xy) {
+    EnvCell c = env_cell(e, xy);
+    int w = (int)e[ENV_WIDTH];
+    __global const float* t = sc->tex.info + TEX_STRIDE * (int)e[ENV_TEXTURE];
+    TexTaps k;
+    k.n = 4;
+    k.is_float = (int)t[TEX_FORMAT] == TEXF_FLOAT;
+    int base = as_int(t[TEX_OFFSET]);
+    k.at[0] = base + c.j0 * w + c.i0;
+    k.at[1] = base + c.j0 * w + c.i1;
+    k.at[2] = base + (c.j0 + 1) * w + c.i0;
+    k.at[3] = base + (c.j0 + 1) * w + c.i1;
+    k.w[0] = (1.0f - c.fx) * (1.0f - c.fy);
+    k.w[1] = c.fx * (1.0f - c.fy);
+    k.w[2] = (1.0f - c.fx) * c.fy;
+    k.w[3] = c.fx * c.fy;
+    return k;
 }
 
 /* Solid-angle density with which env_sample produces the map-frame direction at xy. */
@@ -221,6 +257,7 @@ static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u,
     __global const float* l = sc->lights + LIGHT_STRIDE * id;
     int type = (int)l[LIGHT_TYPE];
     ls->delta = false;
+    ls->light = id;
     if (HAS_LIGHT(LIGHT_CONSTANT) && type == LIGHT_CONSTANT) {
         ls->wi = square_to_uniform_sphere(u);
         ls->dist = INF_F;

@@ -171,6 +171,60 @@ static inline vec4 tex_eval4(const Textures* tx, int id, vec2 uv) {
 
 static inline vec3 tex_eval(const Textures* tx, int id, vec2 uv) { return v4_xyz(tex_eval4(tx, id, uv)); }
 
+/* The texels a lookup of texture `id` at uv blends, with their weights: tex_eval4's value is
+ * scale * sum_k w[k] * texel(at[k]) (before sRGB decoding of 8-bit texels: the weights apply to linear
+ * values). at[k] indexes texels8 (is_float false) or texels32 (true) in texels, -1 for a texel outside a
+ * TEX_WRAP_BLACK image (weight 0). n = 0 for a checkerboard (its colours are not texels). For
+ * gradients with respect to texels (cl/gradients/). */
+typedef struct {
+    int at[4];
+    float w[4];
+    int n;
+    bool is_float;
+} TexTaps;
+
+static inline int tex_texel_index(__global const float* t, int x, int y) {
+    int w = (int)t[TEX_WIDTH], h = (int)t[TEX_HEIGHT], mode = (int)t[TEX_WRAP];
+    x = tex_wrap(x, w, mode);
+    y = tex_wrap(y, h, mode);
+    if (x < 0 || y < 0) return -1;
+    return as_int(t[TEX_OFFSET]) + y * w + x;
+}
+
+static inline TexTaps tex_taps(const Textures* tx, int id, vec2 uv) {
+    TexTaps k;
+    k.n = 0;
+    k.is_float = false;
+    __global const float* t = tx->info + TEX_STRIDE * id;
+    if ((int)t[TEX_KIND] != TEX_BITMAP) return k;
+    k.is_float = (int)t[TEX_FORMAT] == TEXF_FLOAT;
+    vec2 st = v2(uv.x * t[TEX_UV_SCALE] + t[TEX_UV_OFFSET], uv.y * t[TEX_UV_SCALE + 1] + t[TEX_UV_OFFSET + 1]);
+    float x = st.x * t[TEX_WIDTH] - 0.5f;
+    float y = (1.0f - st.y) * t[TEX_HEIGHT] - 0.5f;
+    if (!(m_isfinite(x) && m_isfinite(y))) return k;
+    x = m_clamp(x, -1.0e7f, 1.0e7f);
+    y = m_clamp(y, -1.0e7f, 1.0e7f);
+    float fx = m_floor(x), fy = m_floor(y);
+    if ((int)t[TEX_FILTER] == 0) {
+        k.n = 1;
+        k.at[0] = tex_texel_index(t, (int)m_floor(x + 0.5f), (int)m_floor(y + 0.5f));
+        k.w[0] = 1.0f;
+        return k;
+    }
+    int x0 = (int)fx, y0 = (int)fy;
+    float ax = x - fx, ay = y - fy;
+    k.n = 4;
+    k.at[0] = tex_texel_index(t, x0, y0);
+    k.at[1] = tex_texel_index(t, x0 + 1, y0);
+    k.at[2] = tex_texel_index(t, x0, y0 + 1);
+    k.at[3] = tex_texel_index(t, x0 + 1, y0 + 1);
+    k.w[0] = (1.0f - ax) * (1.0f - ay);
+    k.w[1] = ax * (1.0f - ay);
+    k.w[2] = (1.0f - ax) * ay;
+    k.w[3] = ax * ay;
+    return k;
+}
+
 /* A scalar view of a texture (opacity, bump height): the mean of rgb, as Mitsuba's
  * `eval_1` of an RGB texture. */
 static inline float tex_eval1(const Textures* tx, int id, vec2 uv) {

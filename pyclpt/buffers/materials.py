@@ -109,6 +109,10 @@ class TextureTable:
         self._ids[key] = len(self.records) - 1
         return self._ids[key]
 
+    def index(self, tex: Bitmap | Checkerboard) -> int | None:
+        """The id of a texture added to the table, None if it was not."""
+        return self._ids.get(id(tex))
+
     def info(self) -> np.ndarray:
         return np.stack(self.records) if self.records else np.zeros((1, TEX_STRIDE), np.float32)
 

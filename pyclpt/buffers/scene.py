@@ -16,7 +16,13 @@ import pyopencl as cl
 
 from pyclpt.accel.bvh import FlatBVH, build_bvh, leaf_packet_buffer
 from pyclpt.buffers.lights import LightArrays, camera_consts, pack_lights
-from pyclpt.buffers.materials import MAT_STRIDE, TextureTable, pack_material, pack_materials  # noqa: F401
+from pyclpt.buffers.materials import (  # noqa: F401
+    MAT_STRIDE,
+    MaterialArrays,
+    TextureTable,
+    pack_material,
+    pack_materials,
+)
 from pyclpt.device.context import Device, upload
 from pyclpt.scene.model import Camera, Scene
 
@@ -67,10 +73,45 @@ class SceneArrays:
         return sum(a.nbytes for _, a in self.device_arrays())
 
 
+def triangle_emission(scene: Scene) -> np.ndarray:
+    """(T, 3) float32: the emitted radiance of every triangle of the scene, in mesh order."""
+    parts = []
+    for mesh in scene.meshes:
+        em = mesh.emission if mesh.emission is not None and max(mesh.emission) > 0 else (0.0, 0.0, 0.0)
+        parts.append(np.tile(np.asarray(em, np.float32), (mesh.triangle_count, 1)))
+    return np.concatenate(parts)
+
+
+def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[MaterialArrays, LightArrays]:
+    """The materials, textures and emitters of ``scene`` for its BVH: everything but the geometry."""
+    mats = pack_materials(scene.materials)
+    lights = pack_lights(scene, bvh.tris.reshape(-1, 9), triangle_emission(scene)[bvh.tri_order], bounds,
+                         mats.textures)
+    return mats, lights
+
+
+def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool) -> dict:
+    return {"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
+            "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
+            "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets}
+
+
+def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order: np.ndarray) -> np.ndarray:
+    """(T, 2) int32 in leaf order: material | TRI_* flags, light index."""
+    info = []
+    for mesh in scene.meshes:
+        flags = ((TRI_HAS_NORMALS if mesh.normals is not None else 0) | (TRI_HAS_UVS if mesh.uvs is not None else 0)
+                 | (TRI_MASKED if mats.masked[mesh.material] else 0))
+        info.append(np.full(mesh.triangle_count, mesh.material | flags, np.int32))
+    tri_info = np.empty((len(order), 2), np.int32)
+    tri_info[:, 0] = np.concatenate(info)[order]
+    tri_info[:, 1] = lights.tri_light
+    return tri_info
+
+
 def pack_scene(scene: Scene) -> SceneArrays:
     scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
-    mats = pack_materials(scene.materials)
-    positions, indices, normals, uvs, info, emission = [], [], [], [], [], []
+    positions, indices, normals, uvs = [], [], [], []
     offset = 0
     for mesh in scene.meshes:
         positions.append(mesh.positions)
@@ -78,11 +119,6 @@ def pack_scene(scene: Scene) -> SceneArrays:
         nv = mesh.positions.shape[0]
         normals.append(mesh.normals if mesh.normals is not None else np.zeros((nv, 3), np.float32))
         uvs.append(mesh.uvs if mesh.uvs is not None else np.zeros((nv, 2), np.float32))
-        flags = ((TRI_HAS_NORMALS if mesh.normals is not None else 0) | (TRI_HAS_UVS if mesh.uvs is not None else 0)
-                 | (TRI_MASKED if mats.masked[mesh.material] else 0))
-        info.append(np.full(mesh.triangle_count, mesh.material | flags, np.int32))
-        em = mesh.emission if mesh.emission is not None and max(mesh.emission) > 0 else (0.0, 0.0, 0.0)
-        emission.append(np.tile(np.asarray(em, np.float32), (mesh.triangle_count, 1)))
         offset += nv
     P = np.concatenate(positions)
     tris = np.concatenate(indices)
@@ -90,13 +126,10 @@ def pack_scene(scene: Scene) -> SceneArrays:
     packets = LEAF_PACKETS and bvh.width == 8
     order = bvh.tri_order
     bounds = np.stack([P.min(0), P.max(0)])
-    lights = pack_lights(scene, bvh.tris.reshape(-1, 9), np.concatenate(emission)[order], bounds, mats.textures)
-    tri_info = np.empty((len(order), 2), np.int32)
-    tri_info[:, 0] = np.concatenate(info)[order]
-    tri_info[:, 1] = lights.tri_light
+    mats, lights = pack_appearance(scene, bvh, bounds)
     return SceneArrays(
         bvh=bvh,
-        tri_info=tri_info,
+        tri_info=triangle_info(scene, mats, lights, order),
         tri_vidx=np.ascontiguousarray(tris[order]),
         vnormals=np.concatenate(normals).astype(np.float32),
         vuvs=np.concatenate(uvs).astype(np.float32),
@@ -104,9 +137,7 @@ def pack_scene(scene: Scene) -> SceneArrays:
         lights=lights,
         textures=mats.textures,
         bounds=bounds,
-        defines={"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
-                 "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
-                 "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets},
+        defines=scene_defines(mats, lights, bvh, packets),
         node_buffer=leaf_packet_buffer(bvh) if packets else bvh.nodes,
     )
 
@@ -128,6 +159,34 @@ class SceneBuffers:
     def defines(self) -> dict:
         """-D specialisations the kernels need for this scene."""
         return self.arrays.defines
+
+    def refresh_appearance(self) -> list[str]:
+        """Re-read the scene's materials, textures and emitters (after their values changed) and upload
+        the buffers whose contents changed; the geometry and its BVH are kept. Returns the names of the
+        buffers uploaded. ValueError when the change needs other kernels (a material kind or an emitter
+        kind appears or disappears, texturing is switched on or off): then make a new renderer."""
+        self.scene.validate()
+        old = self.arrays
+        mats, lights = pack_appearance(self.scene, old.bvh, old.bounds)
+        packets = old.defines["BVH_LEAF_PACKETS"]
+        defines = scene_defines(mats, lights, old.bvh, packets)
+        changed = {k: (old.defines[k], v) for k, v in defines.items() if old.defines[k] != v}
+        if changed:
+            what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items())
+            raise ValueError(f"scene {self.scene.name!r}: the new values change what the kernels are compiled "
+                             f"for ({what}); render it with a new renderer")
+        new = SceneArrays(bvh=old.bvh, tri_info=triangle_info(self.scene, mats, lights, old.bvh.tri_order),
+                          tri_vidx=old.tri_vidx, vnormals=old.vnormals, vuvs=old.vuvs, materials=mats.materials,
+                          lights=lights, textures=mats.textures, bounds=old.bounds, defines=defines,
+                          node_buffer=old.node_buffer)
+        uploaded = []
+        for k, ((name, before), (_, after)) in enumerate(zip(old.device_arrays(), new.device_arrays())):
+            if before is not after and (before.dtype != after.dtype or before.tobytes() != after.tobytes()):
+                self._buffers[k] = upload(self.device, after, f"scene {self.scene.name!r} {name}")
+                uploaded.append(name)
+        self.arrays = new
+        self._consts.clear()  # the environment's light index and the number of emitters live there
+        return uploaded
 
     def refresh_camera(self, previous: Camera | None = None) -> None:
         """Re-read the scene's camera: the constants are rebuilt on the next args() call. ``previous``:

@@ -85,6 +85,14 @@ def bad_texel(pixels: np.ndarray, *, negative: bool) -> str | None:
 # Elements whose _check() is running: its own assignments (normalised values) are not checked again.
 # Kept out of the elements themselves so that their __dict__ holds their fields and nothing else.
 _CHECKING: set[int] = set()
+# Bumped by every field assignment an element accepts: what keeps a copy of the model (the gradient
+# renderer's device buffers) can tell that something changed (generation()).
+_GENERATION = [0]
+
+
+def generation() -> int:
+    """A number that changes whenever a field of any element of any scene is assigned."""
+    return _GENERATION[0]
 
 
 class Checked(abc.ABC):
@@ -124,6 +132,7 @@ class Checked(abc.ABC):
         except BaseException:
             object.__setattr__(self, name, old)
             raise
+        _GENERATION[0] += 1
 
 
 @dataclass(eq=False)
@@ -596,6 +605,9 @@ class Scene(Checked):
     name: str = "scene"
     source: Path | None = None
     lights: list[PointLight] = field(default_factory=list)  # emitters that are not shapes
+    # Mitsuba's names of objects the meshes' names do not give ("material:3" -> "red", "environment",
+    # "light:0"): set by the dict and XML loaders, used by pyclpt.traverse
+    ids: dict[str, str] = field(default_factory=dict)
 
     def _check(self) -> None:
         where = f"scene {self.name!r}"
@@ -621,6 +633,9 @@ class Scene(Checked):
         if not isinstance(self.film, Film):
             raise TypeError(f"{where} film: expected a pyclpt.Film, got {type(self.film).__name__}")
         self.spp = check_int(self.spp, f"{where} spp", lo=1)
+        if not isinstance(self.ids, dict) or not all(isinstance(k, str) and isinstance(v, str)
+                                                     for k, v in self.ids.items()):
+            raise TypeError(f"{where} ids: expected a dict of str to str, got {self.ids!r:.80}")
         self.max_depth = check_int(self.max_depth, f"{where} max_depth", lo=-1, note=" (-1 = unlimited)")
 
     def material_label(self, index: int) -> str:

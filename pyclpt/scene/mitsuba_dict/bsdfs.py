@@ -270,6 +270,9 @@ def material_index(ctx: LoadContext, d: Mapping[str, Any] | None, where: str) ->
     mat: Material = Diffuse() if d is None else resolve_bsdf(ctx, d, where)
     ctx.materials.append(mat)
     idx = len(ctx.materials) - 1
+    # Mitsuba's name of the BSDF: its id, else its place in the shape (traverse's names)
+    ctx.ids[f"material:{idx}"] = key[3:] if key is not None and key.startswith("id:") else (
+        "default_bsdf" if d is None else where)
     if key is not None:
         ctx.material_ids[key] = idx
     return idx

@@ -53,6 +53,7 @@ class LoadContext:
         self.notes: list[str] = []
         self.materials: list[Material] = []
         self.material_ids: dict[str, int] = {}
+        self.ids: dict[str, str] = {}  # Scene.ids: Mitsuba's names of the scene's objects
         self.meshes: list[Mesh] = []
         self.lights: list[PointLight] = []
         self.environment: RGB | Envmap | None = None

@@ -41,6 +41,7 @@ def load_point(ctx: LoadContext, d: Mapping[str, Any], where: str) -> None:
     if "position" in d:
         pos = ctx.vector(d, "position", where)
     ctx.lights.append(PointLight(tuple(pos), color(ctx, d.get("intensity", 1.0), f"{where}.intensity", d)))
+    ctx.ids[f"light:{len(ctx.lights) - 1}"] = str(d.get("id", where))
     return None
 
 
@@ -53,9 +54,16 @@ def load_envmap(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environme
     """``envmap``: an equirectangular image (8-bit files decoded from sRGB), ``to_world`` and ``scale``."""
     from pyclpt.scene.textures import read_texture_image
 
-    ctx.note_unused(where, d, {"filename", "to_world", "scale"})
-    if "filename" not in d:
-        raise ctx.fail(where, "an envmap needs a filename", d)
+    ctx.note_unused(where, d, {"filename", "data", "to_world", "scale"})
+    if ("filename" in d) == ("data" in d):
+        raise ctx.fail(where, "an envmap needs a filename or data (an (H, W, 3) array of linear radiance), "
+                              "one of them", d)
+    if "data" in d:
+        try:
+            return Envmap(np.array(d["data"], np.float32), ctx.transform(d, "to_world", where),
+                          ctx.number(d, "scale", 1.0, where), f"{where}.data")
+        except (ValueError, TypeError) as exc:
+            raise ctx.fail(where, str(exc), d) from None
     path = ctx.path(d["filename"], f"{where}.filename", d)
     try:
         pixels, ldr = read_texture_image(path)
@@ -142,3 +150,4 @@ def load_emitter(ctx: LoadContext, name: str, d: Mapping[str, Any]) -> None:
         raise ctx.fail(where, str(exc), d) from None
     if environment is not None:
         ctx.environment = environment
+        ctx.ids["environment"] = str(d.get("id", name))

@@ -91,4 +91,5 @@ def load_scene(ctx: LoadContext, d: Mapping[str, Any], name: str) -> Scene:
             ctx.note(value, key, f"{value.get('type')} defined but never referenced by a shape, unused")
     if ctx.notes:
         log.warning("%s: not used by pyclpt (%d): %s", ctx.origin, len(ctx.notes), "; ".join(ctx.notes))
-    return Scene(ctx.meshes, ctx.materials, camera, film, ctx.environment, spp, max_depth, name, lights=ctx.lights)
+    return Scene(ctx.meshes, ctx.materials, camera, film, ctx.environment, spp, max_depth, name, lights=ctx.lights,
+                 ids=ctx.ids)

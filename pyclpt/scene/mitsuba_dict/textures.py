@@ -59,11 +59,11 @@ def load_bitmap(ctx: LoadContext, d: Mapping[str, Any], where: str, scale: RGB) 
     from pyclpt.scene.textures import load_bitmap as read_bitmap
 
     uv_scale, uv_offset = uv_transform(ctx, d, where)
-    ctx.note_unused(where, d, {"filename", "filter_type", "wrap_mode", "wrap_mode_u", "wrap_mode_v", "raw",
+    ctx.note_unused(where, d, {"filename", "data", "filter_type", "wrap_mode", "wrap_mode_u", "wrap_mode_v", "raw",
                                "gamma", "max_anisotropy", "cache", "channel"} | _UV_KEYS)
-    if "filename" not in d:
-        raise ctx.fail(where, "a bitmap texture needs a filename", d)
-    path = ctx.path(d["filename"], f"{where}.filename", d)
+    if ("filename" in d) == ("data" in d):
+        raise ctx.fail(where, "a bitmap texture needs a filename or data (an (H, W, C) array of linear values), "
+                              "one of them", d)
     filt = str(d.get("filter_type", "bilinear")).lower()
     if filt not in ("bilinear", "nearest"):
         ctx.note(d, where, f"filter_type {filt}: bilinear filtering used (no mipmaps)")
@@ -78,6 +78,13 @@ def load_bitmap(ctx: LoadContext, d: Mapping[str, Any], where: str, scale: RGB) 
         ctx.note(d, where, "gamma ignored: the file's own encoding (sRGB for LDR) used")
     if "channel" in d:
         ctx.note(d, where, f"channel {d['channel']!r} ignored")
+    if "data" in d:  # texels given as an array: linear values (Mitsuba's bitmap `data`)
+        try:
+            return Bitmap(np.array(d["data"], np.float32), name=f"{where}.data", srgb=False, filter=filt,
+                          wrap_mode=wrap, uv_scale=uv_scale, uv_offset=uv_offset, scale=scale)
+        except (ValueError, TypeError) as exc:
+            raise ctx.fail(where, str(exc), d) from None
+    path = ctx.path(d["filename"], f"{where}.filename", d)
     raw = ctx.flag(d, "raw", False, where)
     key = (str(path), raw, filt, wrap, uv_scale, uv_offset, tuple(scale))
     if key not in ctx.bitmaps:

@@ -1,0 +1,162 @@
+/* backward: reverse-mode gradients by path replay (Vicini, Speierer and Jakob 2021, Mitsuba's prb).
+ *
+ * Consumes: the film slots [offset, offset + count) of a batch of frames starting at sample
+ *           first_sample (slot f: pixel f % pixels, sample first_sample + f / pixels; path.h), and
+ *           image_grad, dLoss/dImage (3 floats per pixel), scaled by inv_spp (the image is the
+ *           mean of spp samples).
+ * Produces: the adjoints of the scene's parameters added to the gradient buffers (params.h: GRAD_PARAMS,
+ *           float atomics); drop_marks[f] = 1 for a path whose radiance was NaN or inf (dropped, its
+ *           gradient too; counted by the host).
+ *
+ * One work-item per path; dL = image_grad[pixel] / spp. The path's contributions and what they
+ * differentiate into, with G the radiance the path gathered up to and including a vertex and L its
+ * total:
+ *   emission at a hit, C = beta Le w:   dLe += dL beta w
+ *   next-event estimation, C:           dLe_light += dL beta f w / pdf,   dtheta += dL C (df/dtheta) / f
+ *   BSDF sample at the vertex:          dtheta += dL (L - G) (df/dtheta) / f
+ * since everything the path gathers after a vertex went through f there. The first two are known at
+ * the vertex; the third needs L, known only when the path ends. So the primal pass (the estimator of
+ * path.h, the same calls in the same order, so the same L) scatters the first two at once and keeps
+ * the third's (df/dtheta)/f and G for its first DEFERRED_VERTICES vertices (private memory, a few
+ * hundred bytes whatever the depth), scattered when L is known. A path longer than that is traced
+ * again from its camera ray with the same random numbers (rng keys: seed, pixel, sample, bounce,
+ * dimension): the replay, which scatters the third term of its later vertices (DEFERRED_VERTICES = 0:
+ * every vertex, Mitsuba's prb as published). Shadow-ray visibility of the first 32 bounces is kept as
+ * bits for the replay. A path's adjoints are summed privately per slot and added to the buffers when it
+ * ends (params.h: grad_put3, grad_flush). Memory: nothing per path, sample or bounce in device memory. */
+#include "gradients/bsdf_derivative.h"
+
+#define VIS_BITS 32
+/* Vertices whose BSDF-sample term the primal pass keeps for the end of the path (the later ones are
+ * done by a replay of the path). */
+#ifndef DEFERRED_VERTICES
+#define DEFERRED_VERTICES 8
+#endif
+#define DEFERRED_SLOTS (DEFERRED_VERTICES > 0 ? DEFERRED_VERTICES : 1)
+
+/* A vertex's BSDF-sample term, waiting for the path's radiance. */
+typedef struct {
+    BsdfRatios r;
+    vec3 gathered; /* G: the radiance gathered up to and including the vertex */
+    vec2 uv;
+    int material;
+} Deferred;
+
+/* One walk along the path (path_continue's loop). The primal pass (replay false) scatters the emission
+ * and next-event terms, defers the BSDF-sample terms of vertices before DEFERRED_VERTICES (at most
+ * that many, in deferred) and says in *more whether later vertices need a replay; it records
+ * shadow-ray visibility in *visible. The replay (replay true, L_total known) scatters the BSDF-sample
+ * terms of the vertices from DEFERRED_VERTICES on. Returns the path's radiance. */
+static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pixel, int max_depth, vec3 dL,
+                                 bool replay, vec3 L_total, uint* visible, Deferred* deferred, int* n_deferred,
+                                 bool* more) {
+    PathState ps;
+    camera_path(sc, key, pixel, &ps);
+    if (max_depth == 0) return ps.L;
+    for (;;) {
+        Hit hit;
+        if (!scene_closest(sc, key, ps.depth, ps.org, ps.dir, &hit)) {
+#ifdef GRAD_ENV
+            if (!replay) {
+                bool mis = !(ps.flags & PATH_PREV_DELTA);
+                float light_pdf;
+                vec3 le = env_eval(sc, ps.dir, mis, &light_pdf);
+                if (!v3_is_zero(le)) {
+                    float w = mis ? power_heuristic(ps.prev_pdf, light_pdf) : 1.0f;
+                    grad_emitter(sc, gr, env_light(sc), ps.dir, v3_scale(v3_mul(dL, ps.beta), w));
+                }
+            }
+#endif
+            path_miss(sc, &ps);
+            return ps.L;
+        }
+        Surface s = surface_at(sc, hit.prim, hit.u, hit.v);
+#ifdef GRAD_EMISSION
+        if (!replay && !v3_is_zero(light_emitted(sc, s.light, s.ng, ps.dir))) {
+            float w = 1.0f; /* path_hit_emission's MIS weight */
+            if (!(ps.flags & PATH_PREV_DELTA))
+                w = power_heuristic(ps.prev_pdf, light_pdf_area(sc, s.light, hit.t, -m_dot(s.ng, ps.dir)));
+            grad_emitter(sc, gr, s.light, ps.dir, v3_scale(v3_mul(dL, ps.beta), w));
+        }
+#endif
+        path_hit_emission(sc, &s, hit.t, &ps);
+        if (!depth_allows(ps.depth + 1, max_depth)) return ps.L;
+        Bsdf b = bsdf_at(sc, &s);
+        vec3 wi = to_local(s.sh, v3_neg(ps.dir));
+        NeeSample n;
+        if (path_nee(sc, key, &s, &b, &ps, &n)) {
+            bool vis = (replay && ps.depth < VIS_BITS)
+                           ? ((*visible >> ps.depth) & 1u) != 0
+                           : !scene_occluded(sc, key, ps.depth, n.sr.org, n.sr.dir, n.sr.tmax);
+            if (vis) {
+                ps.L = v3_add(ps.L, n.sr.contrib);
+                if (!replay) {
+                    if (ps.depth < VIS_BITS) *visible |= 1u << ps.depth;
+                    grad_emitter(sc, gr, n.ls.light, n.ls.wi, v3_scale(v3_mul(v3_mul(dL, ps.beta), n.f), n.weight));
+#ifdef GRAD_BSDF
+                    if (bsdf_differentiated(&b)) {
+                        BsdfRatios r = bsdf_ratios(gr, &s, &b, wi, n.wo, false);
+                        BsdfAdjoint g = bsdf_adjoint(&r, v3_mul(dL, n.sr.contrib));
+                        grad_bsdf(sc, gr, s.material, s.uv, &g);
+                    }
+#endif
+                }
+            }
+        }
+        int depth = ps.depth;
+        vec3 gathered = ps.L;
+        if (!path_sample_bsdf(key, &s, &b, &ps, max_depth)) return ps.L;
+#ifdef GRAD_BSDF
+        /* everything the rest of the path gathers went through f at this vertex */
+        if (bsdf_differentiated(&b)) {
+            bool delta = (ps.flags & PATH_PREV_DELTA) != 0;
+            vec3 wo = to_local(s.sh, ps.dir);
+            if (!replay && depth < DEFERRED_VERTICES) {
+                Deferred* d = &deferred[(*n_deferred)++];
+                d->r = bsdf_ratios(gr, &s, &b, wi, wo, delta);
+                d->gathered = gathered;
+                d->uv = s.uv;
+                d->material = s.material;
+            } else if (!replay) {
+                *more = true;
+            } else if (depth >= DEFERRED_VERTICES) {
+                BsdfRatios r = bsdf_ratios(gr, &s, &b, wi, wo, delta);
+                BsdfAdjoint g = bsdf_adjoint(&r, v3_mul(dL, v3_sub(L_total, gathered)));
+                grad_bsdf(sc, gr, s.material, s.uv, &g);
+            }
+        }
+#endif
+    }
+}
+
+__kernel SCALAR_KERNEL void backward(SCENE_PARAMS, __global const float* image_grad, __global uchar* drop_marks,
+                                     uint seed, uint first_sample, int offset, int count, int max_depth,
+                                     float inv_spp, GRAD_PARAMS) {
+    int i = get_global_id(0);
+    if (i >= count) return;
+    Scene sc = SCENE_INIT;
+    Grads gr = GRAD_INIT;
+    int f = offset + i;
+    int pixel = film_pixel(&sc, f);
+    vec3 dL = v3_scale(load3(image_grad, pixel), inv_spp);
+    if (v3_is_zero(dL)) return;
+    RngKey key = rng_key(seed, (uint)pixel, film_sample(&sc, first_sample, f));
+    uint visible = 0;
+    Deferred deferred[DEFERRED_SLOTS];
+    int n_deferred = 0;
+    bool more = false;
+    vec3 L = backward_walk(&sc, &gr, key, pixel, max_depth, dL, false, v3_splat(0.0f), &visible, deferred,
+                           &n_deferred, &more);
+    if (!all_finite3(L)) { /* dropped, with its gradient */
+        drop_marks[f] = (uchar)1;
+        return;
+    }
+#ifdef GRAD_BSDF
+    for (int k = 0; k < n_deferred; k++) {
+        BsdfAdjoint g = bsdf_adjoint(&deferred[k].r, v3_mul(dL, v3_sub(L, deferred[k].gathered)));
+        grad_bsdf(&sc, &gr, deferred[k].material, deferred[k].uv, &g);
+    }
+    if (more) backward_walk(&sc, &gr, key, pixel, max_depth, dL, true, L, &visible, deferred, &n_deferred, &more);
+#endif
+    grad_flush(&gr);
+}

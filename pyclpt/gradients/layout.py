@@ -1,0 +1,103 @@
+"""Where each differentiable parameter lives in the device buffers that the gradient kernels read
+and write (``cl/gradients/params.h``): a gradient or a tangent has the layout of the scene buffers.
+
+:func:`parameter_slots` gives, for a parameter, the buffer (``mats``, ``lights``, ``tex8``, ``tex32``)
+and an index array of shape (K, *value shape): the K device slots that hold each element of the
+value (an area light's radiance is in the record of each of its triangles, a grey texel in the three
+colour channels of its RGBA texel; -1: no slot). A gradient sums the K slots; a tangent writes all K.
+The slots are recomputed after every update, since texture formats and offsets can change.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pyclpt.buffers.lights import ENV_TEXTURE, LIGHT_PRIM, LIGHT_RADIANCE, LIGHT_STRIDE
+from pyclpt.buffers.materials import MAT_ALPHA, MAT_COLOR, MAT_SPEC, MAT_STRIDE, TEXF_FLOAT
+from pyclpt.buffers.scene import SceneArrays
+from pyclpt.gradients.parameters import Parameter
+from pyclpt.scene.model import Bitmap, Envmap, Mesh, Scene
+
+BUFFERS = ("mats", "lights", "tex8", "tex32")
+
+
+@dataclass
+class Slots:
+    buffer: str  # one of BUFFERS
+    index: np.ndarray  # (K, *value shape) int64 indices into the buffer (floats), -1 for none
+
+    def gather(self, buffers: dict[str, np.ndarray]) -> np.ndarray:
+        """The value's gradient: the sum over its K slots."""
+        data = buffers[self.buffer]
+        return np.where(self.index >= 0, data[np.maximum(self.index, 0)], 0.0).sum(axis=0, dtype=np.float64)
+
+    def scatter(self, buffers: dict[str, np.ndarray], value: np.ndarray) -> None:
+        """Write a tangent: every slot of each element gets the element's value."""
+        full = np.broadcast_to(np.asarray(value, np.float32), self.index.shape)
+        ok = self.index >= 0
+        buffers[self.buffer][self.index[ok]] = full[ok]
+
+
+def texture_slots(arrays: SceneArrays, tex_id: int, channels: int) -> Slots:
+    rec = arrays.textures.info()[tex_id]
+    width, height = int(rec[2]), int(rec[3])
+    offset = int(np.float32(rec[4]).view(np.int32))
+    base = 4 * (offset + np.arange(width * height, dtype=np.int64)).reshape(height, width)
+    rgba = {1: [[0, 1, 2]], 2: [[0, 1, 2], []], 3: [[0], [1], [2]], 4: [[0], [1], [2], []]}[channels]
+    k = max(len(c) for c in rgba)
+    index = np.full((k, height, width, channels), -1, np.int64)
+    for c, sources in enumerate(rgba):
+        for j, src in enumerate(sources):
+            index[j, :, :, c] = base + src
+    return Slots("tex32" if int(rec[1]) == TEXF_FLOAT else "tex8", index)
+
+
+def mesh_light_records(scene: Scene, arrays: SceneArrays, mesh: Mesh) -> np.ndarray:
+    """The light records of a mesh's emissive triangles."""
+    start = 0
+    for m in scene.meshes:
+        if m is mesh:
+            break
+        start += m.triangle_count
+    order = arrays.bvh.tri_order
+    leaf = np.flatnonzero((order >= start) & (order < start + mesh.triangle_count))
+    lights = arrays.lights.tri_light[leaf]
+    return lights[lights >= 0].astype(np.int64)
+
+
+def parameter_slots(scene: Scene, arrays: SceneArrays, p: Parameter) -> Slots:
+    """The device slots of differentiable parameter ``p`` in ``arrays`` (packed from ``scene``)."""
+    rgb = np.arange(3, dtype=np.int64)
+    if p.kind in ("color", "spec") and isinstance(p.target, Bitmap):
+        tex_id = arrays.textures.index(p.target)
+        if tex_id is None:
+            raise ValueError(f"{p.name}: the texture is not on the device")
+        return texture_slots(arrays, tex_id, p.target.pixels.shape[2])
+    if p.kind in ("color", "spec"):
+        slot = MAT_COLOR if p.kind == "color" else MAT_SPEC
+        return Slots("mats", (MAT_STRIDE * p.material + slot + rgb)[None])
+    if p.kind == "alpha":
+        return Slots("mats", np.array([[MAT_STRIDE * p.material + MAT_ALPHA]], np.int64))
+    if p.kind == "emission":
+        assert isinstance(p.target, Mesh)
+        records = mesh_light_records(scene, arrays, p.target)
+        return Slots("lights", LIGHT_STRIDE * records[:, None] + LIGHT_RADIANCE + rgb[None, :])
+    if p.kind == "env":
+        env = arrays.lights.env_light
+        if isinstance(p.target, Envmap):
+            if env < 0:  # a black map is no emitter
+                return Slots("tex32", np.full((1, *p.target.pixels.shape), -1, np.int64))
+            at = int(arrays.lights.lights[env, LIGHT_PRIM:LIGHT_PRIM + 1].view(np.int32)[0])
+            tex_id = int(arrays.lights.light_data[at + ENV_TEXTURE])
+            return texture_slots(arrays, tex_id, 3)
+        if env < 0:
+            return Slots("lights", np.full((1, 3), -1, np.int64))
+        return Slots("lights", (LIGHT_STRIDE * env + LIGHT_RADIANCE + rgb)[None])
+    raise ValueError(f"{p.name} is not differentiable: {p.reason}")
+
+
+def buffer_sizes(arrays: SceneArrays) -> dict[str, int]:
+    """Floats in each gradient buffer (the layout of the scene buffers)."""
+    return {"mats": arrays.materials.size, "lights": arrays.lights.lights.size,
+            "tex8": arrays.textures.texels8().size, "tex32": arrays.textures.texels32().size}

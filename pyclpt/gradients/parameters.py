@@ -1,0 +1,342 @@
+"""Scene parameters by name: :func:`traverse` (Mitsuba 3's ``mi.traverse``).
+
+A scene's parameters are named as Mitsuba 3 names them for the same scene loaded from a dict or XML
+file: ``<bsdf id>.reflectance.value`` for a constant colour, ``<bsdf id>.reflectance.data`` for a
+bitmap's texels (linear values, (H, W, C)), ``<bsdf id>.alpha.value`` for a rough conductor's or
+dielectric's roughness (``.alpha`` for a rough plastic's), ``<shape id>.emitter.radiance.value`` for
+an area light, ``<emitter id>.radiance.value`` for a constant environment and ``<emitter id>.data`` for
+an environment map's texels. A BSDF without an id is named after its place (``floor.bsdf``); a
+two-sided one's parameters sit under ``.brdf_0``, a mask's or bump map's under ``.nested_bsdf``.
+
+Values are numpy arrays. Assign a new value (``params[name] = value``), then call
+:meth:`SceneParameters.update`: it checks the values, writes them into the scene and uploads what
+changed to the devices that hold the scene for gradients (:mod:`pyclpt.gradients.replay`), without
+rebuilding its BVH; renders made afterwards (``pyclpt.render``) see them too.
+
+Parameters whose gradient pyclpt does not compute are listed too, with the reason
+(:meth:`SceneParameters.unsupported`); they can still be changed with ``update``.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from pyclpt.common.image_io import srgb_to_linear
+from pyclpt.scene.model import (
+    Bitmap,
+    BumpMap,
+    Checkerboard,
+    Conductor,
+    Dielectric,
+    Diffuse,
+    Envmap,
+    Mask,
+    Material,
+    Mesh,
+    Plastic,
+    Scene,
+    ThinDielectric,
+)
+
+#: Kinds of differentiable parameters (the -D GRAD_* groups of cl/gradients/params.h).
+KINDS = ("color", "spec", "alpha", "emission", "env")
+
+NOT_DIFFERENTIABLE = {
+    "ior": "index of refraction: not differentiated (changes Fresnel, refraction directions and sampling)",
+    "conductor": "complex IOR of a conductor: not differentiated yet",
+    "transmission": "dielectric reflectance and transmittance: not differentiated yet",
+    "checkerboard": "checkerboard colours: not differentiated (only bitmap texels are)",
+    "geometry": "vertex positions: visibility (silhouette) gradients need edge sampling, not implemented "
+                "(docs/differentiable.md)",
+    "point": "point light intensity: not differentiated yet",
+    "scale": "environment map scale: not differentiated (its texels are)",
+    "mask": "opacity: changes visibility, not differentiated",
+}
+
+
+@dataclass
+class Parameter:
+    """One named parameter: how to read and write it in the scene model."""
+
+    name: str
+    kind: str  # one of KINDS, or "" when not differentiable
+    get: Callable[[], np.ndarray]
+    set: Callable[[np.ndarray], None]
+    target: object  # the model element it belongs to (material, mesh, bitmap, envmap, scene)
+    reason: str = ""  # why it is not differentiable
+    material: int = -1  # the index in scene.materials of a material's parameter
+
+    @property
+    def differentiable(self) -> bool:
+        return bool(self.kind)
+
+
+def _rgb_param(obj: object, attr: str) -> tuple[Callable, Callable]:
+    def get() -> np.ndarray:
+        return np.asarray(getattr(obj, attr), np.float32).reshape(3)
+
+    def put(v: np.ndarray) -> None:
+        setattr(obj, attr, tuple(float(x) for x in np.asarray(v, np.float64).reshape(3)))
+
+    return get, put
+
+
+def _scalar_param(obj: object, attr: str, positive: str = "") -> tuple[Callable, Callable]:
+    def get() -> np.ndarray:
+        return np.asarray([getattr(obj, attr)], np.float32)
+
+    def put(v: np.ndarray) -> None:
+        x = float(np.asarray(v, np.float64).reshape(-1)[0])
+        if positive and not x > 0:
+            raise ValueError(f"{positive} must stay > 0, got {x}")
+        setattr(obj, attr, x)
+
+    return get, put
+
+
+def bitmap_linear(bitmap: Bitmap) -> np.ndarray:
+    """A bitmap's texels as linear values, (H, W, C) float32 (sRGB-encoded ones decoded; alpha kept)."""
+    px = bitmap.pixels
+    if not bitmap.srgb:
+        return px.copy()
+    out = np.asarray(srgb_to_linear(px), np.float32)
+    if px.shape[2] in (2, 4):  # alpha is linear
+        out[..., -1] = px[..., -1]
+    return out
+
+
+def _bitmap_param(bitmap: Bitmap) -> tuple[Callable, Callable]:
+    def get() -> np.ndarray:
+        return bitmap_linear(bitmap)
+
+    def put(v: np.ndarray) -> None:
+        old = (bitmap.pixels, bitmap.srgb)
+        bitmap.srgb = False  # the new texels are linear values
+        try:
+            bitmap.pixels = np.asarray(v, np.float32)
+        except (ValueError, TypeError):
+            bitmap.srgb = old[1]
+            raise
+
+    return get, put
+
+
+def _envmap_param(env: Envmap) -> tuple[Callable, Callable]:
+    def get() -> np.ndarray:
+        return env.pixels.copy()
+
+    def put(v: np.ndarray) -> None:
+        env.pixels = np.asarray(v, np.float32)
+
+    return get, put
+
+
+class _Walker:
+    """Collects the Parameters of a scene."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        self.params: dict[str, Parameter] = {}
+        self.index = -1  # the material being walked
+
+    def add(self, name: str, kind: str, accessors: tuple[Callable, Callable], target: object,
+            reason: str = "") -> None:
+        get, put = accessors
+        self.params[name] = Parameter(name, kind, get, put, target, NOT_DIFFERENTIABLE.get(reason, reason),
+                                      self.index)
+
+    def color(self, prefix: str, obj: object, attr: str, kind: str) -> None:
+        value = getattr(obj, attr)
+        if isinstance(value, Bitmap):
+            self.add(f"{prefix}.{attr}.data", kind, _bitmap_param(value), value,
+                     "" if kind else "transmission")
+        elif isinstance(value, Checkerboard):
+            for c in ("color0", "color1"):
+                self.add(f"{prefix}.{attr}.{c}.value", "", _rgb_param(value, c), value, "checkerboard")
+        else:
+            self.add(f"{prefix}.{attr}.value", kind, _rgb_param(obj, attr), obj, "" if kind else "transmission")
+
+    def material(self, prefix: str, mat: Material) -> None:
+        while isinstance(mat, (Mask, BumpMap)):
+            if isinstance(mat, Mask) and not isinstance(mat.opacity, (Bitmap, Checkerboard)):
+                self.add(f"{prefix}.opacity.value", "", _rgb_param(mat, "opacity"), mat, "mask")
+            prefix, mat = f"{prefix}.nested_bsdf", mat.material
+        if getattr(mat, "twosided", False):
+            prefix = f"{prefix}.brdf_0"
+        if isinstance(mat, Diffuse):
+            self.color(prefix, mat, "reflectance", "color")
+        elif isinstance(mat, Conductor):
+            self.color(prefix, mat, "specular_reflectance", "spec")
+            if mat.alpha > 0:
+                self.add(f"{prefix}.alpha.value", "alpha", _scalar_param(mat, "alpha", f"{prefix}.alpha.value"),
+                         mat)
+            for c in ("eta", "k"):
+                self.add(f"{prefix}.{c}.value", "", _rgb_param(mat, c), mat, "conductor")
+        elif isinstance(mat, Plastic):
+            self.color(prefix, mat, "diffuse_reflectance", "color")
+            self.color(prefix, mat, "specular_reflectance", "spec")
+            if mat.alpha > 0:
+                self.add(f"{prefix}.alpha", "alpha", _scalar_param(mat, "alpha", f"{prefix}.alpha"), mat)
+            self.add(f"{prefix}.int_ior", "", _scalar_param(mat, "int_ior"), mat, "ior")
+        elif isinstance(mat, (Dielectric, ThinDielectric)):
+            self.color(prefix, mat, "specular_reflectance", "")
+            self.color(prefix, mat, "specular_transmittance", "")
+            if isinstance(mat, Dielectric) and mat.alpha > 0:
+                self.add(f"{prefix}.alpha.value", "alpha", _scalar_param(mat, "alpha", f"{prefix}.alpha.value"),
+                         mat)
+            self.add(f"{prefix}.int_ior", "", _scalar_param(mat, "int_ior"), mat, "ior")
+
+    def mesh(self, mesh: Mesh) -> None:
+        def get() -> np.ndarray:
+            return mesh.positions.reshape(-1).copy()
+
+        def put(v: np.ndarray) -> None:
+            raise ValueError(f"{mesh.name}.vertex_positions: changing geometry needs a new BVH; "
+                             f"edit scene.meshes and render again")
+
+        self.add(f"{mesh.name}.vertex_positions", "", (get, put), mesh, "geometry")
+        if mesh.emission is not None:
+            self.add(f"{mesh.name}.emitter.radiance.value", "emission", _rgb_param(mesh, "emission"), mesh)
+
+    def walk(self) -> dict[str, Parameter]:
+        sc = self.scene
+        for i, mat in enumerate(sc.materials):
+            self.index = i
+            self.material(sc.ids.get(f"material:{i}", f"material_{i}"), mat)
+        self.index = -1
+        for mesh in sc.meshes:
+            self.mesh(mesh)
+        env = sc.environment
+        env_name = sc.ids.get("environment", "environment")
+        if isinstance(env, Envmap):
+            self.add(f"{env_name}.data", "env", _envmap_param(env), env)
+            self.add(f"{env_name}.scale", "", _scalar_param(env, "scale"), env, "scale")
+        elif env is not None:
+            self.add(f"{env_name}.radiance.value", "env", _rgb_param(sc, "environment"), sc)
+        for k, light in enumerate(sc.lights):
+            self.add(f"{sc.ids.get(f'light:{k}', f'light_{k}')}.intensity.value", "",
+                     _rgb_param(light, "intensity"), light, "point")
+        return self.params
+
+
+# What update() refreshes, by id(scene): the device copies of a scene kept for gradients
+# (differentiate.py registers and forgets them).
+_LISTENERS: dict[int, list[Callable[[], object]]] = {}
+
+
+def on_update(scene: Scene, refresh: Callable[[], object]) -> None:
+    """Call ``refresh`` after :meth:`SceneParameters.update` wrote new values into ``scene``."""
+    _LISTENERS.setdefault(id(scene), []).append(refresh)
+
+
+def forget(scene: Scene) -> None:
+    """No more refreshes for ``scene`` (its device copies were dropped)."""
+    _LISTENERS.pop(id(scene), None)
+
+
+class SceneParameters(Mapping[str, np.ndarray]):
+    """The parameters of a scene by name (:func:`traverse`): a mapping of names to numpy arrays.
+
+    ``params[name] = value`` stages a new value (same shape, or a scalar for every element);
+    :meth:`update` checks and applies the staged values."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        self._params = _Walker(scene).walk()
+        self._staged: dict[str, np.ndarray] = {}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name in self._staged:
+            return self._staged[name].copy()
+        return self._param(name).get()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._params)
+
+    def __len__(self) -> int:
+        return len(self._params)
+
+    def __setitem__(self, name: str, value: object) -> None:
+        current = self._param(name).get()
+        try:
+            arr = np.asarray(value, np.float32)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}: expected a number or an array of shape {current.shape}, "
+                             f"got {value!r:.60}") from None
+        if arr.size == 1:
+            arr = np.full(current.shape, arr.reshape(-1)[0], np.float32)
+        if arr.shape != current.shape:
+            raise ValueError(f"{name}: expected shape {current.shape}, got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name}: values must be finite, got NaN or infinite values")
+        self._staged[name] = arr.copy()
+
+    def _param(self, name: str) -> Parameter:
+        try:
+            return self._params[name]
+        except KeyError:
+            close = [k for k in self._params if k.split(".")[0] == str(name).split(".")[0]]
+            hint = f"; {name.split('.')[0]!r} has: {', '.join(close)}" if close else ""
+            raise KeyError(f"scene {self.scene.name!r} has no parameter {name!r}{hint}") from None
+
+    def parameter(self, name: str) -> Parameter:
+        """The :class:`Parameter` behind ``name`` (its kind, the model element it belongs to)."""
+        return self._param(name)
+
+    @property
+    def differentiable(self) -> list[str]:
+        """The names whose gradients pyclpt computes."""
+        return [k for k, p in self._params.items() if p.differentiable]
+
+    def unsupported(self) -> dict[str, str]:
+        """The names whose gradients pyclpt does not compute, each with the reason."""
+        return {k: p.reason for k, p in self._params.items() if not p.differentiable}
+
+    def update(self, values: Mapping[str, object] | None = None) -> list[str]:
+        """Write the staged values, and ``values`` (a mapping of names to values: an optimiser), into the
+        scene (each checked by the scene model: a bad value raises ValueError naming the parameter,
+        nothing is written and the staged values are dropped), then upload what changed to the device
+        copies kept for gradients. Returns the names updated."""
+        for k, v in (values or {}).items():
+            self[k] = v
+        names = list(self._staged)
+        olds = {k: self._params[k].get() for k in names}
+        done: list[str] = []
+        try:
+            for k in names:
+                self._params[k].set(self._staged[k])
+                done.append(k)
+        except (ValueError, TypeError) as exc:
+            for k in done:  # leave the scene as it was, and drop the staged values
+                self._params[k].set(olds[k])
+            self._staged.clear()
+            raise ValueError(f"{k}: {exc}") from None
+        if names:
+            try:
+                for refresh in _LISTENERS.get(id(self.scene), []):
+                    refresh()
+            except ValueError:
+                for k in names:
+                    self._params[k].set(olds[k])
+                self._staged.clear()
+                for refresh in _LISTENERS.get(id(self.scene), []):
+                    refresh()
+                raise
+        self._staged.clear()
+        return names
+
+    def __repr__(self) -> str:
+        lines = [f"SceneParameters[{self.scene.name!r}]"]
+        for k, p in self._params.items():
+            lines.append(f"  {'*' if p.differentiable else ' '} {k}: {p.get().shape}")
+        return "\n".join(lines)
+
+
+def traverse(scene: Scene) -> SceneParameters:
+    """The parameters of ``scene`` by name (see the module's docstring)."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"traverse needs a pyclpt.Scene, got {type(scene).__name__}")
+    scene.validate()
+    return SceneParameters(scene)

@@ -1,0 +1,188 @@
+"""Path replay on a device: the ``backward`` and ``forward`` kernels (``cl/gradients/``) for one scene,
+resolution and depth.
+
+:meth:`PathReplay.backward` runs reverse mode: every path of ``spp`` samples per pixel is traced twice
+by one work-item (primal, then adjoint replay with the same random numbers), and the adjoints of the
+parameters are added to gradient buffers laid out as the scene buffers (``cl/gradients/params.h``).
+:meth:`PathReplay.forward` runs forward mode: the derivative of the image along a tangent in the
+same layout, averaged by a film as an image is. Device memory: the scene, the gradient or tangent
+buffers and one film batch; nothing grows with spp or depth (:attr:`PathReplay.device_bytes`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Iterable
+
+import numpy as np
+import pyopencl as cl
+
+from pyclpt.buffers.materials import MAT_STRIDE, pack_material
+from pyclpt.buffers.scene import SceneBuffers
+from pyclpt.device.context import Device, alloc, upload
+from pyclpt.device.profile import KernelProfile
+from pyclpt.device.program import build_program
+from pyclpt.film.film import Film, frames_per_batch
+from pyclpt.gradients.layout import BUFFERS, buffer_sizes
+from pyclpt.gradients.parameters import KINDS
+from pyclpt.integrators.megakernel import Megakernel
+
+LAUNCH = 1 << 18  # paths per launch (film slots)
+LOCAL_SIZE = 64
+BSDF_DIFF_STEP = 1.0 / 64.0  # cl/gradients/bsdf_derivative.h: the relative step of the roughness derivative
+GRAD_DEFINES = {"color": "GRAD_COLOR", "spec": "GRAD_SPEC", "alpha": "GRAD_ALPHA", "emission": "GRAD_EMISSION",
+                "env": "GRAD_ENV"}
+
+
+def moved_alpha_records(scene, step: float = BSDF_DIFF_STEP) -> tuple[np.ndarray, np.ndarray]:
+    """The material records packed again with every roughness alpha moved to alpha (1 + step) and
+    alpha (1 - step): what depends on alpha on the host (a rough plastic's coating tables) moves with
+    it (cl/gradients/bsdf_derivative.h). Texture ids in them are not the scene's (unused)."""
+    from pyclpt.scene.model import BumpMap, Mask, base_material
+
+    def moved(mat, factor: float):
+        if isinstance(mat, (Mask, BumpMap)):
+            return dataclasses.replace(mat, material=moved(mat.material, factor))
+        base = base_material(mat)
+        alpha = getattr(base, "alpha", 0.0)
+        return dataclasses.replace(base, alpha=alpha * factor) if alpha > 0 else base
+
+    up = np.stack([pack_material(moved(m, 1.0 + step)) for m in scene.materials]).reshape(-1, MAT_STRIDE)
+    down = np.stack([pack_material(moved(m, 1.0 - step)) for m in scene.materials]).reshape(-1, MAT_STRIDE)
+    return up, down
+
+
+class PathReplay:
+    """The gradient kernels of one scene on one device, at one resolution and depth limit."""
+
+    def __init__(self, device: Device, scene: SceneBuffers, width: int, height: int, max_depth: int,
+                 deferred_vertices: int | None = None) -> None:
+        """``deferred_vertices``: vertices of a path whose BSDF term the primal pass keeps for the end of
+        the path (-DDEFERRED_VERTICES, cl/gradients/backward.cl; None: the kernel's default, 8); the
+        later ones are done by replaying the path, all of them with 0."""
+        self.device, self.scene = device, scene
+        self.deferred_vertices = deferred_vertices
+        self.width, self.height = width, height
+        self.max_depth = max_depth
+        self.film = Film(device, width, height, precision="double",
+                         batch=frames_per_batch(width * height, LAUNCH))
+        self.profile = KernelProfile()
+        self.dropped = 0  # paths dropped by the last pass (NaN or inf radiance)
+        self._programs: dict[tuple[str, ...], cl.Kernel] = {}
+        self._image_grad: cl.Buffer | None = None
+        self._grads: dict[str, cl.Buffer] = {}
+        self._alpha: tuple[bytes, cl.Buffer, cl.Buffer] | None = None
+        self._primal: Megakernel | None = None
+        self.compile_seconds = 0.0
+
+    def kernel(self, name: str, kinds: Iterable[str] = ()) -> cl.Kernel:
+        """Kernel ``backward`` (specialised for the parameter kinds differentiated) or ``forward``."""
+        kinds = tuple(sorted(set(kinds)))
+        key = (name, *kinds)
+        if key not in self._programs:
+            start = time.perf_counter()
+            defines = {**self.scene.defines, **{GRAD_DEFINES[k]: 1 for k in kinds}}
+            if self.deferred_vertices is not None:
+                defines["DEFERRED_VERTICES"] = self.deferred_vertices
+            program = build_program(self.device, [f"gradients/{name}.cl"], defines=defines)
+            self._programs[key] = cl.Kernel(program, name)
+            self.compile_seconds += time.perf_counter() - start
+        return self._programs[key]
+
+    @property
+    def device_bytes(self) -> int:
+        """Bytes of device memory this replay holds: scene, film batch, image gradient, gradient buffers."""
+        film = self.film.pixels * (self.film.batch * (3 * 4 + 1) + 12) + self.film.accumulator.state_bytes
+        grads = sum(b.size for b in self._grads.values())
+        image = self._image_grad.size if self._image_grad is not None else 0
+        return self.scene.arrays.nbytes + film + grads + image
+
+    def _alpha_records(self) -> tuple[cl.Buffer, cl.Buffer]:
+        """alpha_up and alpha_down for the scene's current materials (packed again when they change)."""
+        key = self.scene.arrays.materials.tobytes()
+        if self._alpha is None or self._alpha[0] != key:
+            up, down = moved_alpha_records(self.scene.scene)
+            self._alpha = (key, upload(self.device, up, "materials, alpha moved up"),
+                           upload(self.device, down, "materials, alpha moved down"))
+        return self._alpha[1], self._alpha[2]
+
+    def _buffers(self) -> dict[str, cl.Buffer]:
+        """Zeroed gradient (or tangent) buffers in the scene's current layout."""
+        q = self.device.queue
+        for name, n in buffer_sizes(self.scene.arrays).items():
+            buf = self._grads.get(name)
+            if buf is None or buf.size != 4 * max(n, 1):
+                buf = self._grads[name] = alloc(self.device, 4 * max(n, 1), f"gradient buffer {name}")
+            cl.enqueue_fill_buffer(q, buf, np.float32(0), 0, buf.size)
+        return self._grads
+
+    def _launch(self, kernel: cl.Kernel, name: str, spp: int, seed: int, head: tuple, tail: tuple) -> None:
+        """Launch ``kernel`` over samples [0, spp) of every pixel, a film batch of frames at a time."""
+        args = self.scene.args(self.width, self.height)
+        self.dropped = 0
+        s = 0
+        while s < spp:
+            frames = min(self.film.batch, spp - s)
+            total = self.film.pixels * frames
+            for offset in range(0, total, LAUNCH):
+                count = min(LAUNCH, total - offset)
+                g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
+                ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, *head, np.uint32(seed), np.uint32(s),
+                            np.int32(offset), np.int32(count), np.int32(self.max_depth), *tail)
+                self.profile.record(name, ev)
+            if name == "forward":
+                self.film.add_frames(frames)
+            self.film.count_dropped(frames)
+            s += frames
+
+    def primal(self, spp: int, seed: int) -> np.ndarray:
+        """The image (H, W, 3): the megakernel integrator on the same scene buffers, so exactly what
+        ``pyclpt.render(scene, spp, seed=seed)`` gives at this resolution and depth."""
+        if self._primal is None:
+            self._primal = Megakernel(self.device, self.scene, self.film, self.max_depth)
+        self.film.clear()
+        s = 0
+        while s < spp:
+            frames = min(self.film.batch, spp - s)
+            self._primal.render_frames(seed, s, frames)
+            self.film.add_frames(frames)
+            s += frames
+        self.dropped = self.film.dropped_samples()
+        return self.film.image()
+
+    def backward(self, image_grad: np.ndarray, spp: int, seed: int, kinds: Iterable[str]) -> dict[str, np.ndarray]:
+        """Reverse mode: the adjoints of every parameter of ``kinds`` (params.h) for dLoss/dImage
+        ``image_grad`` (H, W, 3), as host copies of the gradient buffers by name (layout.py)."""
+        kinds = [k for k in kinds if k in KINDS]
+        kernel = self.kernel("backward", kinds)
+        grads = self._buffers()
+        arr = np.ascontiguousarray(image_grad, np.float32).reshape(-1)
+        if self._image_grad is None or self._image_grad.size != arr.nbytes:
+            self._image_grad = upload(self.device, arr, "image gradient")
+        else:
+            cl.enqueue_copy(self.device.queue, self._image_grad, arr)
+        self.film.clear()
+        self._launch(kernel, "backward", spp, seed, (self._image_grad, self.film.drop_marks),
+                     (np.float32(1.0 / spp), *(grads[b] for b in BUFFERS), *self._alpha_records()))
+        self.dropped = self.film.dropped_samples()
+        out = {}
+        for name in BUFFERS:
+            host = np.empty(self._grads[name].size // 4, np.float32)
+            cl.enqueue_copy(self.device.queue, host, self._grads[name])
+            out[name] = host
+        return out
+
+    def forward(self, tangent: dict[str, np.ndarray], spp: int, seed: int) -> np.ndarray:
+        """Forward mode: the derivative of the image (H, W, 3) along ``tangent`` (host arrays by buffer
+        name, layout.py)."""
+        kernel = self.kernel("forward")
+        bufs = self._buffers()
+        for name in BUFFERS:
+            data = np.ascontiguousarray(tangent[name], np.float32)
+            if data.size:
+                cl.enqueue_copy(self.device.queue, bufs[name], data)
+        self.film.clear()
+        self._launch(kernel, "forward", spp, seed, (self.film.frame, self.film.drop_marks),
+                     (*(bufs[b] for b in BUFFERS), *self._alpha_records()))
+        self.dropped = self.film.dropped_samples()
+        return self.film.image()

@@ -1,0 +1,384 @@
+"""Differentiable rendering (pyclpt.gradients): parameters by name, reverse mode against central finite
+differences with the same seed on both sides (within 5 %, Mitsuba's own bound), forward mode against
+reverse mode, analytic furnaces, linearity in emission, seeds, memory, and inverse rendering."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gradient_scenes import filling_sphere, material_under_sky, sphere_under_envmap, textured_quad
+
+import pyclpt
+from pyclpt.buffers.scene import SceneBuffers
+from pyclpt.gradients.differentiate import replay_for
+from scenes import interior_furnace
+
+try:  # the example of docs/differentiable.md (a source checkout: bench/ beside pyclpt/; installed: pyclpt.bench)
+    from pyclpt.bench import inverse_rendering
+except ModuleNotFoundError:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+    from bench import inverse_rendering
+
+RED = "red.reflectance.value"
+RED_TRUTH = np.array([0.570068, 0.0430135, 0.0443706], np.float32)
+
+
+@pytest.fixture
+def box() -> pyclpt.Scene:
+    return pyclpt.load("cornell-box")
+
+
+# ---- parameters by name ---------------------------------------------------------------------------
+
+
+def test_traverse_names_as_mitsuba(box):
+    params = pyclpt.traverse(box)
+    for name in ("white.reflectance.value", "green.reflectance.value", RED, "light.emitter.radiance.value"):
+        assert name in params.differentiable, name
+        assert params[name].shape == (3,)
+    np.testing.assert_allclose(params[RED], RED_TRUTH, rtol=1e-6)
+    assert "floor.vertex_positions" in params.unsupported()
+    assert "edge sampling" in params.unsupported()["floor.vertex_positions"]
+
+
+def test_traverse_names_every_kind():
+    scene = pyclpt.load_dict({
+        "type": "scene",
+        "env": {"type": "envmap", "data": np.ones((4, 8, 3), np.float32)},
+        "lamp": {"type": "point", "position": [0, 3, 0], "intensity": 5.0},
+        "a": {"type": "cube", "bsdf": {"type": "roughconductor", "id": "metal", "alpha": 0.2}},
+        "b": {"type": "cube", "bsdf": {"type": "roughplastic", "id": "rp", "alpha": 0.2}},
+        "c": {"type": "cube", "bsdf": {"type": "roughdielectric", "id": "glass", "alpha": 0.2}},
+        "d": {"type": "cube", "bsdf": {"type": "twosided", "id": "two", "bsdf": {"type": "plastic"}}},
+        "e": {"type": "cube", "bsdf": {"type": "diffuse", "reflectance": {
+            "type": "bitmap", "data": np.full((2, 2, 3), 0.5, np.float32)}}},
+        "f": {"type": "cube", "bsdf": {"type": "conductor", "id": "mirror"}},
+    })
+    params = pyclpt.traverse(scene)
+    for name in ("env.data", "metal.alpha.value", "metal.specular_reflectance.value", "rp.alpha",
+                 "rp.diffuse_reflectance.value", "rp.specular_reflectance.value", "glass.alpha.value",
+                 "two.brdf_0.diffuse_reflectance.value", "e.bsdf.reflectance.data",
+                 "mirror.specular_reflectance.value"):
+        assert name in params.differentiable, (name, list(params))
+    assert params["env.data"].shape == (4, 8, 3)
+    assert params["e.bsdf.reflectance.data"].shape == (2, 2, 3)
+    unsupported = params.unsupported()
+    for name in ("lamp.intensity.value", "glass.int_ior", "metal.eta.value", "env.scale",
+                 "glass.specular_transmittance.value"):
+        assert name in unsupported and unsupported[name], name
+
+
+def test_update_checks_values_and_keeps_the_scene(box):
+    params = pyclpt.traverse(box)
+    with pytest.raises(ValueError, match="red.reflectance.value"):
+        params[RED] = [-0.5, 0.1, 0.1]
+        params.update()
+    np.testing.assert_allclose(params[RED], RED_TRUTH, rtol=1e-6)
+    with pytest.raises(ValueError, match="expected shape"):
+        params[RED] = np.ones(4)
+    with pytest.raises(ValueError, match="finite"):
+        params[RED] = [np.nan, 0, 0]
+    with pytest.raises(KeyError, match="'red' has: red.reflectance.value"):
+        params["red.reflectance.data"]
+    with pytest.raises(ValueError, match="vertex_positions"):
+        params["floor.vertex_positions"] = params["floor.vertex_positions"] + 1
+        params.update()
+
+
+def test_roughness_must_stay_positive():
+    scene = material_under_sky({"type": "roughconductor", "alpha": 0.3})
+    params = pyclpt.traverse(scene)
+    with pytest.raises(ValueError, match="m.alpha.value.*> 0"):
+        params.update({"m.alpha.value": 0.0})
+    assert params["m.alpha.value"][0] == pytest.approx(0.3)
+
+
+def test_update_uploads_only_what_changed(box, device):
+    buffers = SceneBuffers(box, device)
+    nodes = buffers.args(8, 8)[0]
+    params = pyclpt.traverse(box)
+    params[RED] = [0.2, 0.3, 0.4]
+    params.update()
+    assert buffers.refresh_appearance() == ["materials"]
+    assert buffers.args(8, 8)[0] is nodes  # the BVH stays
+    params["light.emitter.radiance.value"] = [1.0, 2.0, 3.0]
+    params.update()
+    assert buffers.refresh_appearance() == ["lights"]
+
+
+def test_update_reaches_the_gradient_renderer(box):
+    replay = replay_for(box, width=8, height=8, max_depth=2)
+    params = pyclpt.traverse(box)
+    params.update({RED: [0.25, 0.5, 0.75]})
+    material = box.ids and list(box.ids.values()).index("red")
+    np.testing.assert_allclose(replay.scene.arrays.materials[material, 2:5], [0.25, 0.5, 0.75])
+
+
+def test_update_that_needs_new_kernels_is_refused():
+    scene = interior_furnace(0.5)
+    replay_for(scene, width=4, height=4, max_depth=2)
+    params = pyclpt.traverse(scene)
+    with pytest.raises(ValueError, match="SCENE_LIGHTS"):
+        params.update({"shell.emitter.radiance.value": 0.0})  # the scene's only emitter would vanish
+    assert params["shell.emitter.radiance.value"][0] == 1.0  # and the scene is as it was
+
+
+# ---- finite differences ----------------------------------------------------------------------------
+
+CASES = {
+    # name: (scene, parameter, spp, max_depth, FD step relative to the value)
+    "diffuse": (lambda: pyclpt.load("cornell-box"), RED, 16, 3, 0.01),
+    "area-light": (lambda: pyclpt.load("cornell-box"), "light.emitter.radiance.value", 16, 3, 0.01),
+    "constant-env": (lambda: material_under_sky({"type": "diffuse"}), "sky.radiance.value", 16, 3, 0.01),
+    "bitmap": (lambda: textured_quad(np.random.default_rng(3).random((4, 4, 3)).astype(np.float32) * 0.6 + 0.2),
+               "tex.reflectance.data", 16, 2, 0.01),
+    "bitmap-nearest": (lambda: textured_quad(np.full((3, 5, 1), 0.4, np.float32), filter="nearest"),
+                       "tex.reflectance.data", 16, 2, 0.01),
+    "envmap": (lambda: sphere_under_envmap(np.random.default_rng(4).random((6, 12, 3)).astype(np.float32) + 0.2),
+               "env.data", 32, 3, 0.01),
+    "conductor-spec": (lambda: material_under_sky({"type": "conductor", "material": "Au",
+                                                   "specular_reflectance": [0.5, 0.7, 0.9]}),
+                       "m.specular_reflectance.value", 16, 3, 0.01),
+    "roughconductor-spec": (lambda: material_under_sky({"type": "roughconductor", "alpha": 0.3}),
+                            "m.specular_reflectance.value", 16, 3, 0.01),
+    "roughconductor-alpha": (lambda: material_under_sky({"type": "roughconductor", "material": "Cu", "alpha": 0.3}),
+                             "m.alpha.value", 512, 3, 0.05),
+    "plastic-spec": (lambda: material_under_sky({"type": "plastic", "diffuse_reflectance": [0.3, 0.5, 0.2]}),
+                     "m.specular_reflectance.value", 256, 3, 0.05),
+    "plastic-diffuse-nonlinear": (lambda: material_under_sky({"type": "plastic", "nonlinear": True,
+                                                              "diffuse_reflectance": [0.3, 0.5, 0.2]}),
+                                  "m.diffuse_reflectance.value", 256, 3, 0.05),
+    "roughplastic-spec": (lambda: material_under_sky({"type": "roughplastic", "alpha": 0.3}),
+                          "m.specular_reflectance.value", 256, 3, 0.05),
+    "roughplastic-alpha": (lambda: material_under_sky({"type": "roughplastic", "alpha": 0.3}),
+                           "m.alpha", 256, 3, 0.05),
+    "roughdielectric-alpha": (lambda: material_under_sky({"type": "roughdielectric", "alpha": 0.3}),
+                              "m.alpha.value", 1024, 3, 0.05),
+}
+SIZE = 16
+
+
+def _loss_weights(shape) -> np.ndarray:
+    return np.random.default_rng(1).random(shape).astype(np.float32)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_backward_matches_finite_differences(case):
+    """Central differences of sum(w * image) along a random direction d (of random signs for texels),
+    with the same seed on both sides, against reverse mode's gradient . d (within 5 %) and forward
+    mode's sum(w * dimage) (equal: the same paths)."""
+    make, name, spp, depth, step = CASES[case]
+    scene = make()
+    params = pyclpt.traverse(scene)
+    v0 = params[name]
+    rng = np.random.default_rng(2)
+    # texels: signs at random, so that a gradient given to the wrong texel does not average out
+    d = (rng.standard_normal(v0.shape) if v0.size > 3 else rng.random(v0.shape) + 0.5).astype(np.float32)
+    h = step * float(np.abs(v0).max())
+    w = _loss_weights((SIZE, SIZE, 3))
+    opts = dict(spp=spp, seed=11, max_depth=depth, width=SIZE, height=SIZE)
+
+    def loss(v):
+        params.update({name: v})
+        return float((w * pyclpt.render(scene, **opts)).sum(dtype=np.float64))
+
+    fd = (loss(v0 + h * d) - loss(v0 - h * d)) / (2 * h)
+    params.update({name: v0})
+    grad = pyclpt.render_backward(scene, w, params=[name], **opts)[name]
+    assert grad.shape == v0.shape
+    backward = float((grad.astype(np.float64) * d).sum())
+    forward = float((w * pyclpt.render_forward(scene, name, d, **opts)).sum(dtype=np.float64))
+    assert abs(fd) > 1e-3
+    assert backward == pytest.approx(fd, rel=0.05), (backward, fd)
+    assert forward == pytest.approx(backward, rel=1e-3)
+
+
+@pytest.mark.parametrize("deferred", [0, 2])
+def test_replay_gives_the_gradients_of_the_deferred_pass(box, device, deferred):
+    """Vertices past DEFERRED_VERTICES are done by replaying the path (0: all of them, Mitsuba's prb as
+    published); the gradients are those of the one-pass default, up to the order of float atomics."""
+    from pyclpt.buffers.scene import SceneBuffers
+    from pyclpt.gradients.layout import BUFFERS
+    from pyclpt.gradients.replay import PathReplay
+
+    buffers = SceneBuffers(box, device)
+    w = _loss_weights((16, 16, 3))
+    kinds = ["color", "emission"]
+    default = PathReplay(device, buffers, 16, 16, 8).backward(w, 8, 3, kinds)
+    replayed = PathReplay(device, buffers, 16, 16, 8, deferred_vertices=deferred).backward(w, 8, 3, kinds)
+    for name in BUFFERS:
+        np.testing.assert_allclose(replayed[name], default[name], rtol=1e-4, atol=1e-7)
+    assert np.abs(default["mats"]).max() > 0
+
+
+# ---- analytic cases ---------------------------------------------------------------------------------
+
+
+def test_convex_diffuse_sphere_in_uniform_light():
+    """I = rho Le on a convex diffuse object in a uniform environment: dI/drho = Le, dI/dLe = rho."""
+    rho, le = 0.4, 1.5
+    scene = filling_sphere(rho, le)
+    opts = dict(spp=256, seed=3, max_depth=-1)
+    image = pyclpt.render(scene, **opts)
+    assert image.mean() == pytest.approx(rho * le, rel=0.02)
+    d_rho = pyclpt.render_forward(scene, "ball.reflectance.value", 1.0, **opts)
+    np.testing.assert_allclose(d_rho, image / rho, rtol=1e-4)  # linear in rho, path for path
+    assert d_rho.mean() == pytest.approx(le, rel=0.02)
+    grads = pyclpt.render_backward(scene, np.ones_like(image) / image.size, spp=256, seed=4, max_depth=-1)
+    assert grads["ball.reflectance.value"].sum() == pytest.approx(le, rel=0.02)
+    assert grads["sky.radiance.value"].sum() == pytest.approx(rho, rel=0.02)
+
+
+@pytest.mark.parametrize("rho", [0.3, 0.6])
+def test_closed_furnace(rho):
+    """Inside a closed emissive diffuse sphere: L = Le / (1 - rho), dL/drho = Le / (1 - rho)^2,
+    dL/dLe = 1 / (1 - rho)."""
+    le = 2.0
+    scene = interior_furnace(rho, le)
+    n = 8
+    grads = pyclpt.render_backward(scene, np.full((n, n, 3), 1.0 / (3 * n * n), np.float32), spp=256, seed=5,
+                                   max_depth=-1, width=n, height=n)
+    assert grads["shell.bsdf.reflectance.value"].sum() == pytest.approx(le / (1 - rho) ** 2, rel=0.03)
+    assert grads["shell.emitter.radiance.value"].sum() == pytest.approx(1 / (1 - rho), rel=0.03)
+    d_rho = pyclpt.render_forward(scene, "shell.bsdf.reflectance.value", 1.0, spp=256, seed=6, max_depth=-1,
+                                  width=n, height=n)
+    assert d_rho.mean() == pytest.approx(le / (1 - rho) ** 2, rel=0.03)
+
+
+def test_image_is_linear_in_emission(box):
+    """Scaling every emitter scales the image, path for path: dI/dLe . Le = I (Euler's theorem)."""
+    opts = dict(spp=4, seed=7, max_depth=8, width=24, height=24)
+    image = pyclpt.render(box, **opts)
+    le = pyclpt.traverse(box)["light.emitter.radiance.value"]
+    d_image = pyclpt.render_forward(box, "light.emitter.radiance.value", le, **opts)
+    np.testing.assert_allclose(d_image, image, rtol=1e-4, atol=1e-6)
+    w = _loss_weights(image.shape)
+    grad = pyclpt.render_backward(box, w, params=["light.emitter.radiance.value"], **opts)
+    assert float(grad["light.emitter.radiance.value"] @ le) == pytest.approx(float((w * image).sum()), rel=1e-4)
+
+
+# ---- seeds, errors, memory -----------------------------------------------------------------------------
+
+
+def test_gradient_seed_must_differ_from_the_loss_seed(box):
+    grad = np.zeros((8, 8, 3), np.float32)
+    with pytest.raises(ValueError, match="biased"):
+        pyclpt.render_backward(box, grad, spp=1, seed=3, loss_seed=3, width=8, height=8)
+    pyclpt.render_backward(box, grad, spp=1, seed=4, loss_seed=3, width=8, height=8)
+
+
+def test_bad_arguments_name_what_is_wrong(box):
+    with pytest.raises(ValueError, match="expected shape \\(8, 8, 3\\)"):
+        pyclpt.render_backward(box, np.zeros((4, 4, 3)), spp=1, width=8, height=8)
+    with pytest.raises(ValueError, match="NaN"):
+        pyclpt.render_backward(box, np.full((8, 8, 3), np.nan), spp=1, width=8, height=8)
+    with pytest.raises(ValueError, match="not differentiable: floor.vertex_positions"):
+        pyclpt.render_backward(box, np.zeros((8, 8, 3)), spp=1, width=8, height=8, params=["floor.vertex_positions"])
+    with pytest.raises(KeyError, match="no parameter"):
+        pyclpt.render_forward(box, "nothing.value", 1.0, spp=1, width=8, height=8)
+    with pytest.raises(ValueError, match="direction for red.reflectance.value"):
+        pyclpt.render_forward(box, RED, np.ones(2), spp=1, width=8, height=8)
+
+
+def test_zero_mean_gradient_at_the_optimum(box):
+    """At the true value, the loss image and the gradient on separate seeds give gradients whose mean
+    is zero: averaged over seeds, it is small next to the gradient away from the optimum."""
+    n, spp = 24, 4
+    opts = dict(width=n, height=n, max_depth=4)
+    target = pyclpt.render(box, spp=64, seed=1000, **opts)
+    params = pyclpt.traverse(box)
+
+    def gradient(seed: int) -> np.ndarray:
+        image = pyclpt.render(box, spp=spp, seed=2 * seed, **opts)
+        g = 2 * (image - target) / image.size
+        return pyclpt.render_backward(box, g, spp=spp, seed=2 * seed + 1, loss_seed=2 * seed, params=[RED],
+                                      **opts)[RED]
+
+    at_optimum = np.mean([gradient(k) for k in range(8)], axis=0)
+    params.update({RED: RED_TRUTH + 0.2})
+    away = gradient(0)
+    params.update({RED: RED_TRUTH})
+    assert np.all(np.abs(at_optimum) < 0.15 * np.abs(away)), (at_optimum, away)
+
+
+def test_device_memory_does_not_grow_with_spp_or_depth(box):
+    grad = np.ones((16, 16, 3), np.float32)
+    replay = replay_for(box, width=16, height=16, max_depth=8)
+    pyclpt.render_backward(box, grad, spp=1, seed=1, width=16, height=16, max_depth=8)
+    small = replay.device_bytes
+    pyclpt.render_backward(box, grad, spp=64, seed=1, width=16, height=16, max_depth=8)
+    assert replay.device_bytes == small
+    deep = replay_for(box, width=16, height=16, max_depth=64)
+    pyclpt.render_backward(box, grad, spp=64, seed=1, width=16, height=16, max_depth=64)
+    assert deep.device_bytes == small
+
+
+# ---- inverse rendering ------------------------------------------------------------------------------
+
+
+def test_recover_the_red_wall():
+    """The cornell box's red wall from (0.01, 0.2, 0.9) to within 0.005 of its reflectance, in at most 50
+    Adam steps at 128x128, 4 spp."""
+    history = inverse_rendering.recover_red_wall(steps=50)
+    errors = [float(np.abs(v - RED_TRUTH).max()) for v in history["values"]]
+    assert errors[0] > 0.5
+    assert errors[-1] < 0.005, errors[-10:]
+
+
+def test_recover_a_texture():
+    """A 4x4 bitmap texture from grey, by its texels' gradients."""
+    history = inverse_rendering.recover_texture(steps=40)
+    truth = history["truth"]
+    start, end = (float(np.abs(history["values"][k] - truth).mean()) for k in (0, -1))
+    assert end < 0.1 * start, (start, end)
+
+
+def test_adam_minimises_a_quadratic():
+    opt = pyclpt.optim.Adam(lr=0.1, params={"x": np.array([3.0, -2.0])})
+    for _ in range(200):
+        opt.step({"x": 2 * (opt["x"] - np.array([1.0, 0.5]))})
+    np.testing.assert_allclose(opt["x"], [1.0, 0.5], atol=1e-2)
+    with pytest.raises(ValueError, match="shape"):
+        opt.step({"x": np.ones(3)})
+    with pytest.raises(ValueError, match="lr"):
+        pyclpt.optim.Adam(lr=-1)
+
+
+def test_primal_of_the_gradient_renderer_is_pyclpt_render(box):
+    replay = replay_for(box, width=16, height=16, max_depth=8)
+    np.testing.assert_array_equal(replay.primal(4, 9), pyclpt.render(box, spp=4, seed=9, width=16, height=16,
+                                                                     max_depth=8))
+
+
+def test_torch_bridge(box):
+    torch = pytest.importorskip("torch")
+    from pyclpt.gradients.torch_bridge import render_torch
+
+    opts = dict(spp=4, seed=3, max_depth=8, width=16, height=16)
+    red = torch.tensor(RED_TRUTH + 0.1, requires_grad=True)
+    image = render_torch(box, {RED: red}, **opts)
+    assert image.shape == (16, 16, 3)
+    loss = (image ** 2).mean()
+    loss.backward()
+    expected = pyclpt.render_backward(box, 2 * image.detach().numpy() / image.numel(), spp=4, seed=4, max_depth=8,
+                                      width=16, height=16, params=[RED])[RED]
+    np.testing.assert_allclose(red.grad.numpy(), expected, rtol=1e-4)
+    with pytest.raises(TypeError, match="torch tensor"):
+        render_torch(box, {RED: RED_TRUTH}, **opts)
+
+
+def test_a_change_made_to_the_model_reaches_the_gradient_renderer(box):
+    """Not only update(): a material's field assigned directly, or a material replaced, is seen."""
+    opts = dict(spp=2, seed=5, max_depth=3, width=8, height=8)
+    before = pyclpt.render_forward(box, "light.emitter.radiance.value", 1.0, **opts)
+    red = list(box.ids.values()).index("red")
+    box.materials[red].reflectance = (0.9, 0.9, 0.9)
+    after = pyclpt.render_forward(box, "light.emitter.radiance.value", 1.0, **opts)
+    assert not np.array_equal(before, after)
+    le = pyclpt.traverse(box)["light.emitter.radiance.value"]
+    np.testing.assert_allclose(after, pyclpt.render(box, **opts) / le, rtol=1e-4, atol=1e-7)  # linear in Le
+    box.materials[red] = pyclpt.Diffuse((0.1, 0.1, 0.1))
+    replaced = pyclpt.render_forward(box, "light.emitter.radiance.value", 1.0, **opts)
+    assert replaced.sum() < after.sum()
