@@ -44,6 +44,7 @@ from pyclpt.scene.model import (
     Conductor,
     Dielectric,
     Diffuse,
+    DirectionalLight,
     Envmap,
     Film,
     Mask,
@@ -51,6 +52,7 @@ from pyclpt.scene.model import (
     Plastic,
     PointLight,
     Scene,
+    SpotLight,
     ThinDielectric,
 )
 
@@ -59,9 +61,9 @@ __version__ = "0.1.0"
 __all__ = [
     "Accumulator", "AccumulatorError", "Bitmap", "builtin_scenes", "BumpMap", "Camera", "CameraPath", "Checkerboard",
     "Conductor", "default_device", "Denoiser", "DenoiserSettings", "Device", "DeviceError", "DeviceMemoryError",
-    "Dielectric", "Diffuse", "EnvironmentVariableError", "Envmap", "Film", "get_device", "Keyframe",
+    "Dielectric", "Diffuse", "DirectionalLight", "EnvironmentVariableError", "Envmap", "Film", "get_device", "Keyframe",
     "KernelBuildError", "list_devices", "load", "load_dict", "load_xml", "Mask", "Mesh", "open_device", "Plastic",
     "PointLight", "ProgressiveRenderer", "read_image", "render", "Renderer", "RenderStats", "Scene", "SceneDictError",
-    "SceneXMLError", "ThinDielectric", "write_image", "SceneParameters", "optim", "render_backward", "render_forward",
-    "traverse",
+    "SceneXMLError", "SpotLight", "ThinDielectric", "write_image", "SceneParameters", "optim", "render_backward",
+    "render_forward", "traverse",
 ]

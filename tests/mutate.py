@@ -229,6 +229,13 @@ MUTANTS: list[Mutant] = [
     Mutant("ggx-g1-halved", "return 2.0f / (1.0f + m_sqrt(1.0f + tan2));",
            "return 1.0f / (1.0f + m_sqrt(1.0f + tan2));",
            ("tests/test_sampling.py::test_roughconductor_furnace",), "GGX's Smith G1 off by a factor 2"),
+    Mutant("directional-light-reversed", "ls->wi = v3_neg(rgb_at(sc->light_data + as_int(l[LIGHT_PRIM]), sc->unit));",
+           "ls->wi = rgb_at(sc->light_data + as_int(l[LIGHT_PRIM]), sc->unit);",
+           ("tests/test_lights.py::test_directional_light_analytic",), "a directional light sampled from its far side"),
+    Mutant("spot-falloff-linear-in-cosine",
+           ": (s[SPOT_CUTOFF] - m_acos(m_clamp(cos_t, -1.0f, 1.0f))) * s[SPOT_INV_TRANSITION];",
+           ": (cos_t - s[SPOT_COS_CUTOFF]) / (s[SPOT_COS_BEAM] - s[SPOT_COS_CUTOFF]);",
+           ("tests/test_lights.py::test_spot_light_analytic",), "a spot's falloff linear in cosine, not in angle"),
     # ---- differentiable rendering (issue 13) --------------------------------------------------------
     Mutant("gradient-ignores-gathered-radiance",
            "BsdfAdjoint g = bsdf_adjoint(&deferred[k].r, v3_mul(dL, v3_sub(L, deferred[k].gathered)));",

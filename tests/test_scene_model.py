@@ -366,7 +366,7 @@ def test_integrator_and_sensor_values():
     ({"s": {**RECT, "to_world": [{"rotate": {"angle": 90}}]}}, ["s.to_world"]),
     ({"ball": {"type": "sphere", "center": [0, 0]}}, ["ball.center"]),
     ({"ball": {"type": "sphere", "radius": "big"}}, ["ball.radius", "big"]),
-    ({"sensor": {"type": "orthographic"}, "s": {**RECT}}, ["sensor", "orthographic"]),
+    ({"sensor": {"type": "radiancemeter"}, "s": {**RECT}}, ["sensor", "radiancemeter"]),
     ({"sensor": {"type": "perspective", "fov": 200}, "s": {**RECT}}, ["sensor", "fov"]),
     ({"sensor": {"type": "perspective", "film": {"width": 0}}, "s": {**RECT}}, ["sensor.film", "width"]),
     ({"x": 3}, ["x", "expected a dict"]),

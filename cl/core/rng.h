@@ -21,6 +21,8 @@
 #define DIM_CAMERA_Y 8
 #define DIM_MASK_CLOSEST 9 /* opacity tests of the path's ray (4th counter word: triangle) */
 #define DIM_MASK_SHADOW 10 /* opacity tests of the shadow ray */
+#define DIM_LENS_U 11 /* the thin lens's aperture sample (bounce 0) */
+#define DIM_LENS_V 12
 
 /* The high word of a 32 x 32-bit product: exact on every device, and inlined on PoCL, which calls
  * OpenCL's mul_hi out of line. */

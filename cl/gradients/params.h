@@ -161,13 +161,13 @@ static inline vec3 tangent_color(const Scene* sc, const Grads* tg, int mat, int 
 }
 
 /* The radiance of emitter `light` seen along world direction dir: reverse mode adds g (the adjoint of
- * that radiance) to its parameters; forward mode returns its tangent. Point lights are not
- * differentiated. */
+ * that radiance) to its parameters; forward mode returns its tangent. Point, directional and spot
+ * lights are not differentiated. */
 static inline void grad_emitter(const Scene* sc, Grads* gr, int light, vec3 dir, vec3 g) {
     if (light < 0) return;
     __global const float* l = sc->lights + LIGHT_STRIDE * light;
     int type = (int)l[LIGHT_TYPE];
-    if (type == LIGHT_POINT) return;
+    if (type == LIGHT_POINT || type == LIGHT_DIRECTIONAL || type == LIGHT_SPOT) return;
     if (type == LIGHT_ENVMAP) {
 #ifdef GRAD_ENV
         __global const float* e = sc->light_data + as_int(l[LIGHT_PRIM]);
@@ -189,7 +189,7 @@ static inline vec3 tangent_emitter(const Scene* sc, const Grads* tg, int light, 
     if (light < 0) return v3_splat(0.0f);
     __global const float* l = sc->lights + LIGHT_STRIDE * light;
     int type = (int)l[LIGHT_TYPE];
-    if (type == LIGHT_POINT) return v3_splat(0.0f);
+    if (type == LIGHT_POINT || type == LIGHT_DIRECTIONAL || type == LIGHT_SPOT) return v3_splat(0.0f);
     if (type == LIGHT_ENVMAP) {
         __global const float* e = sc->light_data + as_int(l[LIGHT_PRIM]);
         TexTaps taps = env_taps(sc, e, env_texel_coords(e, env_to_local(e, dir)));

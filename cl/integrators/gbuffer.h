@@ -48,8 +48,13 @@ static inline bool camera_screen(const Scene* sc, int base, vec3 d, vec2* px) {
     __global const float* c = sc->consts + base;
     vec3 forward = rgb_at(c + 3, sc->unit), right = rgb_at(c + 6, sc->unit), up = rgb_at(c + 9, sc->unit);
     float z = m_dot(d, forward);
+#if SCENE_CAMERA == CAMERA_ORTHOGRAPHIC
+    float sx = m_dot(d, right) / m_dot(right, right); /* parallel projection */
+    float sy = m_dot(d, up) / m_dot(up, up);
+#else
     float sx = m_dot(d, right) / (m_dot(right, right) * z);
     float sy = m_dot(d, up) / (m_dot(up, up) * z);
+#endif
     px->x = (sx + 1.0f) * 0.5f * sc->consts[CONST_WIDTH];
     px->y = (1.0f - sy) * 0.5f * sc->consts[CONST_HEIGHT];
     return z > 0.0f;
@@ -62,6 +67,9 @@ static inline vec2 gbuffer_motion(const Scene* sc, vec3 p, bool at_infinity) {
     vec3 d_prev = at_infinity ? p : v3_sub(p, rgb_at(c + CONST_PREV_CAM_ORIGIN, sc->unit));
     vec3 d_cur = at_infinity ? p : v3_sub(p, rgb_at(c + CONST_CAM_ORIGIN, sc->unit));
     vec2 prev, cur;
+#if SCENE_CAMERA == CAMERA_ORTHOGRAPHIC
+    if (at_infinity) return v2(0.0f, 0.0f); /* every pixel of a parallel projection sees the same direction */
+#endif
     bool seen = camera_screen(sc, CONST_PREV_CAM_ORIGIN, d_prev, &prev);
     camera_screen(sc, CONST_CAM_ORIGIN, d_cur, &cur);
     return seen ? v2(prev.x - cur.x, prev.y - cur.y) : v2(AOV_OFFSCREEN, AOV_OFFSCREEN);

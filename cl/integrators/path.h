@@ -58,7 +58,8 @@ static inline uint film_sample(const Scene* sc, uint first_sample, int f) {
     return first_sample + (uint)(f / scene_pixels(sc));
 }
 
-/* path init: the camera ray of (pixel, sample) with a jittered position in the pixel. */
+/* path init: the camera ray of (pixel, sample) with a jittered position in the pixel (and, for a thin
+ * lens, a point on the aperture). */
 static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
     __global const float* c = sc->consts;
     int width = (int)c[CONST_WIDTH], height = (int)c[CONST_HEIGHT];
@@ -70,6 +71,23 @@ static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState
     vec3 up = rgb_at(c + CONST_CAM_UP, sc->unit);
     ps->org = rgb_at(c + CONST_CAM_ORIGIN, sc->unit);
     ps->dir = m_normalize(v3_add(v3_add(forward, v3_scale(right, sx)), v3_scale(up, sy)));
+#if SCENE_CAMERA == CAMERA_ORTHOGRAPHIC
+    /* Mitsuba's orthographic: from the image rectangle, along forward */
+    ps->org = v3_add(ps->org, v3_add(v3_scale(right, sx), v3_scale(up, sy)));
+    ps->dir = forward;
+#elif SCENE_CAMERA == CAMERA_THINLENS
+    {
+        /* Mitsuba's thinlens: from a point of the aperture disk towards where the pinhole ray meets the
+         * plane in focus */
+        vec2 a = square_to_disk_concentric(rng_2d(key, 0, DIM_LENS_U));
+        float r = c[CONST_LENS_RADIUS];
+        vec3 lens = v3_add(ps->org, v3_add(v3_scale(m_normalize(right), r * a.x), v3_scale(m_normalize(up), r * a.y)));
+        vec3 plane = v3_add(v3_add(forward, v3_scale(right, sx)), v3_scale(up, sy));
+        vec3 focus = v3_add(ps->org, v3_scale(plane, c[CONST_FOCUS_DISTANCE]));
+        ps->org = lens;
+        ps->dir = m_normalize(v3_sub(focus, lens));
+    }
+#endif
     ps->beta = v3_splat(1.0f);
     ps->L = v3_splat(0.0f);
     ps->prev_pdf = 0.0f;

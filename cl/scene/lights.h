@@ -5,12 +5,17 @@
  *   LIGHT_POINT     an isotropic point light (Mitsuba `point`): a delta light
  *   LIGHT_CONSTANT  the constant environment (Mitsuba `constant`)
  *   LIGHT_ENVMAP    a lat-long environment map (Mitsuba `envmap`; sunsky is baked into one)
+ *   LIGHT_DIRECTIONAL  a distant light (Mitsuba `directional`): a delta light
+ *   LIGHT_SPOT      a spot light (Mitsuba `spot`): a delta light
  *
  * One emitter is chosen by the cumulative `cdf` column (proportional to an
  * estimate of emitted power). Emitters whose data do not fit a record keep it
  * in `light_data`, at the offset in LIGHT_PRIM:
  *
  *   point light   position (3 floats)
+ *   directional   the direction the light travels (3 floats, unit)
+ *   spot          position (3), axis (3, unit), cos(cutoff), cos(beam width), cutoff (radians),
+ *                 1 / (cutoff - beam width) (SPOT_* offsets below)
  *   envmap        ENV_HEADER floats (below), then the sampling tables:
  *                 marginal CDF over cell rows (R = H - 1 floats), conditional
  *                 CDF of each row (R * W), solid angle of one cell of each row (R),
@@ -41,7 +46,8 @@
 #define LIGHT_PRIM 0     /* int bits: triangle: leaf-order triangle; point, envmap: offset in light_data */
 #define LIGHT_PMF 1      /* probability of choosing this emitter */
 #define LIGHT_AREA 2     /* triangle area */
-#define LIGHT_RADIANCE 3 /* rgb: triangle and constant environment: radiance; point: intensity (W/sr) */
+#define LIGHT_RADIANCE 3 /* rgb: triangle and constant environment: radiance; point, spot: intensity (W/sr);
+                            directional: irradiance (W/m^2) */
 #define LIGHT_CDF 6      /* inclusive cumulative pmf */
 #define LIGHT_TYPE 7     /* LIGHT_TRIANGLE ... */
 
@@ -49,6 +55,16 @@
 #define LIGHT_POINT 1
 #define LIGHT_CONSTANT 2
 #define LIGHT_ENVMAP 3
+#define LIGHT_DIRECTIONAL 4
+#define LIGHT_SPOT 5
+
+/* spot block in light_data */
+#define SPOT_POSITION 0
+#define SPOT_AXIS 3
+#define SPOT_COS_CUTOFF 6
+#define SPOT_COS_BEAM 7
+#define SPOT_CUTOFF 8
+#define SPOT_INV_TRANSITION 9
 
 /* -DSCENE_LIGHTS=mask (pyclpt/buffers/lights.py) lists the emitter kinds a scene has (bit LIGHT_*): only
  * those are compiled (no branch on a kind the scene lacks). Without it every kind is compiled. */
@@ -71,7 +87,7 @@ typedef struct {
     float dist;      /* distance to the sampled point (INF for the environment) */
     vec3 radiance;   /* radiance arriving at the shading point (point light: I / dist^2) */
     float pdf;       /* solid-angle pdf, emitter choice included; for a delta light the choice alone */
-    bool delta;      /* a delta light (point): no BSDF sample can hit it, so no MIS */
+    bool delta;      /* a delta light (point, directional, spot): no BSDF sample can hit it, so no MIS */
     int light;       /* the emitter chosen (its index in `lights`) */
 } LightSample;
 
@@ -270,6 +286,31 @@ static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u,
         ls->wi = env_sample(sc, sc->light_data + as_int(l[LIGHT_PRIM]), u, &ls->radiance, &pdf);
         ls->dist = INF_F;
         ls->pdf = l[LIGHT_PMF] * pdf;
+        return ls->pdf > 0.0f;
+    }
+    if (HAS_LIGHT(LIGHT_DIRECTIONAL) && type == LIGHT_DIRECTIONAL) {
+        ls->wi = v3_neg(rgb_at(sc->light_data + as_int(l[LIGHT_PRIM]), sc->unit));
+        ls->dist = INF_F;
+        ls->radiance = rgb_at(l + LIGHT_RADIANCE, sc->unit);
+        ls->pdf = l[LIGHT_PMF];
+        ls->delta = true;
+        return ls->pdf > 0.0f;
+    }
+    if (HAS_LIGHT(LIGHT_SPOT) && type == LIGHT_SPOT) {
+        __global const float* s = sc->light_data + as_int(l[LIGHT_PRIM]);
+        vec3 d = v3_sub(rgb_at(s + SPOT_POSITION, sc->unit), p);
+        float dist2 = m_dot(d, d);
+        if (!(dist2 > 0.0f)) return false;
+        ls->dist = m_sqrt(dist2);
+        ls->wi = v3_divs(d, ls->dist);
+        /* Mitsuba's falloff: 1 inside the beam, linear in angle to 0 at the cutoff */
+        float cos_t = -m_dot(ls->wi, rgb_at(s + SPOT_AXIS, sc->unit));
+        float falloff = cos_t >= s[SPOT_COS_BEAM] ? 1.0f
+                                                  : (s[SPOT_CUTOFF] - m_acos(m_clamp(cos_t, -1.0f, 1.0f))) * s[SPOT_INV_TRANSITION];
+        if (!(cos_t > s[SPOT_COS_CUTOFF] && falloff > 0.0f)) return false;
+        ls->radiance = v3_scale(rgb_at(l + LIGHT_RADIANCE, sc->unit), falloff / dist2);
+        ls->pdf = l[LIGHT_PMF];
+        ls->delta = true;
         return ls->pdf > 0.0f;
     }
     if (HAS_LIGHT(LIGHT_POINT) && type == LIGHT_POINT) {

@@ -38,7 +38,21 @@
 #define CONST_PREV_CAM_FORWARD 23
 #define CONST_PREV_CAM_RIGHT 26
 #define CONST_PREV_CAM_UP 29
-#define CONST_COUNT 32
+#define CONST_LENS_RADIUS 32    /* thinlens: aperture radius */
+#define CONST_FOCUS_DISTANCE 33 /* thinlens: the distance in focus, along forward */
+#define CONST_COUNT 34
+
+/* Camera kinds (pyclpt.scene.model.Camera.kind): -DSCENE_CAMERA=kind compiles a thin lens or an
+ * orthographic camera in (pyclpt/buffers/scene.py; without it, a pinhole), so that path_init has no
+ * branch on the kind and stays vectorized. Perspective and thin lens: right and up scale the image
+ * plane at distance 1 along forward; orthographic: they are the image's half-extent in world units,
+ * and rays start on that rectangle and go along forward. */
+#define CAMERA_PERSPECTIVE 0
+#define CAMERA_THINLENS 1
+#define CAMERA_ORTHOGRAPHIC 2
+#ifndef SCENE_CAMERA
+#define SCENE_CAMERA CAMERA_PERSPECTIVE
+#endif
 
 typedef struct {
     __global const float* nodes;

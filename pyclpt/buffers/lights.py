@@ -1,12 +1,15 @@
 """Emitters -> the `lights` and `light_data` buffers of ``cl/scene/lights.h``, and the
 per-resolution constants (camera, environment) of ``cl/scene/scene.h``.
 
-Emitters are the emissive triangles (leaf order), then the point lights, then the
-environment (constant or map); one is chosen by a CDF proportional to an estimate
-of its power:
+Emitters are the emissive triangles (leaf order), then the scene's other lights (point,
+directional, spot, in their order), then the environment (constant or map); one is chosen by a
+CDF proportional to an estimate of its power:
 
 - triangle: area * luminance of the radiance;
 - point light (intensity I, W/sr): 4 pi * luminance(I);
+- directional light (irradiance E): pi r^2 * luminance(E), r the radius of the scene's bounding
+  sphere (the power through the scene's cross-section, as Mitsuba estimates it);
+- spot light: luminance(I) times the solid angle of a cone halfway between beam and cutoff;
 - environment (constant or map): pi^2 r^2 * mean radiance over the sphere, r the
   radius of the scene's bounding sphere (the power a distant emitter sends through
   the scene's cross-section, ~ pi r^2 * pi L for a constant L).
@@ -24,13 +27,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.buffers.materials import TextureTable
-from pyclpt.scene.model import Bitmap, Camera, Envmap, Scene
+from pyclpt.scene.model import Bitmap, Camera, DirectionalLight, Envmap, Scene, SpotLight
 
 LIGHT_STRIDE = 8
-CONST_COUNT = 32
+CONST_COUNT = 34
+CAMERA_KINDS = {"perspective": 0, "thinlens": 1, "orthographic": 2}  # CAMERA_* of cl/scene/scene.h
+
+
+def camera_kind(camera: Camera) -> int:
+    """The CAMERA_* the kernels compile for (-DSCENE_CAMERA): a thin lens without aperture is a pinhole."""
+    if camera.kind == "thinlens" and not camera.aperture_radius > 0:
+        return CAMERA_KINDS["perspective"]
+    return CAMERA_KINDS[camera.kind]
 # record offsets and types (cl/scene/lights.h)
 LIGHT_PRIM, LIGHT_PMF, LIGHT_AREA, LIGHT_RADIANCE, LIGHT_CDF, LIGHT_TYPE = 0, 1, 2, 3, 6, 7
-LIGHT_TRIANGLE, LIGHT_POINT, LIGHT_CONSTANT, LIGHT_ENVMAP = 0, 1, 2, 3
+LIGHT_TRIANGLE, LIGHT_POINT, LIGHT_CONSTANT, LIGHT_ENVMAP, LIGHT_DIRECTIONAL, LIGHT_SPOT = 0, 1, 2, 3, 4, 5
 ENV_HEADER = 16
 ENV_TEXTURE = 11  # the texture id of an environment map's texels in its light_data block
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
@@ -168,24 +179,39 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
             raise ValueError("the scene's emitter tables exceed 2^31 floats")
         return _int_bits(offset)
 
+    radius = max(0.5 * float(np.linalg.norm(np.asarray(bounds[1], np.float64) - bounds[0])), 1e-3)
     for k, light in enumerate(scene.lights):
-        intensity = np.asarray(light.intensity, np.float64)
-        pos = np.asarray(light.position, np.float64)
-        if not (np.all(np.isfinite(intensity)) and intensity.min() >= 0 and np.all(np.isfinite(pos))):
-            raise ValueError(f"point light {k}: position and intensity must be finite, intensity >= 0")
-        p = 4.0 * np.pi * max(luminance(intensity), float(intensity.mean()))
+        rec = np.zeros(LIGHT_STRIDE, np.float32)
+        if isinstance(light, DirectionalLight):
+            value = np.asarray(light.irradiance, np.float64)
+            p = np.pi * radius**2 * max(luminance(value), float(value.mean()))  # Mitsuba: the bounding disk
+            rec[LIGHT_PRIM] = add_data(np.asarray(light.direction, np.float64))
+            rec[LIGHT_TYPE] = LIGHT_DIRECTIONAL
+        elif isinstance(light, SpotLight):
+            value = np.asarray(light.intensity, np.float64)
+            cutoff, beam = np.radians(light.cutoff_angle), np.radians(light.beam_width)
+            solid_angle = 2 * np.pi * (1 - np.cos(0.5 * (cutoff + beam)))
+            p = solid_angle * max(luminance(value), float(value.mean()))
+            inv_transition = 1.0 / (cutoff - beam) if cutoff > beam else 0.0
+            rec[LIGHT_PRIM] = add_data(np.concatenate([light.position, light.direction,
+                                                       [np.cos(cutoff), np.cos(beam), cutoff, inv_transition]]))
+            rec[LIGHT_TYPE] = LIGHT_SPOT
+        else:
+            value = np.asarray(light.intensity, np.float64)
+            pos = np.asarray(light.position, np.float64)
+            if not (np.all(np.isfinite(value)) and value.min() >= 0 and np.all(np.isfinite(pos))):
+                raise ValueError(f"point light {k}: position and intensity must be finite, intensity >= 0")
+            p = 4.0 * np.pi * max(luminance(value), float(value.mean()))
+            rec[LIGHT_PRIM] = add_data(pos)
+            rec[LIGHT_TYPE] = LIGHT_POINT
         if not p > 0:
             continue
-        rec = np.zeros(LIGHT_STRIDE, np.float32)
-        rec[LIGHT_PRIM] = add_data(pos)
-        rec[LIGHT_RADIANCE:LIGHT_RADIANCE + 3] = intensity
-        rec[LIGHT_TYPE] = LIGHT_POINT
+        rec[LIGHT_RADIANCE:LIGHT_RADIANCE + 3] = value
         records.append(rec)
         power.append(p)
 
     env_light = -1
     env = scene.environment
-    radius = max(0.5 * float(np.linalg.norm(np.asarray(bounds[1], np.float64) - bounds[0])), 1e-3)
     if isinstance(env, Envmap):
         block, mean_radiance = pack_envmap(env, textures)
         if mean_radiance > 0:
@@ -226,6 +252,7 @@ def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int,
     origin, forward, right, up = scene.camera.basis(width, height)
     c[0:3], c[3:6], c[6:9], c[9:12] = origin, forward, right, up
     c[20:23], c[23:26], c[26:29], c[29:32] = (previous or scene.camera).basis(width, height)
+    c[32], c[33] = scene.camera.aperture_radius, scene.camera.focus_distance
     c[12], c[13] = width, height
     if scene.environment is not None and not isinstance(scene.environment, Envmap):
         c[14:17] = scene.environment

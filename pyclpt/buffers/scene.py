@@ -15,7 +15,7 @@ import numpy as np
 import pyopencl as cl
 
 from pyclpt.accel.bvh import FlatBVH, build_bvh, leaf_packet_buffer
-from pyclpt.buffers.lights import LightArrays, camera_consts, pack_lights
+from pyclpt.buffers.lights import LightArrays, camera_consts, camera_kind, pack_lights
 from pyclpt.buffers.materials import (  # noqa: F401
     MAT_STRIDE,
     MaterialArrays,
@@ -90,10 +90,11 @@ def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[Mat
     return mats, lights
 
 
-def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool) -> dict:
+def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, camera: Camera) -> dict:
     return {"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
             "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
-            "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets}
+            "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets,
+            "SCENE_CAMERA": camera_kind(camera) or None}
 
 
 def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order: np.ndarray) -> np.ndarray:
@@ -137,7 +138,7 @@ def pack_scene(scene: Scene) -> SceneArrays:
         lights=lights,
         textures=mats.textures,
         bounds=bounds,
-        defines=scene_defines(mats, lights, bvh, packets),
+        defines=scene_defines(mats, lights, bvh, packets, scene.camera),
         node_buffer=leaf_packet_buffer(bvh) if packets else bvh.nodes,
     )
 
@@ -169,7 +170,7 @@ class SceneBuffers:
         old = self.arrays
         mats, lights = pack_appearance(self.scene, old.bvh, old.bounds)
         packets = old.defines["BVH_LEAF_PACKETS"]
-        defines = scene_defines(mats, lights, old.bvh, packets)
+        defines = scene_defines(mats, lights, old.bvh, packets, self.scene.camera)
         changed = {k: (old.defines[k], v) for k, v in defines.items() if old.defines[k] != v}
         if changed:
             what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items())
@@ -191,6 +192,11 @@ class SceneBuffers:
     def refresh_camera(self, previous: Camera | None = None) -> None:
         """Re-read the scene's camera: the constants are rebuilt on the next args() call. ``previous``:
         the camera of the frame before, whose view the motion vectors point back to (None: none moved)."""
+        kind = camera_kind(self.scene.camera) or None
+        if kind != self.arrays.defines.get("SCENE_CAMERA"):
+            raise ValueError(f"scene {self.scene.name!r}: the camera changed kind (now {self.scene.camera.kind!r}, "
+                             f"aperture {self.scene.camera.aperture_radius}); the kernels are compiled for one kind: "
+                             f"render it with a new renderer")
         self.previous_camera = previous
         self._consts.clear()
 

@@ -31,12 +31,14 @@ from pyclpt.scene.model import (
     Conductor,
     Dielectric,
     Diffuse,
+    DirectionalLight,
     Envmap,
     Mask,
     Material,
     Mesh,
     Plastic,
     Scene,
+    SpotLight,
     ThinDielectric,
 )
 
@@ -51,6 +53,8 @@ NOT_DIFFERENTIABLE = {
     "geometry": "vertex positions: visibility (silhouette) gradients need edge sampling, not implemented "
                 "(docs/differentiable.md)",
     "point": "point light intensity: not differentiated yet",
+    "spot": "spot light intensity: not differentiated yet",
+    "directional": "directional light irradiance: not differentiated yet",
     "scale": "environment map scale: not differentiated (its texels are)",
     "mask": "opacity: changes visibility, not differentiated",
 }
@@ -216,8 +220,12 @@ class _Walker:
         elif env is not None:
             self.add(f"{env_name}.radiance.value", "env", _rgb_param(sc, "environment"), sc)
         for k, light in enumerate(sc.lights):
-            self.add(f"{sc.ids.get(f'light:{k}', f'light_{k}')}.intensity.value", "",
-                     _rgb_param(light, "intensity"), light, "point")
+            name = sc.ids.get(f"light:{k}", f"light_{k}")
+            if isinstance(light, DirectionalLight):
+                self.add(f"{name}.irradiance.value", "", _rgb_param(light, "irradiance"), light, "directional")
+            else:
+                self.add(f"{name}.intensity.value", "", _rgb_param(light, "intensity"), light,
+                         "spot" if isinstance(light, SpotLight) else "point")
         return self.params
 
 

@@ -19,6 +19,7 @@ viewing axis nearest to the centre of the scene's bounding box.
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -92,6 +93,9 @@ class _Pose:
     columns: np.ndarray  # the column scales, signed (a mirrored camera: Mitsuba's -x)
     fov: float
     fov_axis: str
+    kind: str = "perspective"
+    aperture_radius: float = 0.0
+    focus_distance: float = 0.0
 
     @staticmethod
     def of(camera: Camera) -> _Pose:
@@ -103,13 +107,13 @@ class _Pose:
         sign = np.sign(np.linalg.det(r))
         r = r * np.array([sign, 1, 1])  # a mirror becomes a flipped first column's scale
         return _Pose(m[:3, 3].copy(), _quat_from_matrix(r), lengths * np.array([sign, 1, 1]),
-                     float(camera.fov), camera.fov_axis)
+                     float(camera.fov), camera.fov_axis, camera.kind, camera.aperture_radius, camera.focus_distance)
 
     def camera(self) -> Camera:
         m = np.eye(4)
         m[:3, :3] = _matrix_from_quat(self.rotation) * self.columns
         m[:3, 3] = self.origin
-        return Camera(m, self.fov, self.fov_axis)
+        return Camera(m, self.fov, self.fov_axis, self.kind, self.aperture_radius, self.focus_distance)
 
 
 class CameraPath:
@@ -159,7 +163,9 @@ class CameraPath:
         else:
             origin = (1 - u) * a.origin + u * b.origin
         pose = _Pose(origin, _slerp(a.rotation, b.rotation, u), (1 - u) * a.columns + u * b.columns,
-                     (1 - u) * a.fov + u * b.fov, a.fov_axis)
+                     (1 - u) * a.fov + u * b.fov, a.fov_axis, a.kind,
+                     (1 - u) * a.aperture_radius + u * b.aperture_radius,
+                     (1 - u) * a.focus_distance + u * b.focus_distance)
         return pose.camera()
 
     @staticmethod
@@ -186,7 +192,7 @@ class CameraPath:
         for k in range(frames):
             angle = degrees * k / (frames - 1) if frames > 1 else 0.0
             turn = tf.translate(centre) @ tf.rotate(axis, angle) @ tf.translate(-centre)
-            keys.append(Keyframe(float(k), Camera(turn @ m, camera.fov, camera.fov_axis)))
+            keys.append(Keyframe(float(k), dataclasses.replace(camera, to_world=turn @ m)))
         return CameraPath(keys)
 
 

@@ -57,6 +57,7 @@ WRAP_MODES = ("repeat", "mirror", "clamp", "black")
 FILTERS = ("nearest", "bilinear")
 DISTRIBUTIONS = ("ggx", "beckmann")
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
+CAMERA_KINDS = ("perspective", "thinlens", "orthographic")
 
 
 def _uv(value: object, what: str) -> tuple[float, float]:
@@ -440,6 +441,61 @@ class PointLight(Checked):
             raise ValueError(f"point light: negative intensity {self.intensity}")
 
 
+def _unit_vector(value: object, what: str) -> tuple[float, float, float]:
+    v = np.asarray(value, np.float64).reshape(-1)
+    n = float(np.linalg.norm(v)) if v.size == 3 and np.all(np.isfinite(v)) else 0.0
+    if not n > 0:
+        raise ValueError(f"{what}: expected 3 finite numbers, not all 0, got {value!r}")
+    return (float(v[0] / n), float(v[1] / n), float(v[2] / n))
+
+
+@dataclass
+class DirectionalLight(Checked):
+    """A distant light (Mitsuba ``directional``): light travelling along ``direction`` everywhere, with
+    ``irradiance`` (W/m^2, rgb) on a surface facing it. A delta light: found by next-event estimation
+    only."""
+
+    direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    irradiance: RGB = (1.0, 1.0, 1.0)
+
+    def _check(self) -> None:
+        self.direction = _unit_vector(self.direction, "directional light direction")
+        self.irradiance = radiance(self.irradiance, "directional light irradiance")
+
+
+@dataclass
+class SpotLight(Checked):
+    """A spot light (Mitsuba ``spot``) at ``position`` shining along ``direction``: ``intensity`` (W/sr,
+    rgb) within ``beam_width`` degrees of the axis, falling linearly in angle to 0 at ``cutoff_angle``
+    (Mitsuba's defaults: 20 degrees, and 3/4 of the cutoff for the beam). A delta light."""
+
+    position: tuple[float, float, float]
+    direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    intensity: RGB = (1.0, 1.0, 1.0)
+    cutoff_angle: float = 20.0
+    beam_width: float | None = None
+
+    def _check(self) -> None:
+        p = np.asarray(self.position, np.float64).reshape(-1)
+        if p.size != 3 or not np.all(np.isfinite(p)):
+            raise ValueError(f"spot light position: expected 3 finite numbers, got {self.position!r}")
+        self.position = (float(p[0]), float(p[1]), float(p[2]))
+        self.direction = _unit_vector(self.direction, "spot light direction")
+        self.intensity = radiance(self.intensity, "spot light intensity")
+        cutoff = check_float(self.cutoff_angle, "spot light cutoff_angle")
+        if not 0.0 < cutoff <= 90.0:
+            raise ValueError(f"spot light cutoff_angle must be in (0, 90] degrees, got {self.cutoff_angle}")
+        self.cutoff_angle = cutoff
+        beam = 0.75 * cutoff if self.beam_width is None else check_float(self.beam_width, "spot light beam_width")
+        if not 0.0 < beam <= cutoff:
+            raise ValueError(f"spot light beam_width must be in (0, cutoff_angle = {cutoff}] degrees, got {beam}")
+        self.beam_width = beam
+
+
+Light = PointLight | DirectionalLight | SpotLight
+LIGHTS = (PointLight, DirectionalLight, SpotLight)
+
+
 @dataclass(eq=False)
 class Envmap(Checked):
     """A lat-long environment map (Mitsuba ``envmap``): ``pixels`` (H, W, 3) linear radiance,
@@ -531,11 +587,19 @@ class Mesh(Checked):
 
 @dataclass
 class Camera(Checked):
-    """Perspective pinhole camera; ``to_world`` maps camera space (looking along +z) to world."""
+    """A camera; ``to_world`` maps camera space (looking along +z) to world.
+
+    ``kind``: ``perspective`` (a pinhole, Mitsuba ``perspective``), ``thinlens`` (Mitsuba ``thinlens``: a
+    lens of ``aperture_radius`` focused at ``focus_distance`` along +z; to_world must not scale), or
+    ``orthographic`` (Mitsuba ``orthographic``: parallel rays along +z from the camera-space square x in
+    [-1, 1], y in [-1/aspect, 1/aspect], scaled by to_world; ``fov`` unused)."""
 
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
     fov: float = 45.0  # degrees, along fov_axis
     fov_axis: str = "x"  # x | y | diagonal | smaller | larger
+    kind: str = "perspective"
+    aperture_radius: float = 0.0
+    focus_distance: float = 0.0
 
     def _check(self) -> None:
         m = np.asarray(self.to_world, dtype=np.float64).reshape(4, 4)
@@ -548,6 +612,15 @@ class Camera(Checked):
         self.fov = fov
         if self.fov_axis not in FOV_AXES:
             raise ValueError(f"camera fov_axis must be x, y, diagonal, smaller or larger, got {self.fov_axis!r}")
+        if self.kind not in CAMERA_KINDS:
+            raise ValueError(f"camera kind must be one of {CAMERA_KINDS}, got {self.kind!r}")
+        self.aperture_radius = check_float(self.aperture_radius, "camera aperture_radius", lo=0.0)
+        self.focus_distance = check_float(self.focus_distance, "camera focus_distance", lo=0.0)
+        if self.kind == "thinlens" and self.aperture_radius > 0 and not self.focus_distance > 0:
+            raise ValueError(f"a thinlens camera with aperture_radius {self.aperture_radius} needs a "
+                             f"focus_distance > 0, got {self.focus_distance}")
+        if self.kind == "orthographic" and not (abs(np.linalg.det(m[:3, :3])) > 0):
+            raise ValueError("an orthographic camera's to_world must not be singular (its scale is the extent)")
 
     @staticmethod
     def look_at(origin, target, up=(0.0, 1.0, 0.0), fov: float = 45.0, fov_axis: str = "x") -> Camera:
@@ -556,11 +629,15 @@ class Camera(Checked):
         return Camera(look_at(origin, target, up), fov, fov_axis)
 
     def basis(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(origin, forward, right, up) with right/up scaled by the half-extent of the image plane at z=1."""
+        """(origin, forward, right, up) with right/up scaled by the half-extent of the image plane at z=1;
+        for an orthographic camera, by the half-extent of the image in world units (the camera-space
+        square x in [-1, 1], y in [-1/aspect, 1/aspect] through to_world, as Mitsuba's)."""
         m = self.to_world
         origin = m[:3, 3]
         cols = [m[:3, i] / max(np.linalg.norm(m[:3, i]), 1e-30) for i in range(3)]
         aspect = width / height
+        if self.kind == "orthographic":
+            return origin, cols[2], -m[:3, 0], m[:3, 1] / aspect
         axis = self.fov_axis
         if axis == "smaller":
             axis = "y" if aspect > 1 else "x"
@@ -604,14 +681,14 @@ class Scene(Checked):
     max_depth: int = -1
     name: str = "scene"
     source: Path | None = None
-    lights: list[PointLight] = field(default_factory=list)  # emitters that are not shapes
+    lights: list[Light] = field(default_factory=list)  # emitters that are neither shapes nor the environment
     # Mitsuba's names of objects the meshes' names do not give ("material:3" -> "red", "environment",
     # "light:0"): set by the dict and XML loaders, used by pyclpt.traverse
     ids: dict[str, str] = field(default_factory=dict)
 
     def _check(self) -> None:
         where = f"scene {self.name!r}"
-        for attr, kind in (("meshes", Mesh), ("materials", MATERIALS), ("lights", PointLight)):
+        for attr, kind in (("meshes", Mesh), ("materials", MATERIALS), ("lights", LIGHTS)):
             items = getattr(self, attr)
             if not isinstance(items, list):
                 raise TypeError(f"{where} {attr}: expected a list, got {type(items).__name__}")

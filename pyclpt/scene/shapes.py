@@ -3,7 +3,8 @@
 ``rectangle``: [-1, 1]^2 at z = 0, facing +z. ``cube``: [-1, 1]^3, faces outward.
 ``disk``: unit disk at z = 0, facing +z. ``sphere``: unit sphere at the origin
 (a UV sphere with smooth shading normals, a documented approximation of
-Mitsuba's analytic sphere).
+Mitsuba's analytic sphere). ``cylinder``: radius 1 around the z axis from z = 0 to 1, open, facing
+out, u = phi / 2pi and v = z as Mitsuba's (a prism of 128 sides with smooth normals).
 """
 from __future__ import annotations
 
@@ -80,4 +81,18 @@ def sphere(rings: int = 48, segments: int = 96) -> ShapeMesh:
     return ShapeMesh(p, np.array(idx, np.int32), p.copy(), uv.astype(np.float32))
 
 
-SHAPES = {"rectangle": rectangle, "cube": cube, "disk": disk, "sphere": sphere}
+def cylinder(segments: int = 128) -> ShapeMesh:
+    phi = np.linspace(0, 2 * np.pi, segments + 1)  # the seam's vertices twice: u = 0 and u = 1
+    ring = np.stack([np.cos(phi), np.sin(phi)], 1)
+    zero, one = np.zeros(segments + 1), np.ones(segments + 1)
+    p = np.concatenate([np.column_stack([ring, zero]), np.column_stack([ring, one])])
+    n = np.concatenate([np.column_stack([ring, zero])] * 2)
+    u = phi / (2 * np.pi)
+    uv = np.concatenate([np.column_stack([u, zero]), np.column_stack([u, one])])
+    i = np.arange(segments)
+    top = i + segments + 1
+    idx = np.concatenate([np.stack([i, i + 1, top + 1], 1), np.stack([top + 1, top, i], 1)])  # ccw from outside
+    return ShapeMesh(p.astype(np.float32), idx.astype(np.int32), n.astype(np.float32), uv.astype(np.float32))
+
+
+SHAPES = {"rectangle": rectangle, "cube": cube, "disk": disk, "sphere": sphere, "cylinder": cylinder}

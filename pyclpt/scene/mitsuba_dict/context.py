@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from pyclpt.scene import transform as tf
-from pyclpt.scene.model import RGB, Bitmap, Envmap, Material, Mesh, PointLight, rgb
+from pyclpt.scene.model import RGB, Bitmap, Envmap, Light, Material, Mesh, rgb
 
 #: Meta key holding an object's source location ``"file:line"`` (added by :mod:`pyclpt.scene.mitsuba_xml`).
 WHERE = "__where__"
@@ -55,7 +55,7 @@ class LoadContext:
         self.material_ids: dict[str, int] = {}
         self.ids: dict[str, str] = {}  # Scene.ids: Mitsuba's names of the scene's objects
         self.meshes: list[Mesh] = []
-        self.lights: list[PointLight] = []
+        self.lights: list[Light] = []
         self.environment: RGB | Envmap | None = None
         self.bitmaps: dict[tuple, Bitmap] = {}  # one Bitmap per file and sampling settings
 

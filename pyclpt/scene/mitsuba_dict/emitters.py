@@ -1,7 +1,7 @@
-"""Mitsuba emitter plug-ins: point lights, and the environment (``constant``, ``envmap``, ``sunsky``,
-``sky``, ``sun``); ``area`` emitters attach to shapes (:func:`area_radiance`).
+"""Mitsuba emitter plug-ins: point, directional and spot lights, and the environment (``constant``,
+``envmap``, ``sunsky``, ``sky``, ``sun``); ``area`` emitters attach to shapes (:func:`area_radiance`).
 
-:data:`EMITTERS` maps a top-level emitter plug-in to its loader, which adds a point light to the scene or
+:data:`EMITTERS` maps a top-level emitter plug-in to its loader, which adds a light to the scene or
 returns its environment (a scene has at most one; a second is reported and ignored). :data:`UNSUPPORTED`
 names the Mitsuba emitters pyclpt ignores with a note.
 """
@@ -14,14 +14,14 @@ import numpy as np
 
 from pyclpt.scene.mitsuba_dict.context import LoadContext, SceneDictError
 from pyclpt.scene.mitsuba_dict.textures import color
-from pyclpt.scene.model import RGB, Envmap, PointLight
+from pyclpt.scene.model import RGB, DirectionalLight, Envmap, PointLight, SpotLight
 
 Environment = RGB | Envmap
 #: A loader adds to the scene (point lights) and returns None, or returns the scene's environment.
 EmitterLoader = Callable[[LoadContext, Mapping[str, Any], str], Environment | None]
 
 #: Mitsuba emitters pyclpt does not have: reported, and ignored.
-UNSUPPORTED = frozenset({"spot", "directional", "projector", "collimated", "directionalarea"})
+UNSUPPORTED = frozenset({"projector", "collimated", "directionalarea"})
 
 
 def area_radiance(ctx: LoadContext, em: Mapping[str, Any], where: str) -> RGB:
@@ -43,6 +43,36 @@ def load_point(ctx: LoadContext, d: Mapping[str, Any], where: str) -> None:
     ctx.lights.append(PointLight(tuple(pos), color(ctx, d.get("intensity", 1.0), f"{where}.intensity", d)))
     ctx.ids[f"light:{len(ctx.lights) - 1}"] = str(d.get("id", where))
     return None
+
+
+def _add_light(ctx: LoadContext, d: Mapping[str, Any], where: str, light) -> None:
+    ctx.lights.append(light)
+    ctx.ids[f"light:{len(ctx.lights) - 1}"] = str(d.get("id", where))
+
+
+def load_directional(ctx: LoadContext, d: Mapping[str, Any], where: str) -> None:
+    """``directional``: ``irradiance`` travelling along ``direction`` (else the +z axis of ``to_world``)."""
+    ctx.note_unused(where, d, {"irradiance", "direction", "to_world"})
+    direction = np.array([0.0, 0.0, 1.0])
+    if "to_world" in d:
+        direction = ctx.transform(d, "to_world", where)[:3, :3] @ direction
+    if "direction" in d:
+        direction = ctx.vector(d, "direction", where)
+    _add_light(ctx, d, where, DirectionalLight(tuple(direction), color(ctx, d.get("irradiance", 1.0),
+                                                                       f"{where}.irradiance", d)))
+
+
+def load_spot(ctx: LoadContext, d: Mapping[str, Any], where: str) -> None:
+    """``spot``: at the origin of ``to_world``, shining along its +z axis, with ``intensity``,
+    ``cutoff_angle`` and ``beam_width`` (degrees)."""
+    ctx.note_unused(where, d, {"intensity", "cutoff_angle", "beam_width", "to_world", "texture"})
+    if "texture" in d:
+        ctx.note(d, where, "a spot light's texture is not supported: the spot is uniform")
+    m = ctx.transform(d, "to_world", where) if "to_world" in d else np.eye(4)
+    cutoff = ctx.number(d, "cutoff_angle", 20.0, where)
+    beam = ctx.number(d, "beam_width", 0.75 * cutoff, where)
+    _add_light(ctx, d, where, SpotLight(tuple(m[:3, 3]), tuple(m[:3, :3] @ np.array([0.0, 0.0, 1.0])),
+                                        color(ctx, d.get("intensity", 1.0), f"{where}.intensity", d), cutoff, beam))
 
 
 def load_constant(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environment:
@@ -113,6 +143,8 @@ def load_sunsky(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environme
 #: Mitsuba emitter plug-ins pyclpt loads at the top level of a scene, by name.
 EMITTERS: dict[str, EmitterLoader] = {
     "point": load_point,
+    "directional": load_directional,
+    "spot": load_spot,
     "constant": load_constant,
     "envmap": load_envmap,
     "sunsky": load_sunsky,

@@ -1,8 +1,8 @@
 """Mitsuba sensor plug-ins with their film and sampler, and the integrator: camera, image size, sample
 count and path depth.
 
-:data:`SENSORS` maps the sensor plug-ins pyclpt loads to their loaders (a pinhole camera; ``thinlens``
-loses its depth of field, with a note); :data:`OTHER_SENSORS` are recognised as sensors but rejected.
+:data:`SENSORS` maps the sensor plug-ins pyclpt loads to their loaders (``perspective``, ``thinlens``,
+``orthographic``); :data:`OTHER_SENSORS` are recognised as sensors but rejected.
 Films and samplers are read by :func:`load_film` and :func:`load_sampler`. Every Mitsuba integrator
 (:data:`INTEGRATORS`) becomes pyclpt's path tracer with the integrator's ``max_depth``
 (:func:`load_integrator`), with a note when it is not ``path``.
@@ -23,7 +23,7 @@ FILMS = frozenset({"hdrfilm", "ldrfilm", "specfilm"})
 SAMPLERS = frozenset({"independent", "stratified", "multijitter", "ldsampler", "halton", "sobol", "hammersley",
                       "orthogonal"})
 #: Mitsuba sensors pyclpt recognises but cannot render.
-OTHER_SENSORS = frozenset({"orthographic", "radiancemeter", "irradiancemeter", "spherical", "telecentric", "batch"})
+OTHER_SENSORS = frozenset({"radiancemeter", "irradiancemeter", "spherical", "telecentric", "batch"})
 #: Mitsuba integrators: all become pyclpt's path tracer (the path tracers without a note).
 PATH_TRACERS = frozenset({"path", "volpath", "volpathmis"})
 INTEGRATORS = PATH_TRACERS | {"direct", "aov", "sppm", "bdpt", "pssmlt", "mlt", "erpt", "ptracer", "photonmapper",
@@ -42,10 +42,8 @@ def _nested_of(d: Mapping[str, Any], key: str, types: frozenset[str]) -> Mapping
 
 
 def load_perspective(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Camera:
-    """``perspective`` (and ``thinlens``, as a pinhole): ``fov`` (or ``focal_length``), ``fov_axis``,
-    ``to_world``."""
-    if d.get("type", "perspective") == "thinlens":
-        ctx.note(d, where, "thinlens: a pinhole camera used (no depth of field)")
+    """``perspective`` and ``thinlens`` (with ``aperture_radius`` and ``focus_distance``, both required as in
+    Mitsuba): ``fov`` (or ``focal_length``), ``fov_axis``, ``to_world``."""
     fov = ctx.number(d, "fov", 45.0, where)
     if "focal_length" in d and "fov" not in d:
         text = str(d["focal_length"]).lower().replace("mm", "")
@@ -54,8 +52,24 @@ def load_perspective(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Came
         except ValueError:
             raise ctx.fail(f"{where}.focal_length", f"expected e.g. '50mm', got {d['focal_length']!r}",
                            d) from None
+    lens: dict = {}
+    if d.get("type", "perspective") == "thinlens":
+        for key in ("aperture_radius", "focus_distance"):
+            if key not in d:
+                raise ctx.fail(where, f"a thinlens sensor needs {key}", d)
+        lens = {"kind": "thinlens", "aperture_radius": ctx.number(d, "aperture_radius", 0.0, where),
+                "focus_distance": ctx.number(d, "focus_distance", 0.0, where)}
     try:
-        return Camera(ctx.transform(d, "to_world", where), fov, str(d.get("fov_axis", "x")).lower())
+        return Camera(ctx.transform(d, "to_world", where), fov, str(d.get("fov_axis", "x")).lower(), **lens)
+    except ValueError as exc:
+        raise ctx.fail(where, str(exc), d) from None
+
+
+def load_orthographic(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Camera:
+    """``orthographic``: parallel rays; ``to_world``'s scale sets the extent (Mitsuba's camera-space square
+    x in [-1, 1], y in [-1/aspect, 1/aspect])."""
+    try:
+        return Camera(ctx.transform(d, "to_world", where), kind="orthographic")
     except ValueError as exc:
         raise ctx.fail(where, str(exc), d) from None
 
@@ -64,6 +78,7 @@ def load_perspective(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Came
 SENSORS: dict[str, SensorLoader] = {
     "perspective": load_perspective,
     "thinlens": load_perspective,
+    "orthographic": load_orthographic,
 }
 #: The parameters the sensor loaders read.
 _SENSOR_KEYS = frozenset({"fov", "fov_axis", "to_world", "near_clip", "far_clip", "focus_distance", "focal_length",

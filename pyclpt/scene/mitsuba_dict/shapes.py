@@ -39,13 +39,26 @@ class Geometry:
 ShapeLoader = Callable[[LoadContext, Mapping[str, Any], str, np.ndarray], Geometry]
 
 #: Mitsuba shapes pyclpt does not have: reported, and skipped.
-UNSUPPORTED = frozenset({"cylinder", "hair", "heightfield", "shapegroup", "instance", "bsplinecurve",
+UNSUPPORTED = frozenset({"hair", "heightfield", "shapegroup", "instance", "bsplinecurve",
                          "linearcurve", "sdfgrid", "ellipsoids", "ellipsoidsmesh"})
 
 
+def mitsuba_frame(n: np.ndarray) -> np.ndarray:
+    """Mitsuba's ``Frame3f(n)`` as a 4x4 matrix (columns s, t, n): its ``coordinate_system`` (Duff et al.
+    2017), so that a cylinder's u starts where Mitsuba's does."""
+    sign = np.copysign(1.0, n[2])
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    m = np.eye(4)
+    m[:3, 0] = [1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]]
+    m[:3, 1] = [b, sign + n[1] * n[1] * a, -n[1]]
+    m[:3, 2] = n
+    return m
+
+
 def load_analytic(ctx: LoadContext, d: Mapping[str, Any], where: str, to_world: np.ndarray) -> Geometry:
-    """``rectangle``, ``cube``, ``disk``, ``sphere`` (``center``, ``radius``) as meshes (see
-    :mod:`pyclpt.scene.shapes`)."""
+    """``rectangle``, ``cube``, ``disk``, ``sphere`` (``center``, ``radius``), ``cylinder`` (``p0``, ``p1``,
+    ``radius``) as meshes (see :mod:`pyclpt.scene.shapes`)."""
     kind = d.get("type")
     base = shape_lib.SHAPES[kind]()
     used: set[str] = set()
@@ -56,6 +69,16 @@ def load_analytic(ctx: LoadContext, d: Mapping[str, Any], where: str, to_world: 
             to_world = to_world @ tf.translate(d.get("center", (0.0, 0.0, 0.0))) @ tf.scale(r)
         except (ValueError, TypeError) as exc:
             raise ctx.fail(f"{where}.center", str(exc), d) from None
+    if kind == "cylinder":  # Mitsuba: to_world * translate(p0) * to_frame(Frame(d / |d|)) * scale(r, r, |d|)
+        used |= {"p0", "p1", "radius"}
+        r = ctx.number(d, "radius", 1.0, where)
+        p0 = ctx.vector(d, "p0", where) if "p0" in d else np.zeros(3)
+        p1 = ctx.vector(d, "p1", where) if "p1" in d else np.array([0.0, 0.0, 1.0])
+        length = float(np.linalg.norm(p1 - p0))
+        if not (length > 0 and r > 0):
+            raise ctx.fail(where, f"a cylinder needs p0 != p1 and radius > 0, got p0 {p0.tolist()}, "
+                                  f"p1 {p1.tolist()}, radius {r}", d)
+        to_world = to_world @ tf.translate(p0) @ mitsuba_frame((p1 - p0) / length) @ tf.scale((r, r, length))
     return Geometry(base.positions, base.indices, base.normals, base.uvs, to_world, used=used)
 
 

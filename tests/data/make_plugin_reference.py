@@ -1,0 +1,28 @@
+"""Regenerate the Mitsuba 3 renders that the plug-in tests compare pyclpt's renders of the same files with:
+``NAME-mitsuba.npy`` for each ``NAME.xml`` below.
+
+    /tmp/mts/bin/python tests/data/make_plugin_reference.py [NAME ...]
+
+- ``delta-emitters.xml``: a spot and a directional light over a floor and a box (tests/test_lights.py);
+- ``cylinder.xml``: a textured cylinder given by p0, p1 and radius (tests/test_plugins.py);
+- ``thinlens.xml``, ``orthographic.xml``: the two other cameras, over boxes at several depths
+  (tests/test_plugins.py).
+
+Mitsuba's path tracer as each file says (box filter), 16384 spp.
+"""
+import sys
+from pathlib import Path
+
+import mitsuba as mi
+import numpy as np
+
+mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
+HERE = Path(__file__).parent
+NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic")
+
+if __name__ == "__main__":
+    for name in sys.argv[1:] or NAMES:
+        scene = mi.load_file(str(HERE / f"{name}.xml"))
+        image = np.array(mi.render(scene, spp=16384, seed=7), dtype=np.float32)[..., :3]
+        np.save(HERE / f"{name}-mitsuba.npy", image)
+        print(name, image.shape, image.reshape(-1, 3).mean(0))
