@@ -236,6 +236,9 @@ MUTANTS: list[Mutant] = [
            ": (s[SPOT_CUTOFF] - m_acos(m_clamp(cos_t, -1.0f, 1.0f))) * s[SPOT_INV_TRANSITION];",
            ": (cos_t - s[SPOT_COS_CUTOFF]) / (s[SPOT_COS_BEAM] - s[SPOT_COS_CUTOFF]);",
            ("tests/test_lights.py::test_spot_light_analytic",), "a spot's falloff linear in cosine, not in angle"),
+    Mutant("thinlens-focus-ignored", "vec3 focus = v3_add(ps->org, v3_scale(plane, c[CONST_FOCUS_DISTANCE]));",
+           "vec3 focus = v3_add(ps->org, plane);", ("tests/test_plugins.py::test_plugin_matches_mitsuba",),
+           "a thin lens focused at distance 1 whatever its focus_distance"),
     # ---- differentiable rendering (issue 13) --------------------------------------------------------
     Mutant("gradient-ignores-gathered-radiance",
            "BsdfAdjoint g = bsdf_adjoint(&deferred[k].r, v3_mul(dL, v3_sub(L, deferred[k].gathered)));",
