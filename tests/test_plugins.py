@@ -89,11 +89,12 @@ def test_unsupported_plugins_share_one_warning_line(caplog):
                                    "skipped; s: emitter type 'projector' not supported, ignored")
 
 
-@pytest.mark.parametrize("name", ["cylinder", "thinlens", "orthographic"])
+@pytest.mark.parametrize("name", ["cylinder", "thinlens", "orthographic", "uv-shapes"])
 def test_plugin_matches_mitsuba(name):
     """Mitsuba 3 rendering the same XML file (tests/data/make_plugin_reference.py, 16384 spp): a cylinder
     given by p0, p1 and radius with a bitmap whose glyph shows where u starts and which way v runs; a thin
-    lens focused at a distance over boxes at several depths; an orthographic camera scaled by to_world.
+    lens focused at a distance over boxes at several depths; an orthographic camera scaled by to_world;
+    the glyph on a rectangle, a disk, a sphere and a cube (Mitsuba's cube mesh, its uvs included).
     Pixel relative MSE (the glyph's edges, the blur of the lens in place), the mean within 1 %, and the
     megakernel equal to the wavefront."""
     import numpy as np
@@ -151,3 +152,18 @@ def test_cylinder_parameters():
     np.testing.assert_allclose([default[:, 2].min(), default[:, 2].max()], [0, 1], atol=1e-6)
     with pytest.raises(SceneDictError, match="p0 != p1"):
         load_dict({"type": "scene", "c": {"type": "cylinder", "p0": [1, 1, 1], "p1": [1, 1, 1]}})
+
+
+def test_disk_texture_coordinates_are_mitsubas():
+    """Mitsuba's disk: uv = (r, phi / 2pi) everywhere (not r phi along a fan), checked at the centroid of
+    every triangle, away from the seam."""
+    import numpy as np
+
+    from pyclpt.scene.shapes import disk
+
+    m = disk()
+    p, uv = m.positions[m.indices].mean(1), m.uvs[m.indices].mean(1)
+    r, phi = np.hypot(p[:, 0], p[:, 1]), np.arctan2(p[:, 1], p[:, 0]) % (2 * np.pi)
+    away = (phi > 0.1) & (phi < 2 * np.pi - 0.1)
+    np.testing.assert_allclose(uv[away, 1], phi[away] / (2 * np.pi), atol=2 / 128)
+    np.testing.assert_allclose(uv[:, 0], r, atol=0.01)

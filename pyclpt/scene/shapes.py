@@ -27,39 +27,47 @@ def rectangle() -> ShapeMesh:
     return ShapeMesh(p, np.array([[0, 1, 2], [2, 3, 0]], np.int32), n, uv)
 
 
+# Mitsuba 3's cube, as mi.traverse gives it (vertex_positions, vertex_texcoords, faces): 4 vertices a face,
+# texture coordinates as Mitsuba's (the loader flips v into pyclpt's convention, as for every analytic shape).
+_CUBE_POSITIONS = [
+    [1, -1, -1], [1, -1, 1], [-1, -1, 1], [-1, -1, -1],  # -y
+    [1, 1, -1], [-1, 1, -1], [-1, 1, 1], [1, 1, 1],  # +y
+    [1, -1, -1], [1, 1, -1], [1, 1, 1], [1, -1, 1],  # +x
+    [1, -1, 1], [1, 1, 1], [-1, 1, 1], [-1, -1, 1],  # +z
+    [-1, -1, 1], [-1, 1, 1], [-1, 1, -1], [-1, -1, -1],  # -x
+    [1, 1, -1], [1, -1, -1], [-1, -1, -1], [-1, 1, -1],  # -z
+]
+_CUBE_FACE_UVS = [[0, 1], [1, 1], [1, 0], [0, 0]]
+
+
 def cube() -> ShapeMesh:
-    positions, normals, uvs, indices = [], [], [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            n = np.zeros(3)
-            n[axis] = sign
-            u_axis, v_axis = [a for a in range(3) if a != axis]
-            corners = []
-            for du, dv in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                c = np.zeros(3)
-                c[axis], c[u_axis], c[v_axis] = sign, du, dv
-                corners.append(c)
-            # keep counter-clockwise winding seen from outside
-            if np.dot(np.cross(corners[1] - corners[0], corners[2] - corners[0]), n) < 0:
-                corners = corners[::-1]
-            base = len(positions)
-            positions += corners
-            normals += [n] * 4
-            uvs += [[0, 0], [1, 0], [1, 1], [0, 1]]
-            indices += [[base, base + 1, base + 2], [base + 2, base + 3, base]]
-    return ShapeMesh(np.array(positions, np.float32), np.array(indices, np.int32),
-                     np.array(normals, np.float32), np.array(uvs, np.float32))
+    p = np.array(_CUBE_POSITIONS, np.float32)
+    n = np.repeat(np.array([[0, -1, 0], [0, 1, 0], [1, 0, 0], [0, 0, 1], [-1, 0, 0], [0, 0, -1]], np.float32), 4, 0)
+    uv = np.tile(np.array(_CUBE_FACE_UVS, np.float32), (6, 1))
+    base = 4 * np.arange(6)[:, None]
+    idx = np.concatenate([base + [0, 1, 2], base + [3, 0, 2]], 1).reshape(-1, 3)
+    return ShapeMesh(p, idx.astype(np.int32), n, uv)
 
 
-def disk(segments: int = 64) -> ShapeMesh:
-    phi = np.linspace(0, 2 * np.pi, segments, endpoint=False)
-    ring = np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], 1)
-    p = np.vstack([[0, 0, 0], ring]).astype(np.float32)
+def disk(segments: int = 128, rings: int = 8) -> ShapeMesh:
+    """Rings of vertices at radii k / rings with uv (r, phi / 2pi) as Mitsuba's disk has; the centre is
+    a ring of its own (one vertex per angle, all at the origin: its triangles with two of them have no
+    area), so that v follows the angle everywhere, and the seam's vertices come twice (v = 0 and 1)."""
+    phi = np.linspace(0, 2 * np.pi, segments + 1)
+    r = np.linspace(0, 1, rings + 1)
+    rr, ff = np.meshgrid(r, phi, indexing="ij")
+    p = np.stack([rr * np.cos(ff), rr * np.sin(ff), np.zeros_like(rr)], -1).reshape(-1, 3)
+    uv = np.stack([rr, ff / (2 * np.pi)], -1).reshape(-1, 2)
+    w = segments + 1
+    idx = []
+    for k in range(rings):
+        for j in range(segments):
+            a, b, c, d = k * w + j, k * w + j + 1, (k + 1) * w + j, (k + 1) * w + j + 1
+            if k > 0:  # counter-clockwise seen from +z
+                idx.append([a, d, b])
+            idx.append([a, c, d])
     n = np.tile(np.array([0, 0, 1], np.float32), (len(p), 1))
-    uv = np.vstack([[0, 0], np.stack([np.ones_like(phi), phi / (2 * np.pi)], 1)]).astype(np.float32)
-    i = np.arange(segments)
-    idx = np.stack([np.zeros(segments, int), 1 + i, 1 + (i + 1) % segments], 1).astype(np.int32)
-    return ShapeMesh(p, idx, n, uv)
+    return ShapeMesh(p.astype(np.float32), np.array(idx, np.int32), n, uv.astype(np.float32))
 
 
 def sphere(rings: int = 48, segments: int = 96) -> ShapeMesh:

@@ -5,7 +5,8 @@
 
 - ``delta-emitters.xml``: a spot and a directional light over a floor and a box (tests/test_lights.py);
 - ``cylinder.xml``: a textured cylinder given by p0, p1 and radius (tests/test_plugins.py);
-- ``thinlens.xml``, ``orthographic.xml``: the two other cameras, over boxes at several depths
+- ``thinlens.xml``, ``orthographic.xml``: the two other cameras, over boxes at several depths;
+- ``uv-shapes.xml``: the texture coordinates of the rectangle, disk, sphere and cube
   (tests/test_plugins.py).
 
 Mitsuba's path tracer as each file says (box filter), 16384 spp.
@@ -18,7 +19,7 @@ import numpy as np
 
 mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
 HERE = Path(__file__).parent
-NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic")
+NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes")
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or NAMES:
