@@ -424,6 +424,17 @@ def check_material(mat: object, what: str) -> None:
         raise type(exc)(f"{what}: {exc}") from None
 
 
+def _point(value: object, what: str) -> tuple[float, float, float]:
+    """3 finite numbers as a tuple; ValueError naming ``what``."""
+    try:
+        p = np.asarray(value, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        p = np.zeros(0)
+    if p.size != 3 or not np.all(np.isfinite(p)):
+        raise ValueError(f"{what}: expected 3 finite numbers, got {value!r}")
+    return (float(p[0]), float(p[1]), float(p[2]))
+
+
 @dataclass
 class PointLight(Checked):
     """An isotropic point emitter of ``intensity`` (W/sr, rgb) at ``position``."""
@@ -432,10 +443,7 @@ class PointLight(Checked):
     intensity: RGB = (1.0, 1.0, 1.0)
 
     def _check(self) -> None:
-        p = np.asarray(self.position, np.float64).reshape(-1)
-        if p.size != 3 or not np.all(np.isfinite(p)):
-            raise ValueError(f"point light position: expected 3 finite numbers, got {self.position!r}")
-        self.position = (float(p[0]), float(p[1]), float(p[2]))
+        self.position = _point(self.position, "point light position")
         self.intensity = rgb(self.intensity, "point light intensity")
         if min(self.intensity) < 0:
             raise ValueError(f"point light: negative intensity {self.intensity}")
@@ -476,10 +484,7 @@ class SpotLight(Checked):
     beam_width: float | None = None
 
     def _check(self) -> None:
-        p = np.asarray(self.position, np.float64).reshape(-1)
-        if p.size != 3 or not np.all(np.isfinite(p)):
-            raise ValueError(f"spot light position: expected 3 finite numbers, got {self.position!r}")
-        self.position = (float(p[0]), float(p[1]), float(p[2]))
+        self.position = _point(self.position, "spot light position")
         self.direction = _unit_vector(self.direction, "spot light direction")
         self.intensity = radiance(self.intensity, "spot light intensity")
         cutoff = check_float(self.cutoff_angle, "spot light cutoff_angle")
