@@ -382,3 +382,6 @@ def test_a_change_made_to_the_model_reaches_the_gradient_renderer(box):
     box.materials[red] = pyclpt.Diffuse((0.1, 0.1, 0.1))
     replaced = pyclpt.render_forward(box, "light.emitter.radiance.value", 1.0, **opts)
     assert replaced.sum() < after.sum()
+    box.camera = pyclpt.Camera.look_at((0.5, 0.2, 3.0), (0, 0, 0), fov=50)  # a new view, too
+    moved = pyclpt.render_forward(box, "light.emitter.radiance.value", 1.0, **opts)
+    np.testing.assert_allclose(moved, pyclpt.render(box, **opts) / le, rtol=1e-4, atol=1e-7)
