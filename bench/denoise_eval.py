@@ -809,6 +809,12 @@ COLORS = {"none": "#606060", "blend": "#1f77b4", "svgf": "#d62728", "oidn": "#2c
 DPI = 100
 
 
+def _save(fig, out: Path, name: str) -> str:
+    from .plots import save_figure
+
+    return save_figure(fig, out, name, dpi=DPI, software="pyclpt bench/denoise_eval.py")
+
+
 def _plt() -> Any:
     import matplotlib
 
@@ -849,10 +855,7 @@ def side_by_side(sc: dict, kind: str, npz: Path, out: Path, s: dict) -> str:
             ax.contour(data["region"], levels=[0.5], colors="cyan", linewidths=0.6)
     fig.suptitle(f"{sc['scene']} ({w}x{h}), {when}", fontsize=9)
     name = f"{_file(sc['scene'])}_{kind}.png"
-    fig.tight_layout()
-    fig.savefig(out / name, dpi=DPI, metadata={"Software": "pyclpt bench/denoise_eval.py"})
-    plt.close(fig)
-    return name
+    return _save(fig, out, name)
 
 
 def curves(sc: dict, out: Path, s: dict) -> str | None:
@@ -884,10 +887,7 @@ def curves(sc: dict, out: Path, s: dict) -> str | None:
         ax.legend(fontsize=7)
     fig.suptitle(f"{sc['scene']}: dashed = a fresh run of the changed scene (no history)", fontsize=9)
     name = f"{_file(sc['scene'])}_curves.png"
-    fig.tight_layout()
-    fig.savefig(out / name, dpi=DPI, metadata={"Software": "pyclpt bench/denoise_eval.py"})
-    plt.close(fig)
-    return name
+    return _save(fig, out, name)
 
 
 # -- report ---------------------------------------------------------------------------------------

@@ -17,9 +17,10 @@ LABELS = {"megakernel": "megakernel", "wavefront-aos": "wavefront AoS", "wavefro
 DPI = 110
 
 
-def _save(fig, folder: Path, name: str) -> str:
+def save_figure(fig, folder: Path, name: str, dpi: int = DPI, software: str = "pyclpt bench") -> str:
+    """Lay out, write folder/name (PNG, tagged with the program that made it), close; returns name."""
     fig.tight_layout()
-    fig.savefig(folder / name, dpi=DPI, metadata={"Software": "pyclpt bench"})
+    fig.savefig(folder / name, dpi=dpi, metadata={"Software": software})
     plt.close(fig)
     return name
 
@@ -65,7 +66,7 @@ def table1(res: dict, folder: Path) -> str | None:
     ax.set_ylabel("frames per second (1 spp)")
     w, h = res["settings"]["resolution_label"], depth
     ax.set_title(f"Table 1 analog: FPS at max depth {h}, 1 spp, {w}")
-    return _save(fig, folder, "table1_fps.png")
+    return save_figure(fig, folder, "table1_fps.png")
 
 
 def fig6(res: dict, folder: Path) -> str | None:
@@ -85,7 +86,7 @@ def fig6(res: dict, folder: Path) -> str | None:
     ax.set_ylabel(f"seconds for {st['spp']} spp (log)")
     ax.set_title(f"Fig. 6 analog: render time at max depth {st['spp_depth']}, {st['spp']} spp, "
                  f"{st['resolution_label']}")
-    return _save(fig, folder, "fig6_spp_time.png")
+    return save_figure(fig, folder, "fig6_spp_time.png")
 
 
 def fig7(res: dict, folder: Path) -> str | None:
@@ -108,7 +109,7 @@ def fig7(res: dict, folder: Path) -> str | None:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle("Fig. 7 analog: time against max depth (median, band: min-max)", fontsize=11)
-    return _save(fig, folder, "fig7_time_vs_depth.png")
+    return save_figure(fig, folder, "fig7_time_vs_depth.png")
 
 
 def kernels(res: dict, folder: Path) -> str | None:
@@ -162,7 +163,7 @@ def occupancy(res: dict, folder: Path) -> str | None:
         return None
     _line_axes(ax, "bounce", "paths alive / pixels (log)",
                f"Occupancy: paths alive per bounce at max depth {depth} (ray queue size)", logy=True)
-    return _save(fig, folder, "occupancy.png")
+    return save_figure(fig, folder, "occupancy.png")
 
 
 def rays(res: dict, folder: Path) -> str | None:
@@ -186,7 +187,7 @@ def rays(res: dict, folder: Path) -> str | None:
         ax.legend(fontsize=8, ncol=2, loc="upper left")
         ax.set_ylabel("million rays / s")
         ax.set_title(f"rays/s (camera + extension + shadow), max depth {d}", fontsize=10)
-    return _save(fig, folder, "rays_per_second.png")
+    return save_figure(fig, folder, "rays_per_second.png")
 
 
 def triangles(res: dict, folder: Path) -> str | None:
@@ -207,7 +208,7 @@ def triangles(res: dict, folder: Path) -> str | None:
                         textcoords="offset points", xytext=(3, 3))
     _line_axes(ax, "triangles (log)", "ms per frame (1 spp)", f"Cost against triangle count, max depth {depth}",
                logx=True)
-    return _save(fig, folder, "triangles.png")
+    return save_figure(fig, folder, "triangles.png")
 
 
 def _line_axes(ax, xlabel: str, ylabel: str, title: str, logx: bool = False, logy: bool = False) -> None:
