@@ -112,7 +112,7 @@ def test_update_reaches_the_gradient_renderer(box):
     replay = replay_for(box, width=8, height=8, max_depth=2)
     params = pyclpt.traverse(box)
     params.update({RED: [0.25, 0.5, 0.75]})
-    material = box.ids and list(box.ids.values()).index("red")
+    material = next(int(k.split(":")[1]) for k, v in box.ids.items() if v == "red")
     np.testing.assert_allclose(replay.scene.arrays.materials[material, 2:5], [0.25, 0.5, 0.75])
 
 

@@ -26,7 +26,7 @@ from pyclpt.buffers.scene import SceneBuffers
 from pyclpt.common.checks import check_int, check_optional_int
 from pyclpt.device.context import Device, get_device
 from pyclpt.gradients.layout import BUFFERS, buffer_sizes, parameter_slots
-from pyclpt.gradients.parameters import SceneParameters, forget, on_update, traverse
+from pyclpt.gradients.parameters import SceneParameters, forget, on_update
 from pyclpt.gradients.replay import PathReplay
 from pyclpt.scene.model import Scene, generation
 
@@ -128,7 +128,8 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
         raise ValueError(f"image_grad: expected shape {expected} (the rendered image's), got {grad.shape}")
     if not np.all(np.isfinite(grad)):
         raise ValueError("image_grad holds NaN or infinite values")
-    table = params if isinstance(params, SceneParameters) else traverse(scene)
+    # the scene was checked by replay_for (when packed, and again when it changed): no traverse() check here
+    table = params if isinstance(params, SceneParameters) else SceneParameters(scene)
     names = table.differentiable if params is None or isinstance(params, SceneParameters) else list(params)
     chosen = [table.parameter(n) for n in names]
     bad = [f"{p.name} ({p.reason})" for p in chosen if not p.differentiable]
@@ -154,7 +155,7 @@ def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Ite
     seed = _check_seed(seed, "seed")
     spp = check_int(scene.spp if spp is None else spp, "spp", lo=1, hi=2**32 - 1)
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
-    p = traverse(scene).parameter(param)
+    p = SceneParameters(scene).parameter(param)
     if not p.differentiable:
         raise ValueError(f"{param} is not differentiable: {p.reason}")
     shape = p.get().shape

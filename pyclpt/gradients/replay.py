@@ -26,6 +26,7 @@ from pyclpt.film.film import Film, frames_per_batch
 from pyclpt.gradients.layout import BUFFERS, buffer_sizes
 from pyclpt.gradients.parameters import KINDS
 from pyclpt.integrators.megakernel import Megakernel
+from pyclpt.scene.model import BumpMap, Mask, Scene, base_material
 
 LAUNCH = 1 << 18  # paths per launch (film slots)
 LOCAL_SIZE = 64
@@ -34,12 +35,10 @@ GRAD_DEFINES = {"color": "GRAD_COLOR", "spec": "GRAD_SPEC", "alpha": "GRAD_ALPHA
                 "env": "GRAD_ENV"}
 
 
-def moved_alpha_records(scene, step: float = BSDF_DIFF_STEP) -> tuple[np.ndarray, np.ndarray]:
+def moved_alpha_records(scene: Scene, step: float = BSDF_DIFF_STEP) -> tuple[np.ndarray, np.ndarray]:
     """The material records packed again with every roughness alpha moved to alpha (1 + step) and
     alpha (1 - step): what depends on alpha on the host (a rough plastic's coating tables) moves with
     it (cl/gradients/bsdf_derivative.h). Texture ids in them are not the scene's (unused)."""
-    from pyclpt.scene.model import BumpMap, Mask, base_material
-
     def moved(mat, factor: float):
         if isinstance(mat, (Mask, BumpMap)):
             return dataclasses.replace(mat, material=moved(mat.material, factor))
