@@ -59,6 +59,7 @@ T_GLASS_INSIDE = "tests/test_analytic.py::test_camera_inside_glass_sphere_sees_e
 T_FURNACE = "tests/test_render.py::test_interior_furnace"
 T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
 T_GRAD_FD = "tests/test_gradients.py::test_backward_matches_finite_differences"
+T_UV_TRANSFORMS = "tests/test_plugins.py::test_plugin_matches_mitsuba[uv-transforms]"
 
 MUTANTS: list[Mutant] = [
     # ---- the mutants of issue 16: each must be killed -------------------------------------------
@@ -260,6 +261,15 @@ MUTANTS: list[Mutant] = [
            "return dataclasses.replace(base, alpha=alpha) if alpha > 0 else base",
            (f"{T_GRAD_FD}[roughconductor-alpha]",), "the roughness records are not moved: no alpha gradient",
            root="host"),
+    # ---- issue 14: texture-coordinate conventions ------------------------------------------------
+    Mutant("checkerboard-on-flipped-v", "    float tm = 1.0f - st.y;", "    float tm = st.y;",
+           (T_UV_TRANSFORMS, "tests/test_textures.py::test_checkerboard"),
+           "the checkerboard decides its squares on pyclpt's v instead of Mitsuba's (colours swapped)"),
+    Mutant("checkerboard-eval1-like-eval", "int at = tex_checker_color0(tex_st(t, uv)) ? TEX_COLOR1 : TEX_SCALE;",
+           "int at = tex_checker_color0(tex_st(t, uv)) ? TEX_SCALE : TEX_COLOR1;", (T_UV_TRANSFORMS,),
+           "a checkerboard used as a mask's opacity gives the colour of its eval (Mitsuba's eval_1 swaps)"),
+    Mutant("to-uv-not-conjugated", "p = FLIP_V @ m @ FLIP_V", "p = m", (T_UV_TRANSFORMS,),
+           "Mitsuba's to_uv applied to pyclpt's v-up coordinates as it is", root="host"),
 ]
 
 

@@ -9,7 +9,7 @@ from closed_forms import camera_rays, form_factor
 import pyclpt
 from pyclpt.buffers.materials import TextureTable
 from pyclpt.device.program import build_program
-from pyclpt.scene.model import Bitmap, Checkerboard
+from pyclpt.scene.model import Bitmap, Checkerboard, uv_matrix
 from scenes import sensor
 
 cl = pytest.importorskip("pyopencl")
@@ -38,7 +38,7 @@ def reference(tex: Bitmap, uv: np.ndarray) -> np.ndarray:
     if tex.srgb:
         rgba[..., :3] = srgb_decode(np.round(rgba[..., :3] * 255) / 255)
     h, w = rgba.shape[:2]
-    st = uv * tex.uv_scale + tex.uv_offset
+    st = np.c_[uv, np.ones(len(uv))] @ uv_matrix(tex).T
     x = st[:, 0] * w - 0.5
     y = (1.0 - st[:, 1]) * h - 0.5
 
@@ -99,7 +99,7 @@ def test_bitmap_lookup_matches_reference(lookup, wrap, filt, srgb):
     rng = np.random.default_rng(1)
     pixels = (rng.integers(0, 256, (5, 7, 4)) / 255.0).astype(np.float32)
     tex = Bitmap(pixels, srgb=srgb, filter=filt, wrap_mode=wrap, uv_scale=(1.5, 0.75), uv_offset=(0.1, -0.2),
-                 scale=(1.0, 0.5, 2.0))
+                 uv_skew=(0.3, -0.4), scale=(1.0, 0.5, 2.0))
     table = TextureTable()
     table.add(Checkerboard())  # the bitmap is not texture 0: ids and offsets are exercised
     tid = table.add(tex)
@@ -143,8 +143,8 @@ def test_checkerboard(lookup):
     tid = table.add(tex)
     uv = random_uv(500)
     got, _ = lookup(table, tid, uv)
-    st = uv * 2.0
-    same = (st[:, 0] - np.floor(st[:, 0]) > 0.5) == (st[:, 1] - np.floor(st[:, 1]) > 0.5)
+    s, t_mitsuba = uv[:, 0] * 2.0, 1.0 - uv[:, 1] * 2.0  # Mitsuba's v runs down
+    same = (s - np.floor(s) > 0.5) == (t_mitsuba - np.floor(t_mitsuba) > 0.5)
     np.testing.assert_allclose(got[:, :3], np.where(same[:, None], [1.0, 0, 0], [0, 1.0, 0]))
 
 

@@ -135,8 +135,11 @@ static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, 
     vec3 dpdv = v3_scale(v3_sub(v3_scale(e2, d1.x), v3_scale(e1, d2.x)), inv);
     __global const float* rec = sc->tex.info + TEX_STRIDE * t;
     bool bitmap = (int)rec[TEX_KIND] == TEX_BITMAP;
-    float du = bitmap ? 1.0f / (rec[TEX_WIDTH] * rec[TEX_UV_SCALE]) : 0.01f;
-    float dv = bitmap ? 1.0f / (rec[TEX_HEIGHT] * rec[TEX_UV_SCALE + 1]) : 0.01f;
+    /* steps of about a texel: the uv transform's column lengths (its diagonal when it has no skew) */
+    float a = rec[TEX_UV], b = rec[TEX_UV + 1], c = rec[TEX_UV + 3], d = rec[TEX_UV + 4];
+    float su = c != 0.0f ? m_sqrt(a * a + c * c) : a, sv = b != 0.0f ? m_sqrt(b * b + d * d) : d;
+    float du = bitmap ? 1.0f / (rec[TEX_WIDTH] * su) : 0.01f;
+    float dv = bitmap ? 1.0f / (rec[TEX_HEIGHT] * sv) : 0.01f;
     float scale = m[MAT_BUMP_SCALE];
     float h = tex_eval1(&sc->tex, t, uv);
     float dhdu = scale * (tex_eval1(&sc->tex, t, v2(uv.x + du, uv.y + 0.0f)) - h) / du;

@@ -8,8 +8,10 @@
  * below), as Mitsuba does. Alpha is always linear.
  *
  * uv convention: OBJ/OpenGL, v pointing up: uv (0, 0) is the bottom-left of
- * the image and row 0 of the texel array is its top. The texture's uv
- * transform applies first: uv' = uv * uv_scale + uv_offset. */
+ * the image and row 0 of the texel array is its top (Mitsuba's v runs down:
+ * v_mitsuba = 1 - v; the loaders convert). The texture's uv transform applies
+ * first: (s, t) = M (u, v, 1) with the 2x3 matrix M at TEX_UV (row by row),
+ * Mitsuba's to_uv conjugated into this convention by the loader. */
 #ifndef PYCLPT_TEXTURE_H
 #define PYCLPT_TEXTURE_H
 
@@ -24,10 +26,9 @@
 #define TEX_WRAP 5      /* TEX_WRAP_* */
 #define TEX_FILTER 6    /* 0 nearest, 1 bilinear */
 #define TEX_CHANNELS 7  /* channels in the file: 4 (or 2) means it has alpha */
-#define TEX_UV_SCALE 8  /* 2 floats */
-#define TEX_UV_OFFSET 10
-#define TEX_SCALE 12    /* rgb: multiplier of a bitmap; color0 of a checkerboard */
-#define TEX_COLOR1 15   /* rgb: color1 of a checkerboard */
+#define TEX_UV 8        /* 6 floats: the uv transform [a b c; d e f], s = a u + b v + c, t = d u + e v + f */
+#define TEX_SCALE 14    /* rgb: multiplier of a bitmap; color0 of a checkerboard */
+#define TEX_COLOR1 17   /* rgb: color1 of a checkerboard */
 
 #define TEX_BITMAP 0
 #define TEX_CHECKER 1
@@ -155,14 +156,26 @@ static inline vec4 tex_bitmap(const Textures* tx, __global const float* t, vec2 
     return tex_bilerp(c00, c10, c01, c11, ax, ay);
 }
 
+/* The texture record t's uv transform applied to uv. */
+static inline vec2 tex_st(__global const float* t, vec2 uv) {
+    return v2(t[TEX_UV] * uv.x + t[TEX_UV + 1] * uv.y + t[TEX_UV + 2],
+              t[TEX_UV + 3] * uv.x + t[TEX_UV + 4] * uv.y + t[TEX_UV + 5]);
+}
+
+/* A checkerboard's square at st: true for color0 (Mitsuba's `eval`: the fractional parts of s and of
+ * Mitsuba's t = 1 - st.y both below or both above one half). */
+static inline bool tex_checker_color0(vec2 st) {
+    float tm = 1.0f - st.y;
+    return (st.x - m_floor(st.x) > 0.5f) == (tm - m_floor(tm) > 0.5f);
+}
+
 /* Texture `id` at uv: linear RGBA with the texture's scale applied to rgb. */
 static inline vec4 tex_eval4(const Textures* tx, int id, vec2 uv) {
     __global const float* t = tx->info + TEX_STRIDE * id;
-    vec2 st = v2(uv.x * t[TEX_UV_SCALE] + t[TEX_UV_OFFSET], uv.y * t[TEX_UV_SCALE + 1] + t[TEX_UV_OFFSET + 1]);
+    vec2 st = tex_st(t, uv);
     vec3 scale = rgb_at(t + TEX_SCALE, tx->unit);
     if ((int)t[TEX_KIND] == TEX_CHECKER) {
-        bool mu = st.x - m_floor(st.x) > 0.5f, mv = st.y - m_floor(st.y) > 0.5f;
-        if (mu == mv) return v4(scale.x, scale.y, scale.z, 1.0f);
+        if (tex_checker_color0(st)) return v4(scale.x, scale.y, scale.z, 1.0f);
         return v4(t[TEX_COLOR1], t[TEX_COLOR1 + 1], t[TEX_COLOR1 + 2], 1.0f);
     }
     vec4 c = tex_bitmap(tx, t, st);
@@ -198,7 +211,7 @@ static inline TexTaps tex_taps(const Textures* tx, int id, vec2 uv) {
     __global const float* t = tx->info + TEX_STRIDE * id;
     if ((int)t[TEX_KIND] != TEX_BITMAP) return k;
     k.is_float = (int)t[TEX_FORMAT] == TEXF_FLOAT;
-    vec2 st = v2(uv.x * t[TEX_UV_SCALE] + t[TEX_UV_OFFSET], uv.y * t[TEX_UV_SCALE + 1] + t[TEX_UV_OFFSET + 1]);
+    vec2 st = tex_st(t, uv);
     float x = st.x * t[TEX_WIDTH] - 0.5f;
     float y = (1.0f - st.y) * t[TEX_HEIGHT] - 0.5f;
     if (!(m_isfinite(x) && m_isfinite(y))) return k;
@@ -226,9 +239,17 @@ static inline TexTaps tex_taps(const Textures* tx, int id, vec2 uv) {
 }
 
 /* A scalar view of a texture (opacity, bump height): the mean of rgb, as Mitsuba's
- * `eval_1` of an RGB texture. */
+ * `eval_1` of an RGB texture. A checkerboard's colours trade places here, as in Mitsuba 3.9's
+ * `checkerboard.eval_1` (color1 where `eval` gives color0). */
 static inline float tex_eval1(const Textures* tx, int id, vec2 uv) {
-    vec3 c = tex_eval(tx, id, uv);
+    __global const float* t = tx->info + TEX_STRIDE * id;
+    vec3 c;
+    if ((int)t[TEX_KIND] == TEX_CHECKER) {
+        int at = tex_checker_color0(tex_st(t, uv)) ? TEX_COLOR1 : TEX_SCALE;
+        c = v3(t[at], t[at + 1], t[at + 2]);
+    } else {
+        c = tex_eval(tx, id, uv);
+    }
     return (c.x + c.y + c.z) * (1.0f / 3.0f);
 }
 

@@ -26,6 +26,7 @@ from pyclpt.scene.model import (
     Plastic,
     ThinDielectric,
     base_material,
+    uv_matrix,
 )
 
 MAT_STRIDE = 32
@@ -39,6 +40,7 @@ MAT_RP_TRANS = 27  # roughplastic: RP_KNOTS half floats of the coating's transmi
 FLAG_TWOSIDED, FLAG_NONLINEAR, FLAG_BECKMANN, FLAG_MASKED = 1, 2, 4, 8
 
 TEX_STRIDE = 20
+TEX_UV, TEX_SCALE, TEX_COLOR1 = 8, 14, 17  # the (2, 3) uv matrix, row by row; rgb; rgb
 TEX_BITMAP, TEX_CHECKER = 0, 1
 TEXF_SRGB8, TEXF_LINEAR8, TEXF_FLOAT = 0, 1, 2
 WRAP = {"repeat": 0, "mirror": 1, "clamp": 2, "black": 3}
@@ -76,12 +78,11 @@ class TextureTable:
         if key in self._ids:
             return self._ids[key]
         rec = np.zeros(TEX_STRIDE, np.float32)
-        rec[8:10] = tex.uv_scale
-        rec[10:12] = tex.uv_offset
+        rec[TEX_UV:TEX_UV + 6] = uv_matrix(tex).reshape(-1)
         if isinstance(tex, Checkerboard):
             rec[0] = TEX_CHECKER
-            rec[12:15] = np.multiply(tex.color0, tex.scale)
-            rec[15:18] = np.multiply(tex.color1, tex.scale)
+            rec[TEX_SCALE:TEX_SCALE + 3] = np.multiply(tex.color0, tex.scale)
+            rec[TEX_COLOR1:TEX_COLOR1 + 3] = np.multiply(tex.color1, tex.scale)
         else:
             rgba = tex.rgba()
             rec[0] = TEX_BITMAP
@@ -89,7 +90,7 @@ class TextureTable:
             rec[5] = WRAP[tex.wrap_mode]
             rec[6] = FILTER[tex.filter]
             rec[7] = tex.pixels.shape[2]
-            rec[12:15] = tex.scale
+            rec[TEX_SCALE:TEX_SCALE + 3] = tex.scale
             q = rgba * 255.0
             eight_bit = tex.srgb or (rgba.min() >= 0 and rgba.max() <= 1 and np.all(q == np.round(q)))
             if eight_bit:

@@ -72,6 +72,19 @@ def _uv(value: object, what: str) -> tuple[float, float]:
     return (float(arr[0]), float(arr[1]))
 
 
+def _check_uv_transform(tex: Bitmap | Checkerboard) -> None:
+    for name in ("uv_scale", "uv_offset", "uv_skew"):
+        setattr(tex, name, _uv(getattr(tex, name), f"texture {tex.name!r} {name}"))
+
+
+def uv_matrix(tex: Bitmap | Checkerboard) -> np.ndarray:
+    """The texture's uv transform as a (2, 3) matrix, (s, t) = M (u, v, 1) in pyclpt's uv convention:
+    ``[[uv_scale[0], uv_skew[0], uv_offset[0]], [uv_skew[1], uv_scale[1], uv_offset[1]]]`` (the skew
+    terms hold a rotation or shear, e.g. of Mitsuba's ``to_uv``)."""
+    (su, sv), (ku, kv), (ou, ov) = tex.uv_scale, tex.uv_skew, tex.uv_offset
+    return np.array([[su, ku, ou], [kv, sv, ov]], np.float64)
+
+
 def bad_texel(pixels: np.ndarray, *, negative: bool) -> str | None:
     """None when every texel is finite (and >= 0 unless ``negative``), else where the first bad one is."""
     ok = np.isfinite(pixels) if negative else (np.isfinite(pixels) & (pixels >= 0))
@@ -144,8 +157,10 @@ class Bitmap(Checked):
     values for ``raw`` or HDR files, sRGB-encoded values in [0, 1] otherwise
     (decoded to linear on the device, before filtering). ``scale`` multiplies
     the value (Mitsuba's ``scale`` texture). Row 0 of ``pixels`` is the top of
-    the image, which is v = 1 as in Mitsuba. Texels must be finite; used as a
-    colour (a reflectance, an opacity) they must also be >= 0 (a bump map's heights may not be).
+    the image, at v = 1 in pyclpt's uv convention (OBJ's, v up; Mitsuba's own v
+    runs down from the top, v_mitsuba = 1 - v, and its loader converts). The uv
+    transform is :func:`uv_matrix`. Texels must be finite; used as a colour (a
+    reflectance, an opacity) they must also be >= 0 (a bump map's heights may not be).
     """
 
     pixels: np.ndarray
@@ -156,6 +171,7 @@ class Bitmap(Checked):
     uv_scale: tuple[float, float] = (1.0, 1.0)
     uv_offset: tuple[float, float] = (0.0, 0.0)
     scale: RGB = (1.0, 1.0, 1.0)
+    uv_skew: tuple[float, float] = (0.0, 0.0)
 
     def _check(self) -> None:
         px = np.asarray(self.pixels, dtype=np.float32)
@@ -173,8 +189,7 @@ class Bitmap(Checked):
         if self.wrap_mode not in WRAP_MODES:
             raise ValueError(f"texture {self.name!r}: wrap_mode must be one of {WRAP_MODES}, "
                              f"got {self.wrap_mode!r}")
-        self.uv_scale = _uv(self.uv_scale, f"texture {self.name!r} uv_scale")
-        self.uv_offset = _uv(self.uv_offset, f"texture {self.name!r} uv_offset")
+        _check_uv_transform(self)
         self.scale = rgb(self.scale, f"texture {self.name!r} scale")
 
     def check_colour(self, what: str) -> None:
@@ -210,8 +225,11 @@ class Bitmap(Checked):
 
 @dataclass(eq=False)
 class Checkerboard(Checked):
-    """Mitsuba's ``checkerboard``: ``color0`` where the fractional parts of u and v are both below
-    or both above one half, ``color1`` elsewhere (after the uv transform); ``scale`` multiplies both."""
+    """Mitsuba's ``checkerboard``: at the transformed coordinates (s, t) = :func:`uv_matrix` (u, v, 1),
+    ``color0`` where the fractional parts of s and of Mitsuba's t (1 - t: Mitsuba's v runs down) are
+    both below or both above one half, ``color1`` elsewhere; ``scale`` multiplies both. Used as a
+    scalar (a ``mask``'s opacity, a bump map's height) the two trade places, as Mitsuba 3.9's
+    ``checkerboard.eval_1`` does: the mean of ``color1`` where ``eval`` gives ``color0``."""
 
     color0: RGB = (0.4, 0.4, 0.4)
     color1: RGB = (0.2, 0.2, 0.2)
@@ -219,12 +237,12 @@ class Checkerboard(Checked):
     uv_offset: tuple[float, float] = (0.0, 0.0)
     scale: RGB = (1.0, 1.0, 1.0)
     name: str = "checkerboard"
+    uv_skew: tuple[float, float] = (0.0, 0.0)
 
     def _check(self) -> None:
         self.color0 = rgb(self.color0, f"texture {self.name!r} color0")
         self.color1 = rgb(self.color1, f"texture {self.name!r} color1")
-        self.uv_scale = _uv(self.uv_scale, f"texture {self.name!r} uv_scale")
-        self.uv_offset = _uv(self.uv_offset, f"texture {self.name!r} uv_offset")
+        _check_uv_transform(self)
         self.scale = rgb(self.scale, f"texture {self.name!r} scale")
 
     def check_colour(self, what: str) -> None:

@@ -41,8 +41,8 @@ def read_texture_image(path: str | os.PathLike) -> tuple[np.ndarray, bool]:
 
 def load_bitmap(path: str | os.PathLike, *, raw: bool = False, filter: str = "bilinear",
                 wrap_mode: str = "repeat", uv_scale=(1.0, 1.0), uv_offset=(0.0, 0.0),
-                scale: RGB = (1.0, 1.0, 1.0)) -> Bitmap:
+                scale: RGB = (1.0, 1.0, 1.0), uv_skew=(0.0, 0.0)) -> Bitmap:
     """A bitmap texture from an image file (sRGB-encoded when it is LDR and not ``raw``)."""
     pixels, ldr = read_texture_image(path)
     return Bitmap(pixels, name=Path(path).name, srgb=ldr and not raw, filter=filter, wrap_mode=wrap_mode,
-                  uv_scale=uv_scale, uv_offset=uv_offset, scale=scale)
+                  uv_scale=uv_scale, uv_offset=uv_offset, scale=scale, uv_skew=uv_skew)

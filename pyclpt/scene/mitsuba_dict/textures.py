@@ -20,19 +20,26 @@ TextureLoader = Callable[[LoadContext, Mapping[str, Any], str, RGB], Texture]
 _UV_KEYS = frozenset({"uscale", "vscale", "uoffset", "voffset", "to_uv"})
 
 
-def uv_transform(ctx: LoadContext, d: Mapping[str, Any], where: str) -> tuple[tuple[float, float],
-                                                                               tuple[float, float]]:
-    """The texture's uv scale and offset (Mitsuba 0.x ``uscale``... or 3.x ``to_uv``)."""
+# (u, v) -> (u, 1 - v): Mitsuba's texture coordinates (v down from the image's top) <-> pyclpt's (v up)
+FLIP_V = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 1.0], [0.0, 0.0, 1.0]])
+
+
+def uv_transform(ctx: LoadContext, d: Mapping[str, Any], where: str) -> dict[str, tuple[float, float]]:
+    """The texture's uv transform (Mitsuba 0.x ``uscale``/``vscale``/``uoffset``/``voffset``, then 3.x
+    ``to_uv``, rotation and shear included) as the model's ``uv_scale``, ``uv_skew`` and ``uv_offset``.
+    Mitsuba applies it to its own coordinates, whose v runs down from the image's top; pyclpt's v runs
+    up (v = 1 - v_mitsuba), so the matrix is conjugated by that flip: M' = F M F."""
     su = ctx.number(d, "uscale", 1.0, where)
     sv = ctx.number(d, "vscale", 1.0, where)
     ou = ctx.number(d, "uoffset", 0.0, where)
     ov = ctx.number(d, "voffset", 0.0, where)
+    m = np.array([[su, 0.0, ou], [0.0, sv, ov], [0.0, 0.0, 1.0]])
     if "to_uv" in d:
-        m = ctx.transform(d, "to_uv", where)
-        if abs(m[0, 1]) > 1e-9 or abs(m[1, 0]) > 1e-9:
-            ctx.note(d, where, "to_uv rotation/shear not supported, its scale and offset used")
-        su, sv, ou, ov = su * m[0, 0], sv * m[1, 1], ou + m[0, 3], ov + m[1, 3]
-    return (su, sv), (ou, ov)
+        t = ctx.transform(d, "to_uv", where)
+        m = np.array([[t[0, 0], t[0, 1], t[0, 3]], [t[1, 0], t[1, 1], t[1, 3]], [0.0, 0.0, 1.0]]) @ m
+    p = FLIP_V @ m @ FLIP_V
+    return {"uv_scale": (float(p[0, 0]), float(p[1, 1])), "uv_skew": (float(p[0, 1]), float(p[1, 0])),
+            "uv_offset": (float(p[0, 2]), float(p[1, 2]))}
 
 
 def load_scale(ctx: LoadContext, d: Mapping[str, Any], where: str, scale: RGB) -> Texture:
@@ -47,18 +54,17 @@ def load_scale(ctx: LoadContext, d: Mapping[str, Any], where: str, scale: RGB) -
 
 
 def load_checkerboard(ctx: LoadContext, d: Mapping[str, Any], where: str, scale: RGB) -> Texture:
-    uv_scale, uv_offset = uv_transform(ctx, d, where)
+    uv = uv_transform(ctx, d, where)
     ctx.note_unused(where, d, {"color0", "color1"} | _UV_KEYS)
     return Checkerboard(color(ctx, d.get("color0", 0.4), f"{where}.color0", d),
-                        color(ctx, d.get("color1", 0.2), f"{where}.color1", d),
-                        uv_scale, uv_offset, scale)
+                        color(ctx, d.get("color1", 0.2), f"{where}.color1", d), scale=scale, **uv)
 
 
 def load_bitmap(ctx: LoadContext, d: Mapping[str, Any], where: str, scale: RGB) -> Texture:
     """``bitmap``: an image file, decoded once per file and sampling settings."""
     from pyclpt.scene.textures import load_bitmap as read_bitmap
 
-    uv_scale, uv_offset = uv_transform(ctx, d, where)
+    uv = uv_transform(ctx, d, where)
     ctx.note_unused(where, d, {"filename", "data", "filter_type", "wrap_mode", "wrap_mode_u", "wrap_mode_v", "raw",
                                "gamma", "max_anisotropy", "cache", "channel"} | _UV_KEYS)
     if ("filename" in d) == ("data" in d):
@@ -81,16 +87,15 @@ def load_bitmap(ctx: LoadContext, d: Mapping[str, Any], where: str, scale: RGB) 
     if "data" in d:  # texels given as an array: linear values (Mitsuba's bitmap `data`)
         try:
             return Bitmap(np.array(d["data"], np.float32), name=f"{where}.data", srgb=False, filter=filt,
-                          wrap_mode=wrap, uv_scale=uv_scale, uv_offset=uv_offset, scale=scale)
+                          wrap_mode=wrap, scale=scale, **uv)
         except (ValueError, TypeError) as exc:
             raise ctx.fail(where, str(exc), d) from None
     path = ctx.path(d["filename"], f"{where}.filename", d)
     raw = ctx.flag(d, "raw", False, where)
-    key = (str(path), raw, filt, wrap, uv_scale, uv_offset, tuple(scale))
+    key = (str(path), raw, filt, wrap, *uv.values(), tuple(scale))
     if key not in ctx.bitmaps:
         try:
-            ctx.bitmaps[key] = read_bitmap(path, raw=raw, filter=filt, wrap_mode=wrap, uv_scale=uv_scale,
-                                           uv_offset=uv_offset, scale=scale)
+            ctx.bitmaps[key] = read_bitmap(path, raw=raw, filter=filt, wrap_mode=wrap, scale=scale, **uv)
         except (OSError, ValueError) as exc:
             raise ctx.fail(where, str(exc), d) from None
     return ctx.bitmaps[key]
