@@ -60,6 +60,7 @@ T_FURNACE = "tests/test_render.py::test_interior_furnace"
 T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
 T_GRAD_FD = "tests/test_gradients.py::test_backward_matches_finite_differences"
 T_UV_TRANSFORMS = "tests/test_plugins.py::test_plugin_matches_mitsuba[uv-transforms]"
+T_EMITTER_TEXTURES = "tests/test_plugins.py::test_plugin_matches_mitsuba[emitter-textures]"
 
 MUTANTS: list[Mutant] = [
     # ---- the mutants of issue 16: each must be killed -------------------------------------------
@@ -270,6 +271,12 @@ MUTANTS: list[Mutant] = [
            "a checkerboard used as a mask's opacity gives the colour of its eval (Mitsuba's eval_1 swaps)"),
     Mutant("to-uv-not-conjugated", "p = FLIP_V @ m @ FLIP_V", "p = m", (T_UV_TRANSFORMS,),
            "Mitsuba's to_uv applied to pyclpt's v-up coordinates as it is", root="host"),
+    Mutant("spot-texture-v-not-flipped", "return light_texture(sc, l, v2(0.5f + x * k, 0.5f - y * k));",
+           "return light_texture(sc, l, v2(0.5f + x * k, 0.5f + y * k));", (T_EMITTER_TEXTURES,),
+           "a spot light's texture projected with Mitsuba's v taken as pyclpt's (mirrored)"),
+    Mutant("area-light-texture-at-one-point", "sc->tri_info[2 * prim], b.x, b.y)));",
+           "sc->tri_info[2 * prim], 0.0f, 0.0f)));",
+           (T_EMITTER_TEXTURES,), "light sampling reads a textured area light's texture at one vertex"),
 ]
 
 

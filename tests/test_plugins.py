@@ -89,13 +89,15 @@ def test_unsupported_plugins_share_one_warning_line(caplog):
                                    "skipped; s: emitter type 'projector' not supported, ignored")
 
 
-@pytest.mark.parametrize("name", ["cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms"])
+@pytest.mark.parametrize("name", ["cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms",
+                                  "emitter-textures"])
 def test_plugin_matches_mitsuba(name):
     """Mitsuba 3 rendering the same XML file (tests/data/make_plugin_reference.py, 16384 spp): a cylinder
     given by p0, p1 and radius with a bitmap whose glyph shows where u starts and which way v runs; a thin
     lens focused at a distance over boxes at several depths; an orthographic camera scaled by to_world;
     the glyph on a rectangle, a disk, a sphere and a cube (Mitsuba's cube mesh, its uvs included); a
-    checkerboard as a colour and as a mask's opacity, a bitmap under to_uv scale + translate + rotate.
+    checkerboard as a colour and as a mask's opacity, a bitmap under to_uv scale + translate + rotate; an
+    area light with a bitmap radiance and a spot light projecting a bitmap.
     Pixel relative MSE (the glyph's edges, the blur of the lens in place), the mean within 1 %, and the
     megakernel equal to the wavefront."""
     import numpy as np
@@ -168,3 +170,27 @@ def test_disk_texture_coordinates_are_mitsubas():
     away = (phi > 0.1) & (phi < 2 * np.pi - 0.1)
     np.testing.assert_allclose(uv[away, 1], phi[away] / (2 * np.pi), atol=2 / 128)
     np.testing.assert_allclose(uv[:, 0], r, atol=0.01)
+
+
+def test_emitter_textures_in_the_model_loader_and_gradients(tmp_path):
+    """An area emitter's texture scales its radiance (an emission is needed as the scale); a spot light's
+    texture must vary over the cone, as Mitsuba requires; the gradients list a textured emitter's radiance
+    as not differentiated."""
+    import numpy as np
+
+    import pyclpt
+    from pyclpt.scene.model import Bitmap, Checkerboard, Mesh
+
+    tri = dict(positions=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], indices=[[0, 1, 2]], material=0)
+    with pytest.raises(ValueError, match="emission_texture needs an emission"):
+        Mesh("lamp", **tri, emission_texture=Checkerboard())
+    with pytest.raises(ValueError, match="lamp.*emission_texture.*must be >= 0"):
+        Mesh("lamp", **tri, emission=(1, 1, 1), emission_texture=Bitmap(-np.ones((2, 2, 3), np.float32)))
+    spot = {"type": "spot", "texture": {"type": "rgb", "value": [1, 0, 0]}}
+    with pytest.raises(SceneDictError, match="light.texture.*spatially varying"):
+        load_dict({"type": "scene", "light": spot, "r": RECT})
+    scene = pyclpt.load(Path(__file__).parent / "data" / "emitter-textures.xml")
+    lamp = next(m for m in scene.meshes if m.emission_texture is not None)
+    assert lamp.emission == (1.0, 1.0, 1.0) and isinstance(lamp.emission_texture, Bitmap)
+    reasons = pyclpt.traverse(scene).unsupported()
+    assert "textured area emitter" in reasons[f"{lamp.name}.emitter.radiance.value"]

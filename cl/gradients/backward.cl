@@ -72,7 +72,7 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
         }
         Surface s = surface_at(sc, hit.prim, hit.u, hit.v);
 #ifdef GRAD_EMISSION
-        if (!replay && !v3_is_zero(light_emitted(sc, s.light, s.ng, ps.dir))) {
+        if (!replay && !v3_is_zero(light_emitted(sc, s.light, s.ng, ps.dir, s.uv))) {
             float w = 1.0f; /* path_hit_emission's MIS weight */
             if (!(ps.flags & PATH_PREV_DELTA))
                 w = power_heuristic(ps.prev_pdf, light_pdf_area(sc, s.light, hit.t, -m_dot(s.ng, ps.dir)));

@@ -96,7 +96,7 @@ static inline void gbuffer_hit(const Scene* sc, AovOut o, int prim, const Surfac
     vec2 mv = gbuffer_motion(sc, s->p, false);
     aov_put(o, AOV_MOTION, mv.x);
     aov_put(o, AOV_MOTION + 1, mv.y);
-    aov_put3(o, AOV_EMISSION, light_emitted(sc, s->light, s->ng, dir)); /* path_hit_emission's, w = 1 */
+    aov_put3(o, AOV_EMISSION, light_emitted(sc, s->light, s->ng, dir, s->uv)); /* path_hit_emission's, w = 1 */
     aov_put(o, AOV_PRIM, as_float(prim));
     aov_put(o, AOV_MATERIAL, as_float(s->material));
 }

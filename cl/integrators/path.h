@@ -109,7 +109,7 @@ static inline void path_miss(const Scene* sc, PathState* ps) {
 
 /* hit processing, part 1: emission at the hit, MIS-weighted against light sampling. */
 static inline void path_hit_emission(const Scene* sc, const Surface* s, float t, PathState* ps) {
-    vec3 le = light_emitted(sc, s->light, s->ng, ps->dir);
+    vec3 le = light_emitted(sc, s->light, s->ng, ps->dir, s->uv);
     if (v3_is_zero(le)) return;
     float w = 1.0f;
     if (!(ps->flags & PATH_PREV_DELTA)) {

@@ -15,7 +15,8 @@
  *   point light   position (3 floats)
  *   directional   the direction the light travels (3 floats, unit)
  *   spot          position (3), axis (3, unit), cos(cutoff), cos(beam width), cutoff (radians),
- *                 1 / (cutoff - beam width) (SPOT_* offsets below)
+ *                 1 / (cutoff - beam width), and with a texture world-to-light (9) and tan(cutoff)
+ *                 (SPOT_* offsets below)
  *   envmap        ENV_HEADER floats (below), then the sampling tables:
  *                 marginal CDF over cell rows (R = H - 1 floats), conditional
  *                 CDF of each row (R * W), solid angle of one cell of each row (R),
@@ -42,7 +43,7 @@
 
 #include "scene/scene.h"
 
-#define LIGHT_STRIDE 8
+#define LIGHT_STRIDE 12
 #define LIGHT_PRIM 0     /* int bits: triangle: leaf-order triangle; point, envmap: offset in light_data */
 #define LIGHT_PMF 1      /* probability of choosing this emitter */
 #define LIGHT_AREA 2     /* triangle area */
@@ -50,6 +51,9 @@
                             directional: irradiance (W/m^2) */
 #define LIGHT_CDF 6      /* inclusive cumulative pmf */
 #define LIGHT_TYPE 7     /* LIGHT_TRIANGLE ... */
+#define LIGHT_TEXTURE 8  /* int bits: triangle: its radiance texture (radiance x texture at the uv); spot: its
+                            texture, projected over the cone; -1 none. Read only with
+                            -DSCENE_HAS_EMITTER_TEXTURES (pyclpt/buffers/lights.py) */
 
 #define LIGHT_TRIANGLE 0
 #define LIGHT_POINT 1
@@ -65,6 +69,8 @@
 #define SPOT_COS_BEAM 7
 #define SPOT_CUTOFF 8
 #define SPOT_INV_TRANSITION 9
+#define SPOT_TO_LOCAL 10  /* with a texture: world -> the light's frame (3x3, row-major; +z the axis) */
+#define SPOT_UV_FACTOR 19 /* tan(cutoff): uv = 1/2 + d_xy / (2 d_z tan(cutoff)), as Mitsuba's spot */
 
 /* -DSCENE_LIGHTS=mask (pyclpt/buffers/lights.py) lists the emitter kinds a scene has (bit LIGHT_*): only
  * those are compiled (no branch on a kind the scene lacks). Without it every kind is compiled. */
@@ -263,6 +269,33 @@ static inline vec3 env_eval(const Scene* sc, vec3 dir, bool want_pdf, float* pdf
     return env_lookup(sc, e, xy);
 }
 
+/* ---- emitter textures ----------------------------------------------------------- */
+
+/* The emitter's texture at uv (pyclpt's v-up convention), or 1 (one compare) without one. */
+static inline vec3 light_texture(const Scene* sc, __global const float* l, vec2 uv) {
+#ifdef SCENE_HAS_EMITTER_TEXTURES
+    int t = as_int(l[LIGHT_TEXTURE]);
+    if (t >= 0) return tex_eval(&sc->tex, t, uv);
+#endif
+    return v3_splat(1.0f);
+}
+
+/* A spot light's texture in the direction wi (from the shading point to the light). */
+static inline vec3 spot_texture(const Scene* sc, __global const float* l, __global const float* s, vec3 wi) {
+#ifdef SCENE_HAS_EMITTER_TEXTURES
+    if (as_int(l[LIGHT_TEXTURE]) < 0) return v3_splat(1.0f);
+    __global const float* m = s + SPOT_TO_LOCAL;
+    vec3 d = v3_neg(wi);
+    float x = m[0] * d.x + m[1] * d.y + m[2] * d.z, y = m[3] * d.x + m[4] * d.y + m[5] * d.z;
+    float z = m[6] * d.x + m[7] * d.y + m[8] * d.z;
+    float k = 0.5f / (z * s[SPOT_UV_FACTOR]);
+    /* Mitsuba's uv (v down) -> pyclpt's (v up) */
+    return light_texture(sc, l, v2(0.5f + x * k, 0.5f - y * k));
+#else
+    return v3_splat(1.0f);
+#endif
+}
+
 /* ---- sampling any emitter ----------------------------------------------------- */
 
 /* Sample an emitter and a point on it as seen from p; false when the sample carries nothing. */
@@ -308,7 +341,8 @@ static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u,
         float falloff = cos_t >= s[SPOT_COS_BEAM] ? 1.0f
                                                   : (s[SPOT_CUTOFF] - m_acos(m_clamp(cos_t, -1.0f, 1.0f))) * s[SPOT_INV_TRANSITION];
         if (!(cos_t > s[SPOT_COS_CUTOFF] && falloff > 0.0f)) return false;
-        ls->radiance = v3_scale(rgb_at(l + LIGHT_RADIANCE, sc->unit), falloff / dist2);
+        ls->radiance = v3_scale(v3_mul(rgb_at(l + LIGHT_RADIANCE, sc->unit), spot_texture(sc, l, s, ls->wi)),
+                                falloff / dist2);
         ls->pdf = l[LIGHT_PMF];
         ls->delta = true;
         return ls->pdf > 0.0f;
@@ -339,14 +373,18 @@ static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u,
     float cos_l = -m_dot(ls->wi, ng);
     ls->pdf = light_pdf_area(sc, id, ls->dist, cos_l);
     ls->radiance = rgb_at(l + LIGHT_RADIANCE, sc->unit);
+#ifdef SCENE_HAS_EMITTER_TEXTURES
+    ls->radiance = v3_mul(ls->radiance, light_texture(sc, l, tri_uv(sc->tri_vidx, sc->vuvs, prim,
+                                                                    sc->tri_info[2 * prim], b.x, b.y)));
+#endif
     return ls->pdf > 0.0f;
 }
 
-/* Radiance an emissive triangle sends along -dir (one-sided: front faces only). */
-static inline vec3 light_emitted(const Scene* sc, int light, vec3 ng, vec3 dir) {
+/* Radiance an emissive triangle sends along -dir (one-sided: front faces only) from its point at uv. */
+static inline vec3 light_emitted(const Scene* sc, int light, vec3 ng, vec3 dir, vec2 uv) {
     if (light < 0 || m_dot(ng, dir) >= 0.0f) return v3_splat(0.0f);
     __global const float* l = sc->lights + LIGHT_STRIDE * light;
-    return rgb_at(l + LIGHT_RADIANCE, sc->unit);
+    return v3_mul(rgb_at(l + LIGHT_RADIANCE, sc->unit), light_texture(sc, l, uv));
 }
 
 #endif

@@ -5,11 +5,12 @@ Emitters are the emissive triangles (leaf order), then the scene's other lights 
 directional, spot, in their order), then the environment (constant or map); one is chosen by a
 CDF proportional to an estimate of its power:
 
-- triangle: area * luminance of the radiance;
+- triangle: area * luminance of the radiance (times the mean of its texture, when it has one);
 - point light (intensity I, W/sr): 4 pi * luminance(I);
 - directional light (irradiance E): pi r^2 * luminance(E), r the radius of the scene's bounding
   sphere (the power through the scene's cross-section, as Mitsuba estimates it);
-- spot light: luminance(I) times the solid angle of a cone halfway between beam and cutoff;
+- spot light: luminance(I) times the solid angle of a cone halfway between beam and cutoff (times
+  the mean of its texture);
 - environment (constant or map): pi^2 r^2 * mean radiance over the sphere, r the
   radius of the scene's bounding sphere (the power a distant emitter sends through
   the scene's cross-section, ~ pi r^2 * pi L for a constant L).
@@ -27,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.buffers.materials import TextureTable
-from pyclpt.scene.model import Bitmap, Camera, DirectionalLight, Envmap, Scene, SpotLight
+from pyclpt.scene.model import Bitmap, Camera, Checkerboard, DirectionalLight, Envmap, Scene, SpotLight
 
-LIGHT_STRIDE = 8
+LIGHT_STRIDE = 12
 CONST_COUNT = 34
 CAMERA_KINDS = {"perspective": 0, "thinlens": 1, "orthographic": 2}  # CAMERA_* of cl/scene/scene.h
 
@@ -40,7 +41,7 @@ def camera_kind(camera: Camera) -> int:
         return CAMERA_KINDS["perspective"]
     return CAMERA_KINDS[camera.kind]
 # record offsets and types (cl/scene/lights.h)
-LIGHT_PRIM, LIGHT_PMF, LIGHT_AREA, LIGHT_RADIANCE, LIGHT_CDF, LIGHT_TYPE = 0, 1, 2, 3, 6, 7
+LIGHT_PRIM, LIGHT_PMF, LIGHT_AREA, LIGHT_RADIANCE, LIGHT_CDF, LIGHT_TYPE, LIGHT_TEXTURE = 0, 1, 2, 3, 6, 7, 8
 LIGHT_TRIANGLE, LIGHT_POINT, LIGHT_CONSTANT, LIGHT_ENVMAP, LIGHT_DIRECTIONAL, LIGHT_SPOT = 0, 1, 2, 3, 4, 5
 ENV_HEADER = 16
 ENV_TEXTURE = 11  # the texture id of an environment map's texels in its light_data block
@@ -58,6 +59,7 @@ class LightArrays:
     light_data: np.ndarray  # float32 tables (point-light positions, environment-map CDFs)
     env_light: int  # index of the environment in lights, or -1
     tri_light: np.ndarray  # (T,) int32: light index of each leaf-order triangle, or -1
+    has_textures: bool = False  # an emitter's radiance is textured (-DSCENE_HAS_EMITTER_TEXTURES)
 
     @property
     def kinds(self) -> int:
@@ -70,6 +72,24 @@ class LightArrays:
 
 def _int_bits(i: int) -> np.float32:
     return np.array([i], np.int32).view(np.float32)[0]
+
+
+def texture_mean(tex: Bitmap | Checkerboard) -> np.ndarray:
+    """The mean linear rgb of a texture over its image (or its two squares), its scale applied."""
+    if isinstance(tex, Checkerboard):
+        return 0.5 * (np.asarray(tex.color0, np.float64) + np.asarray(tex.color1, np.float64)) * tex.scale
+    rgb = tex.rgba()[..., :3].astype(np.float64)
+    if tex.srgb:
+        rgb = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    return rgb.mean(axis=(0, 1)) * tex.scale
+
+
+def spot_frame(direction) -> np.ndarray:
+    """A frame (3, 3), columns x, y, z, with z the spot light's axis (for a texture given without one)."""
+    z = np.asarray(direction, np.float64)
+    x = np.cross([0.0, 1.0, 0.0] if abs(z[1]) < 0.9 else [1.0, 0.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], axis=1)
 
 
 def envmap_rotation(env: Envmap) -> np.ndarray:
@@ -150,20 +170,30 @@ def pack_envmap(env: Envmap, textures: TextureTable) -> tuple[np.ndarray, float]
 
 
 def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds: np.ndarray,
-                textures: TextureTable) -> LightArrays:
-    """Emitters of ``scene``: ``tris`` (T, 9) and ``tri_emission`` (T, 3) are in leaf order."""
+                textures: TextureTable, tri_mesh: np.ndarray | None = None) -> LightArrays:
+    """Emitters of ``scene``: ``tris`` (T, 9) and ``tri_emission`` (T, 3) are in leaf order, as is
+    ``tri_mesh`` (T,), the mesh of each triangle (for emission textures; None: none)."""
     tri_light = np.full(tris.shape[0], -1, np.int32)
     emissive = np.flatnonzero(tri_emission.max(axis=1) > 0)
     area = 0.5 * np.linalg.norm(np.cross(tris[emissive, 3:6], tris[emissive, 6:9]), axis=1)
     keep = area > 0
     emissive, area = emissive[keep], area[keep]
     em64 = tri_emission[emissive].astype(np.float64)  # double: radiance near FLT_MAX must not overflow
+    tri_tex = np.full(len(emissive), -1, np.int32)
+    if tri_mesh is not None:
+        for i, mesh in enumerate(scene.meshes):
+            if mesh.emission_texture is not None:
+                mine = tri_mesh[emissive] == i
+                tri_tex[mine] = textures.add(mesh.emission_texture)
+                em64[mine] *= texture_mean(mesh.emission_texture)
     lum = np.maximum(em64 @ LUMINANCE, em64.mean(axis=1))
     tri_records = np.zeros((len(emissive), LIGHT_STRIDE), np.float32)
     tri_records[:, LIGHT_PRIM] = emissive.astype(np.int32).view(np.float32)
     tri_records[:, LIGHT_AREA] = area
     tri_records[:, LIGHT_RADIANCE:LIGHT_RADIANCE + 3] = tri_emission[emissive]
     tri_records[:, LIGHT_TYPE] = LIGHT_TRIANGLE
+    tri_records[:, LIGHT_TEXTURE] = tri_tex.view(np.float32)
+    has_textures = bool((tri_tex >= 0).any())
     tri_light[emissive] = np.arange(len(emissive), dtype=np.int32)
     records: list[np.ndarray] = []  # the emitters after the triangles
     power: list[float] = list(area * lum)
@@ -182,6 +212,7 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
     radius = max(0.5 * float(np.linalg.norm(np.asarray(bounds[1], np.float64) - bounds[0])), 1e-3)
     for k, light in enumerate(scene.lights):
         rec = np.zeros(LIGHT_STRIDE, np.float32)
+        rec[LIGHT_TEXTURE] = _int_bits(-1)
         if isinstance(light, DirectionalLight):
             value = np.asarray(light.irradiance, np.float64)
             p = np.pi * radius**2 * max(luminance(value), float(value.mean()))  # Mitsuba: the bounding disk
@@ -193,8 +224,14 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
             solid_angle = 2 * np.pi * (1 - np.cos(0.5 * (cutoff + beam)))
             p = solid_angle * max(luminance(value), float(value.mean()))
             inv_transition = 1.0 / (cutoff - beam) if cutoff > beam else 0.0
-            rec[LIGHT_PRIM] = add_data(np.concatenate([light.position, light.direction,
-                                                       [np.cos(cutoff), np.cos(beam), cutoff, inv_transition]]))
+            block = [light.position, light.direction, [np.cos(cutoff), np.cos(beam), cutoff, inv_transition]]
+            if light.texture is not None:
+                frame = light.to_world if light.to_world is not None else spot_frame(light.direction)
+                block += [np.linalg.inv(frame).reshape(-1), [np.tan(cutoff)]]  # SPOT_TO_LOCAL, SPOT_UV_FACTOR
+                rec[LIGHT_TEXTURE] = _int_bits(textures.add(light.texture))
+                p *= max(float(texture_mean(light.texture) @ LUMINANCE), float(texture_mean(light.texture).mean()))
+                has_textures = True
+            rec[LIGHT_PRIM] = add_data(np.concatenate(block))
             rec[LIGHT_TYPE] = LIGHT_SPOT
         else:
             value = np.asarray(light.intensity, np.float64)
@@ -216,6 +253,7 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
         block, mean_radiance = pack_envmap(env, textures)
         if mean_radiance > 0:
             rec = np.zeros(LIGHT_STRIDE, np.float32)
+            rec[LIGHT_TEXTURE] = _int_bits(-1)
             rec[LIGHT_PRIM] = add_data(block)
             rec[LIGHT_TYPE] = LIGHT_ENVMAP
             env_light = len(tri_records) + len(records)
@@ -224,6 +262,7 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
     elif env is not None and max(env) > 0:
         rec = np.zeros(LIGHT_STRIDE, np.float32)
         rec[LIGHT_PRIM] = _int_bits(-1)
+        rec[LIGHT_TEXTURE] = _int_bits(-1)
         rec[LIGHT_RADIANCE:LIGHT_RADIANCE + 3] = env
         rec[LIGHT_TYPE] = LIGHT_CONSTANT
         env_light = len(tri_records) + len(records)
@@ -241,7 +280,7 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
         lights[:, LIGHT_PMF] = pmf
         lights[:, LIGHT_CDF] = cdf
     light_data = np.concatenate(data) if data else np.zeros(1, np.float32)
-    return LightArrays(lights, light_data, env_light, tri_light)
+    return LightArrays(lights, light_data, env_light, tri_light, has_textures)
 
 
 def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int,

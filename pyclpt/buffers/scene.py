@@ -49,7 +49,7 @@ class SceneArrays:
     textures: TextureTable
     bounds: np.ndarray  # (2, 3) scene bounding box
     defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, SCENE_HAS_TEXTURES, SCENE_MATERIALS,
-    # SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS
+    # SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS, SCENE_CAMERA, SCENE_HAS_EMITTER_TEXTURES
     node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer)
 
     @property
@@ -85,8 +85,9 @@ def triangle_emission(scene: Scene) -> np.ndarray:
 def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[MaterialArrays, LightArrays]:
     """The materials, textures and emitters of ``scene`` for its BVH: everything but the geometry."""
     mats = pack_materials(scene.materials)
+    tri_mesh = np.repeat(np.arange(len(scene.meshes)), [m.triangle_count for m in scene.meshes])
     lights = pack_lights(scene, bvh.tris.reshape(-1, 9), triangle_emission(scene)[bvh.tri_order], bounds,
-                         mats.textures)
+                         mats.textures, tri_mesh[bvh.tri_order])
     return mats, lights
 
 
@@ -94,7 +95,7 @@ def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packe
     return {"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
             "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
             "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets,
-            "SCENE_CAMERA": camera_kind(camera) or None}
+            "SCENE_CAMERA": camera_kind(camera) or None, "SCENE_HAS_EMITTER_TEXTURES": lights.has_textures}
 
 
 def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order: np.ndarray) -> np.ndarray:

@@ -57,6 +57,7 @@ NOT_DIFFERENTIABLE = {
     "directional": "directional light irradiance: not differentiated yet",
     "scale": "environment map scale: not differentiated (its texels are)",
     "mask": "opacity: changes visibility, not differentiated",
+    "emission_texture": "the radiance of a textured area emitter: not differentiated yet",
 }
 
 
@@ -201,7 +202,10 @@ class _Walker:
                              f"edit scene.meshes and render again")
 
         self.add(f"{mesh.name}.vertex_positions", "", (get, put), mesh, "geometry")
-        if mesh.emission is not None:
+        if mesh.emission is not None and mesh.emission_texture is not None:
+            self.add(f"{mesh.name}.emitter.radiance.value", "", _rgb_param(mesh, "emission"), mesh,
+                     "emission_texture")
+        elif mesh.emission is not None:
             self.add(f"{mesh.name}.emitter.radiance.value", "emission", _rgb_param(mesh, "emission"), mesh)
 
     def walk(self) -> dict[str, Parameter]:

@@ -500,11 +500,28 @@ class SpotLight(Checked):
     intensity: RGB = (1.0, 1.0, 1.0)
     cutoff_angle: float = 20.0
     beam_width: float | None = None
+    # Mitsuba's ``texture``: projected over the cone, at uv = 1/2 + d_xy / (2 d_z tan(cutoff)) of the
+    # direction d in the light's frame (``to_world``'s 3x3 part: +z the axis), v as Mitsuba's (down)
+    texture: Bitmap | Checkerboard | None = None
+    to_world: np.ndarray | None = None  # (3, 3) the light's frame; None: one built around ``direction``
 
     def _check(self) -> None:
         self.position = _point(self.position, "spot light position")
         self.direction = _unit_vector(self.direction, "spot light direction")
         self.intensity = radiance(self.intensity, "spot light intensity")
+        if self.texture is not None:
+            if not isinstance(self.texture, (Bitmap, Checkerboard)):
+                raise ValueError(f"spot light texture must be a Bitmap or a Checkerboard, got "
+                                 f"{type(self.texture).__name__}")
+            self.texture.validate()
+            self.texture.check_colour("spot light texture")
+        if self.to_world is not None:
+            m = np.asarray(self.to_world, np.float64)
+            if m.shape != (3, 3) or not np.all(np.isfinite(m)) or abs(np.linalg.det(m)) < 1e-12:
+                raise ValueError(f"spot light to_world must be a finite, invertible 3x3 matrix, got {m.tolist()}")
+            if np.dot(m[:, 2] / np.linalg.norm(m[:, 2]), self.direction) < 1 - 1e-5:
+                raise ValueError("spot light to_world's +z axis must be its direction")
+            self.to_world = m
         cutoff = check_float(self.cutoff_angle, "spot light cutoff_angle")
         if not 0.0 < cutoff <= 90.0:
             raise ValueError(f"spot light cutoff_angle must be in (0, 90] degrees, got {self.cutoff_angle}")
@@ -568,6 +585,8 @@ class Mesh(Checked):
     normals: np.ndarray | None = None  # (V, 3) float32 shading normals
     uvs: np.ndarray | None = None  # (V, 2) float32
     emission: RGB | None = None  # radiance of an area emitter on the front side
+    # an area emitter's radiance texture, looked up at the uv (radiance = emission x texture)
+    emission_texture: Bitmap | Checkerboard | None = None
 
     @property
     def triangle_count(self) -> int:
@@ -606,6 +625,14 @@ class Mesh(Checked):
             self.emission = rgb(self.emission, f"{where} emission")
             if min(self.emission) < 0:
                 raise ValueError(f"{where}: negative emitted radiance {self.emission}")
+        if self.emission_texture is not None:
+            if not isinstance(self.emission_texture, (Bitmap, Checkerboard)):
+                raise ValueError(f"{where}: emission_texture must be a Bitmap or a Checkerboard, got "
+                                 f"{type(self.emission_texture).__name__}")
+            if self.emission is None:
+                raise ValueError(f"{where}: an emission_texture needs an emission (its scale, e.g. (1, 1, 1))")
+            self.emission_texture.validate()
+            self.emission_texture.check_colour(f"{where} emission_texture")
 
 
 @dataclass

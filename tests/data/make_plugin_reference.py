@@ -9,7 +9,9 @@
 - ``uv-shapes.xml``: the texture coordinates of the rectangle, disk, sphere and cube
   (tests/test_plugins.py);
 - ``uv-transforms.xml``: a checkerboard as a colour and as a mask's opacity, a bitmap under to_uv
-  scale + translate + rotate, a rotated checkerboard on a sphere (tests/test_plugins.py).
+  scale + translate + rotate, a rotated checkerboard on a sphere (tests/test_plugins.py);
+- ``emitter-textures.xml``: an area light with a bitmap radiance and a spot light projecting a bitmap
+  (tests/test_plugins.py).
 
 Mitsuba's path tracer as each file says (box filter), 16384 spp.
 """
@@ -21,7 +23,8 @@ import numpy as np
 
 mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
 HERE = Path(__file__).parent
-NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms")
+NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms",
+         "emitter-textures")
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or NAMES:

@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from pyclpt.scene.mitsuba_dict.context import LoadContext, SceneDictError
-from pyclpt.scene.mitsuba_dict.textures import color
-from pyclpt.scene.model import RGB, DirectionalLight, Envmap, PointLight, SpotLight
+from pyclpt.scene.mitsuba_dict.textures import Texture, color, color_or_texture
+from pyclpt.scene.model import RGB, Bitmap, Checkerboard, DirectionalLight, Envmap, PointLight, SpotLight
 
 Environment = RGB | Envmap
 #: A loader adds to the scene (point lights) and returns None, or returns the scene's environment.
@@ -24,12 +24,16 @@ EmitterLoader = Callable[[LoadContext, Mapping[str, Any], str], Environment | No
 UNSUPPORTED = frozenset({"projector", "collimated", "directionalarea"})
 
 
-def area_radiance(ctx: LoadContext, em: Mapping[str, Any], where: str) -> RGB:
-    """The radiance of an emitter nested in a shape (which must be ``area``)."""
+def area_radiance(ctx: LoadContext, em: Mapping[str, Any], where: str) -> tuple[RGB, Texture | None]:
+    """The radiance of an emitter nested in a shape (which must be ``area``): a constant, or (1, 1, 1)
+    and a texture looked up at the shape's uv."""
     if em.get("type") != "area":
         raise ctx.fail(where, f"only 'area' emitters attach to shapes, got {em.get('type')!r}", em)
     ctx.note_unused(where, em, {"radiance"})
-    return color(ctx, em.get("radiance", 1.0), f"{where}.radiance", em)
+    value = color_or_texture(ctx, em.get("radiance", 1.0), f"{where}.radiance", em)
+    if isinstance(value, (Bitmap, Checkerboard)):
+        return (1.0, 1.0, 1.0), value
+    return value, None
 
 
 def load_point(ctx: LoadContext, d: Mapping[str, Any], where: str) -> None:
@@ -66,13 +70,22 @@ def load_spot(ctx: LoadContext, d: Mapping[str, Any], where: str) -> None:
     """``spot``: at the origin of ``to_world``, shining along its +z axis, with ``intensity``,
     ``cutoff_angle`` and ``beam_width`` (degrees)."""
     ctx.note_unused(where, d, {"intensity", "cutoff_angle", "beam_width", "to_world", "texture"})
+    texture = None
     if "texture" in d:
-        ctx.note(d, where, "a spot light's texture is not supported: the spot is uniform")
+        texture = color_or_texture(ctx, d["texture"], f"{where}.texture", d)
+        if not isinstance(texture, (Bitmap, Checkerboard)):
+            raise ctx.fail(f"{where}.texture", "a spot light's texture must be spatially varying (a bitmap or "
+                                               "a checkerboard), as Mitsuba requires", d)
     m = ctx.transform(d, "to_world", where) if "to_world" in d else np.eye(4)
     cutoff = ctx.number(d, "cutoff_angle", 20.0, where)
     beam = ctx.number(d, "beam_width", 0.75 * cutoff, where)
-    _add_light(ctx, d, where, SpotLight(tuple(m[:3, 3]), tuple(m[:3, :3] @ np.array([0.0, 0.0, 1.0])),
-                                        color(ctx, d.get("intensity", 1.0), f"{where}.intensity", d), cutoff, beam))
+    try:
+        light = SpotLight(tuple(m[:3, 3]), tuple(m[:3, :3] @ np.array([0.0, 0.0, 1.0])),
+                          color(ctx, d.get("intensity", 1.0), f"{where}.intensity", d), cutoff, beam,
+                          texture=texture, to_world=m[:3, :3] if texture is not None else None)
+    except ValueError as exc:
+        raise ctx.fail(where, str(exc), d) from None
+    _add_light(ctx, d, where, light)
 
 
 def load_constant(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environment:

@@ -182,10 +182,10 @@ def load_shape(ctx: LoadContext, name: str, d: Mapping[str, Any]) -> None:
         ctx.note(d, where, f"{len(materials)} BSDFs given, the first used")
     material = bsdfs.material_index(ctx, materials[0][1] if materials else None,
                                     f"{where}.{materials[0][0]}" if materials else where)
-    emission = None
+    emission = texture = None
     for key, em in lights:
-        emission = emitters.area_radiance(ctx, ctx.deref(em, f"{where}.{key}"), f"{where}.{key}")
+        emission, texture = emitters.area_radiance(ctx, ctx.deref(em, f"{where}.{key}"), f"{where}.{key}")
     try:
-        ctx.meshes.append(Mesh(name, positions, indices, material, normals, uvs, emission))
+        ctx.meshes.append(Mesh(name, positions, indices, material, normals, uvs, emission, texture))
     except ValueError as exc:
         raise ctx.fail(where, str(exc), d) from None
