@@ -116,6 +116,7 @@ def scene_fingerprint(scene: Scene, *, resolution: tuple[int, int] | None = None
                     parts[MESH_FIELDS.get(mf.name, "geometry")].append((mf.name, digest(getattr(mesh, mf.name))))
         elif name == "film" and resolution is not None:
             parts["resolution"].append(tuple(resolution))
+            parts["scene"].append(("rfilter", digest(value.rfilter)))  # the size is overridden, not the filter
         elif name == "max_depth" and max_depth is not None:
             parts["max_depth"].append(max_depth)
         else:
