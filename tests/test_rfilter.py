@@ -64,11 +64,11 @@ FILTERS = [ReconstructionFilter("tent"), ReconstructionFilter("tent", radius=1.7
 
 
 @pytest.mark.parametrize("rfilter", FILTERS, ids=lambda f: f"{f.kind}-{f.radius if f.kind == 'tent' else f.stddev}")
-def test_offsets_follow_mitsubas_filter(device, rfilter):
+def test_offsets_follow_mitsubas_filter(each_device, rfilter):
     """Chi-square of 10^6 offsets in 80 bins over the filter's support against the integrals of Mitsuba's
     w(x) (normalised), and the numpy mirror of the device's mapping equal to it."""
     u = np.random.default_rng(5).random(1_000_000, dtype=np.float32)
-    x = device_offsets(device, rfilter, u)
+    x = device_offsets(each_device, rfilter, u)
     r = rfilter.extent
     assert np.all(np.abs(x) <= r * (1 + 1e-6))
     edges = np.linspace(-r, r, 81)
@@ -135,13 +135,13 @@ def test_filter_matches_mitsuba(kind, rfilter_images):
 
 
 @pytest.mark.parametrize("kind", ["box", "tent", "gaussian"])
-def test_megakernel_equals_wavefront_and_gradient_primal(kind):
+def test_megakernel_equals_wavefront_and_gradient_primal(kind, each_device):
     scene = pyclpt.load(DATA / "rfilter.xml", filter=kind)
-    opts = dict(spp=2, seed=5, width=16, height=12, max_depth=3, progress=False)
+    opts = dict(spp=2, seed=5, width=16, height=12, max_depth=3, progress=False, device=each_device)
     mega = pyclpt.render(scene, **opts)
     np.testing.assert_array_equal(mega, pyclpt.render(scene, integrator="wavefront", **opts))
     np.testing.assert_array_equal(mega, pyclpt.render(scene, integrator="wavefront", layout="aos", **opts))
-    replay = replay_for(scene, width=16, height=12, max_depth=3)
+    replay = replay_for(scene, width=16, height=12, max_depth=3, device=each_device)
     np.testing.assert_array_equal(replay.primal(2, 5), mega)
 
 
