@@ -220,3 +220,20 @@ def test_renderer_keeps_its_filter_kind(device):
     scene.film.rfilter = ReconstructionFilter("tent")
     with pytest.raises(ValueError, match="reconstruction filter changed kind"):
         buffers.refresh_camera()
+
+
+@pytest.mark.parametrize("size", [None, (8, 6)])
+def test_progressive_renderer_follows_a_filter_change(size):
+    """A filter changed on the scene reaches the progressive renderer (a rebuild, another kind compiled in),
+    with or without its own resolution; its frames are then the filter's render."""
+    scene = object_under_sky({"type": "diffuse"}, radiance=1.0)
+    scene.film = pyclpt.Film(8, 6)
+    w, h = size or (None, None)
+    pr = pyclpt.ProgressiveRenderer(scene, seed=4, max_depth=2, width=w, height=h)
+    pr.step(2)
+    scene.film.rfilter = ReconstructionFilter("gaussian")
+    assert pr.sync()
+    assert pr.frame_count == 0
+    pr.step(2)
+    np.testing.assert_array_equal(pr.image(), pyclpt.render(scene, spp=2, seed=4, max_depth=2, width=8, height=6,
+                                                            progress=False))
