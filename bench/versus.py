@@ -209,6 +209,7 @@ def measure(case: dict, s: dict, python: str, device) -> dict:
     from .runner import make_renderer
 
     scene = pyclpt.load(case["file"])
+    scene.film.rfilter = pyclpt.ReconstructionFilter("box")  # as the driver makes Mitsuba's (the shared scenes: tent)
     renderers, info = {}, {}
     for m in s["methods"]:
         r = make_renderer(scene, m, case["depth"], case["width"], case["height"], device)

@@ -51,6 +51,7 @@ from pyclpt.scene.model import (
     Mesh,
     Plastic,
     PointLight,
+    ReconstructionFilter,
     Scene,
     SpotLight,
     ThinDielectric,
@@ -63,7 +64,8 @@ __all__ = [
     "Conductor", "default_device", "Denoiser", "DenoiserSettings", "Device", "DeviceError", "DeviceMemoryError",
     "Dielectric", "Diffuse", "DirectionalLight", "EnvironmentVariableError", "Envmap", "Film", "get_device", "Keyframe",
     "KernelBuildError", "list_devices", "load", "load_dict", "load_xml", "Mask", "Mesh", "open_device", "Plastic",
-    "PointLight", "ProgressiveRenderer", "read_image", "render", "Renderer", "RenderStats", "Scene", "SceneDictError",
+    "PointLight", "ProgressiveRenderer", "read_image", "ReconstructionFilter", "render", "Renderer", "RenderStats",
+    "Scene", "SceneDictError",
     "SceneXMLError", "SpotLight", "ThinDielectric", "write_image", "SceneParameters", "optim", "render_backward",
     "render_forward", "traverse",
 ]

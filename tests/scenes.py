@@ -7,9 +7,11 @@ CENTER_CAMERA = [{"look_at": {"origin": [0, 0, 0], "target": [0, 0, -1], "up": [
 FRONT_CAMERA = [{"look_at": {"origin": [0, 0, 4], "target": [0, 0, 0], "up": [0, 1, 0]}}]
 
 
-def sensor(to_world, fov=60.0, size=16, spp=64):
+def sensor(to_world, fov=60.0, size=16, spp=64, rfilter="box"):
+    """A camera; the box filter by default (Mitsuba's default is the gaussian): the tests reason about
+    what each pixel's own footprint sees."""
     return {"type": "perspective", "fov": fov, "to_world": to_world,
-            "film": {"width": size, "height": size}, "sampler": {"sample_count": spp}}
+            "film": {"width": size, "height": size, "rfilter": {"type": rfilter}}, "sampler": {"sample_count": spp}}
 
 
 def interior_furnace(albedo: float, radiance: float = 1.0) -> pyclpt.Scene:

@@ -43,7 +43,8 @@ def floor_scene(*, facing_down: bool = True, camera_height: float = 0.9, sky: fl
     above."""
     x0, x1, y0, y1, z = LIGHT
     d = {"type": "scene",
-         "sensor": {"type": "perspective", "fov": fov, "film": {"width": size, "height": size},
+         "sensor": {"type": "perspective", "fov": fov,
+                    "film": {"width": size, "height": size, "rfilter": {"type": "box"}},  # per-pixel footprints
                     "to_world": [{"look_at": {"origin": [0, 0, camera_height], "target": [0, 0, 0],
                                               "up": [0, 1, 0]}}]},
          "floor": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": ALBEDO},

@@ -17,6 +17,7 @@
 #include "scene/scene.h"
 #include "scene/lights.h"
 #include "scene/bvh.h"
+#include "film/rfilter.h"
 #include "integrators/gbuffer.h"
 
 /* Russian roulette starts on rays of this bounce index. */
@@ -58,13 +59,16 @@ static inline uint film_sample(const Scene* sc, uint first_sample, int f) {
     return first_sample + (uint)(f / scene_pixels(sc));
 }
 
-/* path init: the camera ray of (pixel, sample) with a jittered position in the pixel (and, for a thin
- * lens, a point on the aperture). */
+/* path init: the camera ray of (pixel, sample) through a position drawn from the film's reconstruction
+ * filter around the pixel's centre (film/rfilter.h; the box: uniform in the pixel) and, for a thin lens,
+ * a point on the aperture. */
 static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
     __global const float* c = sc->consts;
     int width = (int)c[CONST_WIDTH], height = (int)c[CONST_HEIGHT];
     int px = pixel % width, py = pixel / width;
     vec2 j = rng_2d(key, 0, DIM_CAMERA_X);
+    j.x = rfilter_position(c, j.x);
+    j.y = rfilter_position(c, j.y);
     float sx = 2.0f * (((float)px + j.x) / (float)width) - 1.0f;
     float sy = 1.0f - 2.0f * (((float)py + j.y) / (float)height);
     vec3 forward = rgb_at(c + CONST_CAM_FORWARD, sc->unit), right = rgb_at(c + CONST_CAM_RIGHT, sc->unit);

@@ -40,7 +40,20 @@
 #define CONST_PREV_CAM_UP 29
 #define CONST_LENS_RADIUS 32    /* thinlens: aperture radius */
 #define CONST_FOCUS_DISTANCE 33 /* thinlens: the distance in focus, along forward */
-#define CONST_COUNT 34
+#define CONST_FILTER_RADIUS 34  /* the film's reconstruction filter (film/rfilter.h): the tent's radius */
+#define CONST_FILTER_TABLE 35   /* FILTER_TABLE + 1 floats: the gaussian's inverse-CDF table */
+#define FILTER_TABLE 128
+#define CONST_COUNT 164
+
+/* Reconstruction filters (pyclpt.scene.model.ReconstructionFilter.kind): -DSCENE_FILTER=kind compiles the
+ * tent's or the gaussian's sampling of the pixel offset in (pyclpt/buffers/rfilter.py); without it, the
+ * box: a uniform offset, as before filters existed. */
+#define FILTER_BOX 0
+#define FILTER_TENT 1
+#define FILTER_GAUSSIAN 2
+#ifndef SCENE_FILTER
+#define SCENE_FILTER FILTER_BOX
+#endif
 
 /* Camera kinds (pyclpt.scene.model.Camera.kind): -DSCENE_CAMERA=kind compiles a thin lens or an
  * orthographic camera in (pyclpt/buffers/scene.py; without it, a pinhole), so that path_init has no

@@ -28,10 +28,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.buffers.materials import TextureTable
+from pyclpt.buffers.rfilter import CONST_FILTER_RADIUS, FILTER_CONSTS, filter_consts
 from pyclpt.scene.model import Bitmap, Camera, Checkerboard, DirectionalLight, Envmap, Scene, SpotLight
 
 LIGHT_STRIDE = 12
-CONST_COUNT = 34
+CONST_COUNT = 164  # CONST_COUNT of cl/scene/scene.h
 CAMERA_KINDS = {"perspective": 0, "thinlens": 1, "orthographic": 2}  # CAMERA_* of cl/scene/scene.h
 
 
@@ -298,4 +299,5 @@ def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int,
     c[17] = lights.env_light
     c[18] = lights.lights.shape[0]
     c[19] = 1.0  # CONST_UNIT: the stride of record reads, opaque to the compiler (rgb_at, cl/core/common.h)
+    c[CONST_FILTER_RADIUS:CONST_FILTER_RADIUS + FILTER_CONSTS] = filter_consts(scene.film.rfilter)
     return c

@@ -23,6 +23,7 @@ from pyclpt.buffers.materials import (  # noqa: F401
     pack_material,
     pack_materials,
 )
+from pyclpt.buffers.rfilter import filter_kind
 from pyclpt.device.context import Device, upload
 from pyclpt.scene.model import Camera, Scene
 
@@ -91,11 +92,12 @@ def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[Mat
     return mats, lights
 
 
-def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, camera: Camera) -> dict:
+def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, scene: Scene) -> dict:
     return {"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
             "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
             "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets,
-            "SCENE_CAMERA": camera_kind(camera) or None, "SCENE_HAS_EMITTER_TEXTURES": lights.has_textures}
+            "SCENE_CAMERA": camera_kind(scene.camera) or None, "SCENE_FILTER": filter_kind(scene.film.rfilter) or None,
+            "SCENE_HAS_EMITTER_TEXTURES": lights.has_textures}
 
 
 def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order: np.ndarray) -> np.ndarray:
@@ -139,7 +141,7 @@ def pack_scene(scene: Scene) -> SceneArrays:
         lights=lights,
         textures=mats.textures,
         bounds=bounds,
-        defines=scene_defines(mats, lights, bvh, packets, scene.camera),
+        defines=scene_defines(mats, lights, bvh, packets, scene),
         node_buffer=leaf_packet_buffer(bvh) if packets else bvh.nodes,
     )
 
@@ -171,7 +173,7 @@ class SceneBuffers:
         old = self.arrays
         mats, lights = pack_appearance(self.scene, old.bvh, old.bounds)
         packets = old.defines["BVH_LEAF_PACKETS"]
-        defines = scene_defines(mats, lights, old.bvh, packets, self.scene.camera)
+        defines = scene_defines(mats, lights, old.bvh, packets, self.scene)
         changed = {k: (old.defines[k], v) for k, v in defines.items() if old.defines[k] != v}
         if changed:
             what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items())
@@ -191,13 +193,19 @@ class SceneBuffers:
         return uploaded
 
     def refresh_camera(self, previous: Camera | None = None) -> None:
-        """Re-read the scene's camera: the constants are rebuilt on the next args() call. ``previous``:
+        """Re-read the scene's camera and its film's filter parameters: the constants are rebuilt on the next
+        args() call (a filter of another kind is a ValueError, as a camera of another kind). ``previous``:
         the camera of the frame before, whose view the motion vectors point back to (None: none moved)."""
         kind = camera_kind(self.scene.camera) or None
         if kind != self.arrays.defines.get("SCENE_CAMERA"):
             raise ValueError(f"scene {self.scene.name!r}: the camera changed kind (now {self.scene.camera.kind!r}, "
                              f"aperture {self.scene.camera.aperture_radius}); the kernels are compiled for one kind: "
                              f"render it with a new renderer")
+        rfilter = filter_kind(self.scene.film.rfilter) or None
+        if rfilter != self.arrays.defines.get("SCENE_FILTER"):
+            raise ValueError(f"scene {self.scene.name!r}: the film's reconstruction filter changed kind (now "
+                             f"{self.scene.film.rfilter.kind!r}); the kernels are compiled for one: render it with "
+                             f"a new renderer")
         self.previous_camera = previous
         self._consts.clear()
 

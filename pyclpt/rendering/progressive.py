@@ -65,7 +65,7 @@ from pyclpt.film.film import DEFAULT_PRECISION
 from pyclpt.rendering.frame_loop import progress_bar
 from pyclpt.rendering.renderer import MAX_RESOLUTION, Renderer, RenderStats
 from pyclpt.scene.camera_path import CameraPath
-from pyclpt.scene.model import Camera, Mesh, Scene, check_material, rgb
+from pyclpt.scene.model import Camera, Mesh, ReconstructionFilter, Scene, check_material, rgb
 
 log = logging.getLogger("pyclpt.rendering.progressive")
 
@@ -116,6 +116,8 @@ def scene_fingerprint(scene: Scene, *, resolution: tuple[int, int] | None = None
                     parts[MESH_FIELDS.get(mf.name, "geometry")].append((mf.name, digest(getattr(mesh, mf.name))))
         elif name == "film" and resolution is not None:
             parts["resolution"].append(tuple(resolution))
+            if value.rfilter != ReconstructionFilter():  # the size is overridden, not the filter (the box: as
+                parts["scene"].append(("rfilter", digest(value.rfilter)))  # before filters, so cache keys stay)
         elif name == "max_depth" and max_depth is not None:
             parts["max_depth"].append(max_depth)
         else:

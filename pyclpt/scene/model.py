@@ -58,6 +58,7 @@ FILTERS = ("nearest", "bilinear")
 DISTRIBUTIONS = ("ggx", "beckmann")
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 CAMERA_KINDS = ("perspective", "thinlens", "orthographic")
+FILTER_KINDS = ("box", "tent", "gaussian")
 
 
 def _uv(value: object, what: str) -> tuple[float, float]:
@@ -706,13 +707,48 @@ class Camera(Checked):
 
 
 @dataclass
+class ReconstructionFilter(Checked):
+    """The film's pixel filter, Mitsuba's ``rfilter``: a separable w(x) w(y), x and y in pixels from the
+    pixel's centre. ``box`` (w = 1 on [-0.5, 0.5)), ``tent`` (w = max(0, 1 - |x| / radius), ``radius``
+    default 1) or ``gaussian`` (w = max(0, exp(-x^2 / (2 stddev^2)) - exp(-8)), cut off at 4 stddev,
+    ``stddev`` default 0.5: Mitsuba's default filter). ``radius`` is read by the tent only and
+    ``stddev`` by the gaussian only."""
+
+    kind: str = "box"
+    radius: float = 1.0
+    stddev: float = 0.5
+
+    def _check(self) -> None:
+        if self.kind not in FILTER_KINDS:
+            raise ValueError(f"reconstruction filter kind must be one of {FILTER_KINDS}, got {self.kind!r}")
+        self.radius = check_float(self.radius, "tent filter radius", lo=0.0)
+        self.stddev = check_float(self.stddev, "gaussian filter stddev", lo=0.0)
+        if not self.radius > 0:
+            raise ValueError(f"tent filter radius must be > 0 pixels, got {self.radius}")
+        if not self.stddev > 0:
+            raise ValueError(f"gaussian filter stddev must be > 0 pixels, got {self.stddev}")
+
+    @property
+    def extent(self) -> float:
+        """The filter's support radius in pixels (Mitsuba's ``radius()``)."""
+        return {"box": 0.5, "tent": self.radius, "gaussian": 4.0 * self.stddev}[self.kind]
+
+
+@dataclass
 class Film(Checked):
+    """The image size and its reconstruction filter (pyclpt's default: ``box``; a Mitsuba scene without
+    an ``rfilter`` gets Mitsuba's ``gaussian``)."""
+
     width: int = 256
     height: int = 256
+    rfilter: ReconstructionFilter = field(default_factory=ReconstructionFilter)
 
     def _check(self) -> None:
         self.width = check_int(self.width, "film width", lo=1, hi=65536)
         self.height = check_int(self.height, "film height", lo=1, hi=65536)
+        if not isinstance(self.rfilter, ReconstructionFilter):
+            raise TypeError(f"film rfilter: expected a pyclpt.ReconstructionFilter, got {type(self.rfilter).__name__}")
+        self.rfilter.validate()
 
 
 @dataclass(eq=False)

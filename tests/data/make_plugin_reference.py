@@ -11,9 +11,11 @@
 - ``uv-transforms.xml``: a checkerboard as a colour and as a mask's opacity, a bitmap under to_uv
   scale + translate + rotate, a rotated checkerboard on a sphere (tests/test_plugins.py);
 - ``emitter-textures.xml``: an area light with a bitmap radiance and a spot light projecting a bitmap
-  (tests/test_plugins.py).
+  (tests/test_plugins.py);
+- ``rfilter.xml`` with ``filter=tent`` and ``filter=gaussian``: ``rfilter-tent-mitsuba.npy``,
+  ``rfilter-gaussian-mitsuba.npy``, the reconstruction filters (tests/test_rfilter.py).
 
-Mitsuba's path tracer as each file says (box filter), 16384 spp.
+Mitsuba's path tracer as each file says (box filter unless the name says otherwise), 16384 spp.
 """
 import sys
 from pathlib import Path
@@ -24,11 +26,14 @@ import numpy as np
 mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
 HERE = Path(__file__).parent
 NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms",
-         "emitter-textures")
+         "emitter-textures", "rfilter-tent", "rfilter-gaussian")
+#: references of one file with parameters: name -> (file, parameters)
+VARIANTS = {"rfilter-tent": ("rfilter", {"filter": "tent"}), "rfilter-gaussian": ("rfilter", {"filter": "gaussian"})}
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or NAMES:
-        scene = mi.load_file(str(HERE / f"{name}.xml"))
+        file, params = VARIANTS.get(name, (name, {}))
+        scene = mi.load_file(str(HERE / f"{file}.xml"), **params)
         image = np.array(mi.render(scene, spp=16384, seed=7), dtype=np.float32)[..., :3]
         np.save(HERE / f"{name}-mitsuba.npy", image)
         print(name, image.shape, image.reshape(-1, 3).mean(0))

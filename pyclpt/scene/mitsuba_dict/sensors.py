@@ -3,7 +3,8 @@ count and path depth.
 
 :data:`SENSORS` maps the sensor plug-ins pyclpt loads to their loaders (``perspective``, ``thinlens``,
 ``orthographic``); :data:`OTHER_SENSORS` are recognised as sensors but rejected.
-Films and samplers are read by :func:`load_film` and :func:`load_sampler`. Every Mitsuba integrator
+Films (with their reconstruction filter, :func:`load_rfilter`) and samplers are read by :func:`load_film`
+and :func:`load_sampler`. Every Mitsuba integrator
 (:data:`INTEGRATORS`) becomes pyclpt's path tracer with the integrator's ``max_depth``
 (:func:`load_integrator`), with a note when it is not ``path``.
 """
@@ -15,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from pyclpt.scene.mitsuba_dict.context import META_KEYS, LoadContext, is_dict
-from pyclpt.scene.model import Camera, Film
+from pyclpt.scene.model import Camera, Film, ReconstructionFilter
 
 SensorLoader = Callable[[LoadContext, Mapping[str, Any], str], Camera]
 
@@ -85,16 +86,42 @@ _SENSOR_KEYS = frozenset({"fov", "fov_axis", "to_world", "near_clip", "far_clip"
                           "aperture_radius"})
 
 
+#: Mitsuba reconstruction filters pyclpt approximates by its gaussian (with a note).
+OTHER_RFILTERS = frozenset({"mitchell", "catmullrom", "lanczos"})
+
+
+def load_rfilter(ctx: LoadContext, r: Mapping[str, Any] | None, where: str) -> ReconstructionFilter:
+    """The film's ``rfilter``: ``box``, ``tent`` (``radius``, default 1) or ``gaussian`` (``stddev``, default
+    0.5); none given: Mitsuba's default, the gaussian. Mitsuba's negative-lobed filters (``mitchell``,
+    ``catmullrom``, ``lanczos``) become the default gaussian with a note; any other type is an error."""
+    if r is None:
+        return ReconstructionFilter("gaussian")
+    kind = r.get("type", "gaussian")
+    params = {"tent": {"radius"}, "gaussian": {"stddev"}}.get(kind, set())
+    if kind in OTHER_RFILTERS:
+        ctx.note(r, where, f"reconstruction filter {kind!r}: the gaussian (stddev 0.5) used")
+        return ReconstructionFilter("gaussian")
+    if kind not in ("box", "tent", "gaussian"):
+        raise ctx.fail(where, f"unknown reconstruction filter {kind!r} (box, tent, gaussian; mitchell, "
+                              f"catmullrom and lanczos load as the gaussian)", r)
+    ctx.note_unused(where, r, params)
+    try:
+        return ReconstructionFilter(kind, radius=ctx.number(r, "radius", 1.0, where) if kind == "tent" else 1.0,
+                                    stddev=ctx.number(r, "stddev", 0.5, where) if kind == "gaussian" else 0.5)
+    except ValueError as exc:
+        raise ctx.fail(where, str(exc), r) from None
+
+
 def load_film(ctx: LoadContext, f: Mapping[str, Any], where: str) -> Film:
-    """The film's ``width`` and ``height`` (Mitsuba's defaults 768 x 576); its reconstruction filter is box."""
-    rfilter = next((v for v in f.values() if is_dict(v)), None)
+    """The film's ``width`` and ``height`` (Mitsuba's defaults 768 x 576) and its reconstruction filter."""
+    rfilter = f["rfilter"] if is_dict(f.get("rfilter")) else next((v for v in f.values() if is_dict(v)), None)
+    key = next((k for k, v in f.items() if v is rfilter), "rfilter")
     ctx.note_unused(where, {k: v for k, v in f.items() if v is not rfilter},
                     {"width", "height", "pixel_format", "component_format", "file_format", "banner",
-                     "high_quality_edges", "rfilter"})
-    if rfilter is not None and rfilter.get("type", "box") != "box":
-        ctx.note(rfilter, f"{where}.rfilter", f"reconstruction filter {rfilter.get('type')!r}: box filter used")
+                     "high_quality_edges", "rfilter", "sample_border"})
+    filt = load_rfilter(ctx, rfilter, f"{where}.{key}")
     try:
-        return Film(int(ctx.number(f, "width", 768, where)), int(ctx.number(f, "height", 576, where)))
+        return Film(int(ctx.number(f, "width", 768, where)), int(ctx.number(f, "height", 576, where)), filt)
     except (TypeError, ValueError) as exc:
         raise ctx.fail(where, str(exc), f) from None
 
