@@ -8,7 +8,6 @@ normalisation. Render-level checks compare with analytic or quadrature values.
 """
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +27,7 @@ from pyclpt.buffers.lights import (
 from pyclpt.buffers.materials import TextureTable
 from pyclpt.buffers.scene import SceneBuffers, pack_scene
 from pyclpt.scene.model import Envmap, PointLight
-from pyclpt.scene.sky import SunTime, sunsky_envmap, texel_directions
+from pyclpt.scene.sky import SunTime, directional_sun_05, sunsky_envmap, texel_directions
 from pyclpt.scene.sky.bake import row_hat_solid_angle
 from pyclpt.scene.sky.sun import SUN_RADIUS_DEG, sun_radiance_rgb_05
 from pyclpt.scene.transform import rotate
@@ -662,7 +661,7 @@ def test_sun_position_matches_mitsuba3(sunsky_reference):
     np.testing.assert_allclose([d05[1], np.hypot(d05[0], d05[2])], [d3[2], np.hypot(d3[0], d3[1])], atol=1e-12)
 
 
-def test_sunsky_options_and_errors(caplog):
+def test_sunsky_options_and_errors():
     sky = sunsky_envmap((0, 1, 1), sun_scale=0.0, resolution=64)
     assert sky.pixels.shape == (32, 64, 3) and sky.name == "sunsky"
     assert sky.pixels.max() < 1.0  # no sun
@@ -700,9 +699,13 @@ def test_sunsky_options_and_errors(caplog):
                           (dict(sun_direction=(0, 1, 0), albedo=(0.1, 0.2)), "albedo")]:
         with pytest.raises(ValueError, match=f"sunsky.*{match}"):
             sunsky_envmap(**kwargs)
-    with caplog.at_level(logging.WARNING, logger="pyclpt.scene.sky.bake"):
-        sunsky_envmap((0, 1, 1), sun_radius_scale=0.0, resolution=32)
-    assert "directional" in caplog.text
+    # Mitsuba 0.5's directional sun (sun_radius_scale 0): not in the map, a light of the disk's power
+    assert sunsky_envmap((0, 1, 1), sun_radius_scale=0.0, resolution=32).pixels.max() < 1.0
+    direction, irradiance = directional_sun_05((0, 1, 1), sun_scale=2.0)
+    np.testing.assert_allclose(direction, -np.array([0, 1, 1]) / np.sqrt(2), atol=1e-12)
+    disk = sunsky_envmap((0, 1, 1), sky_scale=0.0, sun_scale=2.0, resolution=256)
+    weight = row_hat_solid_angle(128)[:, None, None] * (2 * np.pi / 256)
+    np.testing.assert_allclose((disk.pixels * weight).sum((0, 1)), irradiance, rtol=1e-3)
 
 
 def test_sunsky_loader_versions(tmp_path):
@@ -739,6 +742,10 @@ def test_sunsky_loader_versions(tmp_path):
         <float name="sunRadiusScale" value="4"/><integer name="resolution" value="64"/></emitter></scene>"""
     old = load_string(xml)
     assert old.environment.pixels.shape == (32, 64, 3)
+    directional = load_string(xml.replace('name="sunRadiusScale" value="4"', 'name="sunRadiusScale" value="0"'))
+    (light,) = directional.lights
+    np.testing.assert_allclose(light.direction, -np.array([0, 1, 1]) / np.sqrt(2), atol=1e-6)
+    assert directional.environment.pixels.max() < 1.0  # the sky alone
     xml3 = """<scene version="3.0.0"><shape type="rectangle"/>
         <emitter type="sunsky"><vector name="sun_direction" x="0" y="1" z="1"/>
         <float name="sun_aperture" value="4"/></emitter></scene>"""

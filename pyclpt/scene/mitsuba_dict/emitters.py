@@ -128,9 +128,10 @@ def _file_version(d: Mapping[str, Any]) -> tuple[int, ...]:
 def load_sunsky(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environment:
     """``sunsky`` (and Mitsuba 0.5's ``sky`` and ``sun``), baked into an environment map (see
     :mod:`pyclpt.scene.sky`). A ``sunsky`` of a pre-2.0 file (``__version__``), ``sky`` and ``sun`` are
-    Mitsuba 0.5's (+y up, its sun model, ``sun_radius_scale``, ``resolution``, ``extend``, ``stretch``);
-    any other ``sunsky`` is Mitsuba 3's (+z up, its sun, ``sun_aperture``, ``complex_sun``)."""
-    from pyclpt.scene.sky import SunTime, sunsky_envmap
+    Mitsuba 0.5's (+y up, its sun model, ``sun_radius_scale`` (0: a directional light beside the map),
+    ``resolution``, ``extend``, ``stretch``); any other ``sunsky`` is Mitsuba 3's (+z up, its sun,
+    ``sun_aperture``, ``complex_sun``)."""
+    from pyclpt.scene.sky import SunTime, directional_sun_05, sunsky_envmap
 
     kind = d.get("type")
     legacy = kind != "sunsky" or _file_version(d) < (2, 0, 0)
@@ -167,13 +168,20 @@ def load_sunsky(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environme
     else:
         options = {"sun_aperture": ctx.number(d, "sun_aperture", 0.5358, where),
                    "complex_sun": ctx.flag(d, "complex_sun", False, where)}
+    sun_direction = ctx.vector(d, "sun_direction", where) if "sun_direction" in d else None
+    turbidity = ctx.number(d, "turbidity", 3.0, where)
+    to_world = ctx.transform(d, "to_world", where) if "to_world" in d else None
     try:
-        return sunsky_envmap(ctx.vector(d, "sun_direction", where) if "sun_direction" in d else None,
-                             convention="mitsuba0.5" if legacy else "mitsuba3", time=time,
-                             turbidity=ctx.number(d, "turbidity", 3.0, where), albedo=albedo,
-                             sky_scale=sky_scale, sun_scale=sun_scale,
-                             to_world=ctx.transform(d, "to_world", where) if "to_world" in d else None,
-                             name=str(kind), **options)
+        if legacy and options["sun_radius_scale"] == 0.0 and sun_scale > 0.0:  # Mitsuba 0.5's directional sun
+            direction, irradiance = directional_sun_05(sun_direction, time=time, turbidity=turbidity,
+                                                       sun_scale=sun_scale, to_world=to_world,
+                                                       stretch=options["stretch"])
+            _add_light(ctx, d, where, DirectionalLight(tuple(direction), tuple(irradiance)))
+            if sky_scale == 0.0:  # nothing left for the environment
+                return None
+        return sunsky_envmap(sun_direction, convention="mitsuba0.5" if legacy else "mitsuba3", time=time,
+                             turbidity=turbidity, albedo=albedo, sky_scale=sky_scale, sun_scale=sun_scale,
+                             to_world=to_world, name=str(kind), **options)
     except ValueError as exc:
         if isinstance(exc, SceneDictError):
             raise

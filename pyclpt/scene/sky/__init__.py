@@ -9,11 +9,11 @@ lat-long environment map that pyclpt's envmap emitter renders and importance-sam
 
 What differs from Mitsuba: the sky is point-sampled at the map's texel centres and the sun is spread
 over the texels it covers (its power exact, its shape blurred to about a texel); a sun below the horizon
-is an error (Mitsuba 0.5 errs, Mitsuba 3 warns and emits nothing); Mitsuba 0.5's directional sun
-(``sunRadiusScale = 0``) keeps the real radius, with a warning; negative RGB values of the sky fit are
-clamped to 0 (Mitsuba 3 leaves them).
+is an error (Mitsuba 0.5 errs, Mitsuba 3 warns and emits nothing); negative RGB values of the fits are
+clamped to 0 (Mitsuba 3 leaves them). Mitsuba 0.5's directional sun (``sunRadiusScale = 0``) is a
+directional light beside the map (:func:`directional_sun_05`), as in Mitsuba 0.5.
 """
-from pyclpt.scene.sky.bake import CONVENTIONS, sunsky_envmap, texel_directions
+from pyclpt.scene.sky.bake import CONVENTIONS, directional_sun_05, sunsky_envmap, texel_directions
 from pyclpt.scene.sky.sun_position import SunTime
 
-__all__ = ["CONVENTIONS", "SunTime", "sunsky_envmap", "texel_directions"]
+__all__ = ["CONVENTIONS", "SunTime", "directional_sun_05", "sunsky_envmap", "texel_directions"]

@@ -9,8 +9,6 @@ reconstructed map holds the sun's power exactly.
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
 from pyclpt.scene.model import Envmap
@@ -23,8 +21,6 @@ from pyclpt.scene.sky.sun import (
     sun_radiance_rgb_3,
 )
 from pyclpt.scene.sky.sun_position import SunTime, local_sun_direction
-
-log = logging.getLogger(__name__)
 
 CONVENTIONS = ("mitsuba0.5", "mitsuba3")
 #: Mitsuba 3's sky frame (+z up) from the map's (+y up): local = _M3_FROM_MAP @ map.
@@ -95,6 +91,59 @@ def _check(value, name: str, lo: float | None = None, hi: float | None = None) -
     return v
 
 
+def _sun_in_map(sun_direction, time: SunTime | None, to_world, convention: str) -> tuple[np.ndarray, np.ndarray]:
+    """The sun's unit direction in the map's frame (+y up) and the map's to_world, from ``sun_direction``
+    (world space) or ``time`` (in the sky's frame); ValueError for bad input or a sun below the horizon."""
+    m = np.eye(4) if to_world is None else np.asarray(to_world, np.float64).reshape(4, 4)
+    if not np.all(np.isfinite(m)) or abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        raise ValueError("sunsky: to_world must be a finite, invertible transform")
+    if sun_direction is not None:
+        if time is not None:
+            raise ValueError("sunsky: give sun_direction or a time and place (latitude, longitude, ...), not both")
+        d = np.asarray(sun_direction, np.float64).reshape(-1)
+        if d.size != 3 or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+            raise ValueError(f"sunsky: sun_direction must be 3 finite numbers, not all zero, got {sun_direction!r}")
+        local = np.linalg.solve(m[:3, :3], d)
+    else:
+        local = local_sun_direction(time or SunTime(), convention)
+    local = local / np.linalg.norm(local)
+    if convention == "mitsuba0.5":
+        sun, env_to_world = local, m
+    else:
+        sun = _M3_FROM_MAP.T @ local
+        env_to_world = m.copy()
+        env_to_world[:3, :3] = m[:3, :3] @ _M3_FROM_MAP
+    if sun[1] < 0.0:
+        where = f"sun_direction {list(sun_direction)}" if sun_direction is not None else f"{time or SunTime()}"
+        raise ValueError(f"sunsky: the sun is below the horizon ({where} gives an elevation of "
+                         f"{np.degrees(np.arcsin(np.clip(sun[1], -1.0, 1.0))):.2f} degrees); the sky model "
+                         "does not support it")
+    return sun, env_to_world
+
+
+def directional_sun_05(sun_direction=None, *, time: SunTime | None = None, turbidity: float = 3.0,
+                       sun_scale: float = 1.0, to_world=None, stretch: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Mitsuba 0.5's sun as a directional light (its ``sunRadiusScale = 0``): the direction the light
+    travels in (world space) and its irradiance (linear sRGB): the real disk's radiance x solid angle
+    x ``sun_scale``. Parameters as :func:`sunsky_envmap`'s."""
+    turbidity = _check(turbidity, "turbidity", 1.0, 10.0)
+    sun_scale = _check(sun_scale, "sun_scale", 0.0)
+    stretch = _check(stretch, "stretch", 1.0, 2.0)
+    sun, env_to_world = _sun_in_map(sun_direction, time, to_world, "mitsuba0.5")
+    zenith = float(np.arccos(np.clip(sun[1], -1.0, 1.0)))
+    azimuth = float(np.arctan2(sun[0], -sun[2]))
+    centre = _direction(zenith * stretch, azimuth)
+    world = env_to_world[:3, :3] @ centre
+    solid_angle = 2.0 * np.pi * (1.0 - np.cos(np.radians(SUN_RADIUS_DEG)))
+    return -world / np.linalg.norm(world), sun_radiance_rgb_05(zenith, turbidity) * sun_scale * solid_angle
+
+
+def _direction(zenith: float, azimuth: float) -> np.ndarray:
+    """The map-frame direction of a zenith angle and an azimuth (Mitsuba 0.5's toSphere)."""
+    st = np.sin(zenith)
+    return np.array([np.sin(azimuth) * st, np.cos(zenith), -np.cos(azimuth) * st])
+
+
 def sunsky_envmap(sun_direction=None, *, convention: str = "mitsuba0.5", time: SunTime | None = None,
                   turbidity: float = 3.0, albedo=None, sky_scale: float = 1.0, sun_scale: float = 1.0,
                   sun_radius_scale: float = 1.0, sun_aperture: float = 0.5358, complex_sun: bool = False,
@@ -106,7 +155,8 @@ def sunsky_envmap(sun_direction=None, *, convention: str = "mitsuba0.5", time: S
 
     * ``"mitsuba0.5"`` (0.5/0.6 files, and the ``sky``/``sun`` plug-ins): the sky's frame is +y up; the
       sun is Mitsuba 0.5's (Preetham/Iqbal) with radius 0.2679 deg x ``sun_radius_scale`` at constant
-      power; ``extend``, ``stretch`` and ``resolution`` (default 512) as Mitsuba 0.5; albedo default 0.2.
+      power (0: a directional sun, left out of the map: see :func:`directional_sun_05`); ``extend``,
+      ``stretch`` and ``resolution`` (default 512) as Mitsuba 0.5; albedo default 0.2.
     * ``"mitsuba3"``: the frame is +z up; the sun is Mitsuba 3's (Hosek-Wilkie 2013) with aperture
       ``sun_aperture`` degrees (constant power), limb-darkened with ``complex_sun``, clipped at the
       horizon; albedo default 0.3; ``resolution`` default 1024.
@@ -132,11 +182,9 @@ def sunsky_envmap(sun_direction=None, *, convention: str = "mitsuba0.5", time: S
     width, height = int(res), int(res) // 2
     if legacy:
         sun_radius_scale = _check(sun_radius_scale, "sun_radius_scale", 0.0)
-        if sun_radius_scale == 0.0:
-            log.warning("sunsky: sun_radius_scale = 0 (a directional sun) is not supported; "
-                        "the sun keeps its real angular radius")
-            sun_radius_scale = 1.0
-        radius = np.radians(SUN_RADIUS_DEG) * sun_radius_scale
+        if sun_radius_scale == 0.0:  # a directional sun (directional_sun_05), not in the map
+            sun_scale = 0.0
+        radius = np.radians(SUN_RADIUS_DEG) * (sun_radius_scale or 1.0)
         if radius >= 0.5 * np.pi:
             raise ValueError(f"sunsky: sun_radius_scale {sun_radius_scale} makes the sun wider than a hemisphere")
     else:
@@ -144,31 +192,8 @@ def sunsky_envmap(sun_direction=None, *, convention: str = "mitsuba0.5", time: S
         if not 0.0 < aperture < 180.0:
             raise ValueError(f"sunsky: sun_aperture must be in ]0, 180[ degrees, got {sun_aperture!r}")
         radius = np.radians(0.5 * aperture)
-    m = np.eye(4) if to_world is None else np.asarray(to_world, np.float64).reshape(4, 4)
-    if not np.all(np.isfinite(m)) or abs(np.linalg.det(m[:3, :3])) < 1e-12:
-        raise ValueError("sunsky: to_world must be a finite, invertible transform")
-
-    if sun_direction is not None:
-        if time is not None:
-            raise ValueError("sunsky: give sun_direction or a time and place (latitude, longitude, ...), not both")
-        d = np.asarray(sun_direction, np.float64).reshape(-1)
-        if d.size != 3 or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
-            raise ValueError(f"sunsky: sun_direction must be 3 finite numbers, not all zero, got {sun_direction!r}")
-        local = np.linalg.solve(m[:3, :3], d)
-    else:
-        local = local_sun_direction(time or SunTime(), convention)
-    local = local / np.linalg.norm(local)
-    if legacy:
-        sun, env_to_world = local, m
-    else:
-        sun = _M3_FROM_MAP.T @ local
-        env_to_world = m.copy()
-        env_to_world[:3, :3] = m[:3, :3] @ _M3_FROM_MAP
+    sun, env_to_world = _sun_in_map(sun_direction, time, to_world, convention)
     sun_zenith = float(np.arccos(np.clip(sun[1], -1.0, 1.0)))
-    if sun[1] < 0.0:
-        where = f"sun_direction {list(sun_direction)}" if sun_direction is not None else f"{time or SunTime()}"
-        raise ValueError(f"sunsky: the sun is below the horizon ({where} gives an elevation of "
-                         f"{90.0 - np.degrees(sun_zenith):.2f} degrees); the sky model does not support it")
     sun_azimuth = float(np.arctan2(sun[0], -sun[2]))
 
     dirs = texel_directions(width, height)
@@ -195,9 +220,7 @@ def sunsky_envmap(sun_direction=None, *, convention: str = "mitsuba0.5", time: S
     if sun_scale > 0:
         real_solid_angle = 2.0 * np.pi * (1.0 - np.cos(np.radians(SUN_RADIUS_DEG) if legacy else SUN_HALF_APERTURE))
         if legacy:
-            centre_zenith = sun_zenith * stretch
-            st = np.sin(centre_zenith)
-            centre = np.array([np.sin(sun_azimuth) * st, np.cos(centre_zenith), -np.cos(sun_azimuth) * st])
+            centre = _direction(sun_zenith * stretch, sun_azimuth)
             level_rgb = sun_radiance_rgb_05(sun_zenith, turbidity) * sun_scale
         else:
             centre = sun
