@@ -1,4 +1,4 @@
-"""Emitters (cl/scene/lights.h, pyclpt/light_buffers.py, pyclpt/sunsky.py): environment maps with
+"""Emitters (cl/scene/lights.h, pyclpt/light_buffers.py, pyclpt/scene/sky/): environment maps with
 importance sampling, point lights, the baked sun and sky.
 
 Device-level checks call lights.h through a small test kernel on a real packed scene: the

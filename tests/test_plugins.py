@@ -89,12 +89,13 @@ def test_unsupported_plugins_share_one_warning_line(caplog):
                                    "skipped; s: emitter type 'projector' not supported, ignored")
 
 
-@pytest.mark.parametrize("name", ["cylinder", "thinlens", "orthographic", "uv-shapes"])
+@pytest.mark.parametrize("name", ["cylinder", "thinlens", "orthographic", "uv-shapes", "sunsky"])
 def test_plugin_matches_mitsuba(name):
     """Mitsuba 3 rendering the same XML file (tests/data/make_plugin_reference.py, 16384 spp): a cylinder
     given by p0, p1 and radius with a bitmap whose glyph shows where u starts and which way v runs; a thin
     lens focused at a distance over boxes at several depths; an orthographic camera scaled by to_world;
-    the glyph on a rectangle, a disk, a sphere and a cube (Mitsuba's cube mesh, its uvs included).
+    the glyph on a rectangle, a disk, a sphere and a cube (Mitsuba's cube mesh, its uvs included); Mitsuba
+    3's sunsky (its frame, its sun from a place and time, an RGB albedo) over a floor and a box.
     Pixel relative MSE (the glyph's edges, the blur of the lens in place), the mean within 1 %, and the
     megakernel equal to the wavefront."""
     import numpy as np

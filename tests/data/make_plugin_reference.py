@@ -7,6 +7,8 @@
 - ``cylinder.xml``: a textured cylinder given by p0, p1 and radius (tests/test_plugins.py);
 - ``thinlens.xml``, ``orthographic.xml``: the two other cameras, over boxes at several depths;
 - ``uv-shapes.xml``: the texture coordinates of the rectangle, disk, sphere and cube
+  (tests/test_plugins.py);
+- ``sunsky.xml``: Mitsuba 3's ``sunsky`` (sun from a place and time) over a floor and a box
   (tests/test_plugins.py).
 
 Mitsuba's path tracer as each file says (box filter), 16384 spp.
@@ -19,7 +21,7 @@ import numpy as np
 
 mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
 HERE = Path(__file__).parent
-NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes")
+NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "sunsky")
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or NAMES:
