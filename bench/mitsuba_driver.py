@@ -85,14 +85,18 @@ def load_json(mi, path: Path, a: argparse.Namespace):
 
 
 # Parameters of Mitsuba 0.5/0.6 plug-ins that Mitsuba 3 no longer has (it refuses unused ones): dropped.
-SUN_APERTURE = 0.5338  # Mitsuba 3's default sun_aperture, degrees
+SUN_APERTURE = 0.5358  # Mitsuba 3's default sun_aperture (sunsky.h; its documentation says 0.5338), degrees
 OBSOLETE = {"conductor": {"extEta", "ext_eta"}, "roughconductor": {"extEta", "ext_eta"}}
 
 
 def edit_xml(text: str, a: argparse.Namespace) -> str:
     """The scene XML with the integrator, film and sampler replaced (see the module docstring), the
     parameters of :data:`OBSOLETE` dropped and texture filters Mitsuba 3 lacks made bilinear; a
-    ``sunsky``'s ``sunRadiusScale`` becomes ``sun_aperture``."""
+    ``sunsky``'s ``sunRadiusScale`` becomes ``sun_aperture``, and in a pre-2.0 file its frame turns
+    from +y up (Mitsuba 0.5) to Mitsuba 3's +z up by a rotation prepended to its ``toWorld`` (a
+    ``sunDirection`` is a world direction and stays; a sun from a place and time keeps its elevation,
+    not its azimuth: the two versions' azimuths differ by a mirror) and its albedo defaults to 0.5's 0.2
+    (Mitsuba 3's is 0.3). The sun model stays Mitsuba 3's."""
     root = ET.fromstring(text)
     for bsdf in root.iter("bsdf"):
         for child in list(bsdf):
@@ -102,11 +106,22 @@ def edit_xml(text: str, a: argparse.Namespace) -> str:
         for child in texture.findall("string"):
             if child.get("name") in ("filterType", "filter_type") and child.get("value") not in ("nearest", "bilinear"):
                 child.set("value", "bilinear")
+    old_file = tuple(int(v) for v in root.get("version", "3.0.0").split(".")) < (2, 0, 0)
     for emitter in root.iter("emitter"):  # 0.5's sun radius scale -> Mitsuba 3's sun aperture (degrees)
+        if emitter.get("type") != "sunsky":
+            continue
         for child in emitter.findall("float"):
-            if emitter.get("type") == "sunsky" and child.get("name") in ("sunRadiusScale", "sun_radius_scale"):
+            if child.get("name") in ("sunRadiusScale", "sun_radius_scale"):
                 child.set("name", "sun_aperture")
                 child.set("value", str(SUN_APERTURE * float(child.get("value", "1"))))
+        if old_file:  # 0.5's sky is +y up, Mitsuba 3's +z up: its to_world gets a rotation first
+            to_world = next((t for t in emitter.findall("transform") if t.get("name") in ("toWorld", "to_world")),
+                            None)
+            if to_world is None:
+                to_world = ET.SubElement(emitter, "transform", name="toWorld")
+            to_world.insert(0, ET.Element("rotate", x="1", angle="-90"))
+            if not any(c.get("name") == "albedo" for c in emitter):  # 0.5's default ground albedo (sky.cpp)
+                ET.SubElement(emitter, "float", name="albedo", value="0.2")
     for old in root.findall("integrator"):
         root.remove(old)
     integ = ET.Element("integrator", type="path")

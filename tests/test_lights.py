@@ -1,4 +1,4 @@
-"""Emitters (cl/scene/lights.h, pyclpt/light_buffers.py, pyclpt/sunsky.py): environment maps with
+"""Emitters (cl/scene/lights.h, pyclpt/light_buffers.py, pyclpt/scene/sky/): environment maps with
 importance sampling, point lights, the baked sun and sky.
 
 Device-level checks call lights.h through a small test kernel on a real packed scene: the
@@ -8,7 +8,6 @@ normalisation. Render-level checks compare with analytic or quadrature values.
 """
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +27,9 @@ from pyclpt.buffers.lights import (
 from pyclpt.buffers.materials import TextureTable
 from pyclpt.buffers.scene import SceneBuffers, pack_scene
 from pyclpt.scene.model import Envmap, PointLight
-from pyclpt.scene.sunsky import SUN_RADIUS_DEG, _row_hat_solid_angle, sun_radiance_rgb, sunsky_envmap, texel_directions
+from pyclpt.scene.sky import SunTime, directional_sun_05, sunsky_envmap, texel_directions
+from pyclpt.scene.sky.bake import row_hat_solid_angle
+from pyclpt.scene.sky.sun import SUN_RADIUS_DEG, sun_radiance_rgb_05
 from pyclpt.scene.transform import rotate
 from scenes import FRONT_CAMERA, object_under_sky, sensor
 
@@ -535,8 +536,9 @@ def classroom_sky() -> Envmap:
 
 
 def test_sunsky_classroom_config(classroom_sky):
-    """The classroom scene's sunsky: finite, non-negative, the sun where sun_direction points, a blue
-    zenith, black below the horizon, and the sun's power that of the real sun x sun_scale."""
+    """The classroom scene's sunsky (a Mitsuba 0.6 file): finite, non-negative, the sun where
+    sun_direction points, a blue zenith, black below the horizon, and the sun's power that of Mitsuba
+    0.5's sun x sun_scale."""
     env = classroom_sky
     px = env.pixels
     h, w = px.shape[:2]
@@ -555,10 +557,10 @@ def test_sunsky_classroom_config(classroom_sky):
     assert np.all(lum[(dirs[..., 1] > 0.05) & (angle > 2 * radius)] > 0)
     # power of the sun on the (bilinearly reconstructed) map
     sky_only = sunsky_envmap(CLASSROOM_SUN, turbidity=3, sky_scale=6, sun_scale=0, sun_radius_scale=18.8131)
-    weight = _row_hat_solid_angle(h)[:, None, None] * (2 * np.pi / w)
+    weight = row_hat_solid_angle(h)[:, None, None] * (2 * np.pi / w)
     sun_power = ((px.astype(np.float64) - sky_only.pixels) * weight).sum((0, 1))
     real = 2 * np.pi * (1 - np.cos(np.radians(SUN_RADIUS_DEG)))
-    expected = 10 * sun_radiance_rgb(np.arccos(sun[1]), 3.0) * real
+    expected = 10 * sun_radiance_rgb_05(np.arccos(sun[1]), 3.0) * real
     np.testing.assert_allclose(sun_power, expected, rtol=1e-3)
     assert expected[0] > expected[1] > expected[2] > 0  # a low sun is yellowish
 
@@ -568,11 +570,11 @@ def test_sunsky_lights_a_ground_plane(classroom_sky):
     quadrature (dominated by the sun: tests importance sampling of a very peaked map)."""
     scene = small_scene(classroom_sky, to_world=[{"rotate": {"axis": [1, 0, 0], "angle": -90}}])
     scene.camera = pyclpt.Camera.look_at((0, 3, 1.5), (0, 0, 0), fov=30.0)
-    img = render(scene, spp=64, max_depth=2, seed=7, width=16, height=16)
+    img = render(scene, spp=256, max_depth=2, seed=7, width=16, height=16)
     px = classroom_sky.pixels.astype(np.float64)
     h, w = px.shape[:2]
     cos = np.maximum(texel_directions(w, h)[..., 1], 0.0)
-    weight = _row_hat_solid_angle(h)[:, None] * (2 * np.pi / w)
+    weight = row_hat_solid_angle(h)[:, None] * (2 * np.pi / w)
     E = (px * (cos * weight)[..., None]).sum((0, 1))
     expected = 0.5 / np.pi * E
     centre = img[6:10, 6:10].reshape(-1, 3).mean(0)
@@ -580,28 +582,171 @@ def test_sunsky_lights_a_ground_plane(classroom_sky):
     np.testing.assert_allclose(centre, expected, rtol=0.03)
 
 
-def test_sunsky_options_and_errors(caplog):
+@pytest.fixture(scope="module")
+def sunsky_reference() -> dict[str, np.ndarray]:
+    with np.load(DATA / "sunsky-mitsuba3-eval.npz") as f:
+        return dict(f)
+
+
+SUNSKY_CONFIGS = range(6)  # tests/data/make_sunsky_reference.py: CONFIGS
+
+
+@pytest.mark.parametrize("k", SUNSKY_CONFIGS)
+def test_sky_matches_mitsuba3(sunsky_reference, k):
+    """The baked Hosek-Wilkie sky (Mitsuba 3's frame, to_world) against Mitsuba 3's ``sunsky`` along 400
+    directions, for sun elevations 5-80 degrees, turbidities 1-9 and albedos 0-1: within 0.5 % (the
+    map's bilinear reconstruction) away from the sun and the horizon."""
+    ref = sunsky_reference
+    elev, azim, turb, alb = ref[f"c{k}_params"]
+    m = ref[f"c{k}_to_world"]
+    env = sunsky_envmap(ref[f"c{k}_sun"], convention="mitsuba3", turbidity=turb, albedo=alb, sun_scale=0,
+                        to_world=m)
+    dirs = ref[f"c{k}_dirs"]
+    got = envmap_reference(env.pixels, env.to_world[:3, :3], 1.0, dirs)
+    keep = (dirs @ ref[f"c{k}_sun"] < np.cos(np.radians(10))) & (dirs @ m[:3, 2] > 0.03)
+    assert keep.sum() > 300
+    np.testing.assert_allclose(got[keep], ref[f"c{k}_sky"][keep], rtol=5e-3)
+    # near the sun: the map's texels blur a steep peak, still close (above 1 degree of elevation)
+    above = dirs @ m[:3, 2] > np.sin(np.radians(1.0))
+    np.testing.assert_allclose(got[above], ref[f"c{k}_sky"][above], rtol=0.05, atol=1e-3 * ref[f"c{k}_sky"].max())
+
+
+@pytest.mark.parametrize("k", SUNSKY_CONFIGS)
+def test_sun_matches_mitsuba3(sunsky_reference, k):
+    """Mitsuba 3's sun: its radiance at the real aperture and at 5 degrees (constant power), the
+    limb-darkened disk (``complex_sun``), and the baked power. Mitsuba 3 is 0.22 % brighter: it computes
+    the sun's solid angle 2 pi (1 - cos 0.2679 deg) in float32."""
+    from pyclpt.scene.sky.sun import SUN_HALF_APERTURE, complex_sun_radiance_rgb_3, sun_radiance_rgb_3
+
+    ref = sunsky_reference
+    elev, azim, turb, alb = ref[f"c{k}_params"]
+    m, sun = ref[f"c{k}_to_world"], ref[f"c{k}_sun"]
+    real = sun_radiance_rgb_3(np.radians(elev), turb)
+    wide = np.radians(2.5)
+    ratio = (1 - np.cos(SUN_HALF_APERTURE)) / (1 - np.cos(wide))
+    np.testing.assert_allclose(ref[f"c{k}_sun_rgb"], [real, real * ratio], rtol=3e-3)
+    local = ref[f"c{k}_limb_dirs"] @ m[:3, :3]
+    gamma = np.arccos(np.clip(local @ (m[:3, :3].T @ sun), -1, 1))
+    limb = complex_sun_radiance_rgb_3(local[:, 2], gamma, turb, wide) * ratio
+    np.testing.assert_allclose(limb, ref[f"c{k}_limb"], rtol=3e-3)
+    assert np.all(limb[-1] < 0.8 * limb[0])  # darker towards the limb
+    # the baked disks hold the sun's power (uniform: exactly; limb-darkened: as its quadrature)
+    for complex_sun in (False, True):
+        env = sunsky_envmap(sun, convention="mitsuba3", turbidity=turb, sky_scale=0, sun_aperture=5.0,
+                            complex_sun=complex_sun, resolution=256, to_world=m)
+        h, w = env.pixels.shape[:2]
+        weight = row_hat_solid_angle(h)[:, None, None] * (2 * np.pi / w)
+        power = (env.pixels.astype(np.float64) * weight).sum((0, 1))
+        expected = real * 2 * np.pi * (1 - np.cos(SUN_HALF_APERTURE))
+        if not complex_sun:
+            np.testing.assert_allclose(power, expected, rtol=1e-3)
+        elif elev > 10:  # Mitsuba 3's two suns differ by a few % in power (and more for low suns)
+            np.testing.assert_allclose(power, expected, rtol=0.03)
+
+
+def test_sun_position_matches_mitsuba3(sunsky_reference):
+    """The sun's direction from a place and time (PSA) in Mitsuba 3's frame, as Mitsuba 3 computes it
+    (in float32: within 0.05 degrees)."""
+    from pyclpt.scene.sky.sun_position import local_sun_direction
+
+    names = ("latitude", "longitude", "timezone", "year", "month", "day", "hour", "minute", "second")
+    for k in range(2):
+        t = sunsky_reference[f"t{k}_time"]
+        kw = {n: (int(v) if n in ("year", "month", "day") else float(v)) for n, v in zip(names, t) if np.isfinite(v)}
+        got = local_sun_direction(SunTime(**kw), "mitsuba3")
+        assert np.degrees(np.arccos(np.clip(got @ sunsky_reference[f"t{k}_sun"], -1, 1))) < 0.05
+    # Mitsuba 0.5's frame: the same sun, +y up, east +x, north +z
+    d05 = local_sun_direction(SunTime(), "mitsuba0.5")
+    d3 = local_sun_direction(SunTime(), "mitsuba3")
+    np.testing.assert_allclose([d05[1], np.hypot(d05[0], d05[2])], [d3[2], np.hypot(d3[0], d3[1])], atol=1e-12)
+
+
+def test_sunsky_options_and_errors():
     sky = sunsky_envmap((0, 1, 1), sun_scale=0.0, resolution=64)
     assert sky.pixels.shape == (32, 64, 3) and sky.name == "sunsky"
     assert sky.pixels.max() < 1.0  # no sun
     ext = sunsky_envmap((0, 1, 1), sun_scale=0.0, resolution=64, extend=True)
     assert ext.pixels[20].min() > 0 and np.all(ext.pixels[-1] == 0)  # extended, faded out at the nadir
-    # to_world: the sun stays where sun_direction points in the world
-    rot = rotate([1, 0, 0], 90.0)  # the sky's +y is the world's +z
-    env = sunsky_envmap((0.2, 0.1, 0.9), resolution=128, to_world=rot)
-    np.testing.assert_array_equal(env.to_world, rot)
-    h, w = env.pixels.shape[:2]
-    j, i = np.unravel_index(np.argmax(env.pixels.sum(-1)), (h, w))
-    world = rot[:3, :3] @ texel_directions(w, h)[j, i]
-    assert np.degrees(np.arccos(world @ np.array([0.2, 0.1, 0.9]) / np.linalg.norm([0.2, 0.1, 0.9]))) < 3.0
+    stretched = sunsky_envmap((0, 1, 1), sun_scale=0.0, resolution=64, stretch=1.5)
+    assert stretched.pixels[20].min() > 0 and np.all(stretched.pixels[-1] == 0)  # down to 135 degrees
+    # to_world: the sun stays where sun_direction points in the world, in either frame
+    for convention, rot in (("mitsuba0.5", rotate([1, 0, 0], 90.0)), ("mitsuba3", rotate([0, 1, 1], 30.0))):
+        env = sunsky_envmap((0.2, 0.1, 0.9), resolution=128, to_world=rot, convention=convention)
+        h, w = env.pixels.shape[:2]
+        j, i = np.unravel_index(np.argmax(env.pixels.sum(-1)), (h, w))
+        world = env.to_world[:3, :3] @ texel_directions(w, h)[j, i]
+        assert np.degrees(np.arccos(world @ np.array([0.2, 0.1, 0.9]) / np.linalg.norm([0.2, 0.1, 0.9]))) < 3.0
+    # the default place and time: 15:00 in Tokyo in July, a high sun
+    from pyclpt.scene.sky.sun_position import local_sun_direction
+
+    timed = sunsky_envmap(time=SunTime(), convention="mitsuba3", resolution=64)
+    j, i = np.unravel_index(np.argmax(timed.pixels.sum(-1)), timed.pixels.shape[:2])
+    brightest = timed.to_world[:3, :3] @ texel_directions(64, 32)[j, i]
+    assert brightest @ local_sun_direction(SunTime(), "mitsuba3") > np.cos(np.radians(6.0))
     for kwargs, match in [(dict(sun_direction=(0, -1, 0.2)), "below the horizon"),
+                          (dict(sun_direction=(0, 0, 1), convention="mitsuba3", to_world=rotate([1, 0, 0], 100)),
+                           "below the horizon"),
                           (dict(sun_direction=(0, 0, 0)), "sun_direction"),
+                          (dict(sun_direction=(0, 1, 0), time=SunTime()), "sun_direction or a time"),
                           (dict(sun_direction=(0, 1, 0), turbidity=12), "turbidity"),
+                          (dict(sun_direction=(0, 1, 0), turbidity="x"), "turbidity"),
                           (dict(sun_direction=(0, 1, 0), sky_scale=-1), "sky_scale"),
                           (dict(sun_direction=(0, 1, 0), resolution=3), "resolution"),
-                          (dict(sun_direction=(0, 1, 0), albedo=float("nan")), "albedo")]:
+                          (dict(sun_direction=(0, 1, 0), stretch=3), "stretch"),
+                          (dict(sun_direction=(0, 1, 0), convention="mitsuba3", sun_aperture=0), "sun_aperture"),
+                          (dict(sun_direction=(0, 1, 0), convention="mitsuba2"), "convention"),
+                          (dict(sun_direction=(0, 1, 0), albedo=float("nan")), "albedo"),
+                          (dict(sun_direction=(0, 1, 0), albedo=(0.1, 0.2)), "albedo")]:
         with pytest.raises(ValueError, match=f"sunsky.*{match}"):
             sunsky_envmap(**kwargs)
-    with caplog.at_level(logging.WARNING, logger="pyclpt.scene.sunsky"):
-        sunsky_envmap((0, 1, 1), sun_radius_scale=0.0, resolution=32)
-    assert "directional" in caplog.text
+    # Mitsuba 0.5's directional sun (sun_radius_scale 0): not in the map, a light of the disk's power
+    assert sunsky_envmap((0, 1, 1), sun_radius_scale=0.0, resolution=32).pixels.max() < 1.0
+    direction, irradiance = directional_sun_05((0, 1, 1), sun_scale=2.0)
+    np.testing.assert_allclose(direction, -np.array([0, 1, 1]) / np.sqrt(2), atol=1e-12)
+    disk = sunsky_envmap((0, 1, 1), sky_scale=0.0, sun_scale=2.0, resolution=256)
+    weight = row_hat_solid_angle(128)[:, None, None] * (2 * np.pi / 256)
+    np.testing.assert_allclose((disk.pixels * weight).sum((0, 1)), irradiance, rtol=1e-3)
+
+
+def test_sunsky_loader_versions(tmp_path):
+    """The dict loader: a ``sunsky`` is Mitsuba 3's (+z up) unless its file was older than 2.0
+    (``__version__``, set by the XML importer); time and place parameters; errors name the element."""
+    from pyclpt.scene.mitsuba_dict import VERSION, SceneDictError
+    from pyclpt.scene.mitsuba_xml import load_xml
+
+    def load_string(text: str) -> pyclpt.Scene:
+        (tmp_path / "sky.xml").write_text(text)
+        return load_xml(tmp_path / "sky.xml")
+
+    def env_of(emitter: dict) -> Envmap:
+        scene = pyclpt.load_dict({"type": "scene", "sensor": sensor(FRONT_CAMERA, fov=30.0, size=8),
+                                  "quad": {"type": "rectangle"}, "sky": emitter})
+        return scene.environment
+
+    up_y = env_of({"type": "sunsky", "sun_direction": [0, 1, 0], "sun_scale": 0, "albedo": 0.3, VERSION: "0.6.0"})
+    up_z = env_of({"type": "sunsky", "sun_direction": [0, 0, 1], "sun_scale": 0, "albedo": 0.3})
+    assert up_y.pixels.shape == (256, 512, 3) and up_z.pixels.shape == (512, 1024, 3)
+    # both a sun at the zenith of their frame: the same sky, seen through each map's to_world
+    zen_y = envmap_reference(up_y.pixels, up_y.to_world[:3, :3], 1.0, np.array([[0, 1.0, 0]]))
+    zen_z = envmap_reference(up_z.pixels, up_z.to_world[:3, :3], 1.0, np.array([[0, 0, 1.0]]))
+    np.testing.assert_allclose(zen_y, zen_z * 106.7502594 / 106.85698, rtol=1e-5)  # Mitsuba 0.5's / 3's y-bar
+    with pytest.raises(SceneDictError, match="below the horizon"):
+        env_of({"type": "sunsky", "sun_direction": [0, 1, 0.2], VERSION: "0.5.0", "to_world": rotate([1, 0, 0], 150)})
+    with pytest.raises(SceneDictError, match="sky.*not both"):
+        env_of({"type": "sunsky", "sun_direction": [0, 0, 1], "hour": 12})
+    timed = env_of({"type": "sunsky", "hour": 11.5, "month": 3, "sun_aperture": 3.0, "complex_sun": True})
+    assert timed.pixels.max() > 100  # a 3 degree sun: 1/125 of the real sun's radiance, still far above the sky
+    # a 0.6 file: camelCase names, the old plug-in
+    xml = """<scene version="0.6.0"><shape type="rectangle"/>
+        <emitter type="sunsky"><vector name="sunDirection" x="0" y="1" z="1"/>
+        <float name="sunRadiusScale" value="4"/><integer name="resolution" value="64"/></emitter></scene>"""
+    old = load_string(xml)
+    assert old.environment.pixels.shape == (32, 64, 3)
+    directional = load_string(xml.replace('name="sunRadiusScale" value="4"', 'name="sunRadiusScale" value="0"'))
+    (light,) = directional.lights
+    np.testing.assert_allclose(light.direction, -np.array([0, 1, 1]) / np.sqrt(2), atol=1e-6)
+    assert directional.environment.pixels.max() < 1.0  # the sky alone
+    xml3 = """<scene version="3.0.0"><shape type="rectangle"/>
+        <emitter type="sunsky"><vector name="sun_direction" x="0" y="1" z="1"/>
+        <float name="sun_aperture" value="4"/></emitter></scene>"""
+    assert load_string(xml3).environment.pixels.shape == (512, 1024, 3)

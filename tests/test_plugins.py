@@ -90,14 +90,15 @@ def test_unsupported_plugins_share_one_warning_line(caplog):
 
 
 @pytest.mark.parametrize("name", ["cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms",
-                                  "emitter-textures"])
+                                  "emitter-textures", "sunsky"])
 def test_plugin_matches_mitsuba(name):
     """Mitsuba 3 rendering the same XML file (tests/data/make_plugin_reference.py, 16384 spp): a cylinder
     given by p0, p1 and radius with a bitmap whose glyph shows where u starts and which way v runs; a thin
     lens focused at a distance over boxes at several depths; an orthographic camera scaled by to_world;
     the glyph on a rectangle, a disk, a sphere and a cube (Mitsuba's cube mesh, its uvs included); a
     checkerboard as a colour and as a mask's opacity, a bitmap under to_uv scale + translate + rotate; an
-    area light with a bitmap radiance and a spot light projecting a bitmap.
+    area light with a bitmap radiance and a spot light projecting a bitmap; Mitsuba
+    3's sunsky (its frame, its sun from a place and time, an RGB albedo) over a floor and a box.
     Pixel relative MSE (the glyph's edges, the blur of the lens in place), the mean within 1 %, and the
     megakernel equal to the wavefront."""
     import numpy as np

@@ -114,4 +114,7 @@ def test_driver_compiles_and_edits_the_scene(tmp_path):
     assert [e.get("name") for e in root.find("bsdf")] == ["material"]  # Mitsuba 3 refuses extEta
     assert root.find("texture/string").get("value") == "bilinear"
     aperture = root.find("emitter/float")
-    assert aperture.get("name") == "sun_aperture" and float(aperture.get("value")) == pytest.approx(2 * 0.5338)
+    assert aperture.get("name") == "sun_aperture" and float(aperture.get("value")) == pytest.approx(2 * 0.5358)
+    rotation = root.find("emitter/transform")  # 0.5's +y-up sky frame into Mitsuba 3's +z-up one
+    assert rotation.get("name") == "toWorld" and rotation.find("rotate").attrib == {"x": "1", "angle": "-90"}
+    assert root.find("emitter/float[@name='albedo']").get("value") == "0.2"  # Mitsuba 0.5's default

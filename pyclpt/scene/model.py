@@ -541,7 +541,7 @@ LIGHTS = (PointLight, DirectionalLight, SpotLight)
 class Envmap(Checked):
     """A lat-long environment map (Mitsuba ``envmap``): ``pixels`` (H, W, 3) linear radiance,
     row 0 at the top (+y in the map's frame), ``to_world`` rotating the map into the scene.
-    ``sunsky`` emitters are baked into one of these (pyclpt.scene.sunsky)."""
+    ``sunsky`` emitters are baked into one of these (pyclpt.scene.sky)."""
 
     pixels: np.ndarray
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))

@@ -13,7 +13,9 @@
 - ``emitter-textures.xml``: an area light with a bitmap radiance and a spot light projecting a bitmap
   (tests/test_plugins.py);
 - ``rfilter.xml`` with ``filter=tent`` and ``filter=gaussian``: ``rfilter-tent-mitsuba.npy``,
-  ``rfilter-gaussian-mitsuba.npy``, the reconstruction filters (tests/test_rfilter.py).
+  ``rfilter-gaussian-mitsuba.npy``, the reconstruction filters (tests/test_rfilter.py);
+- ``sunsky.xml``: Mitsuba 3's ``sunsky`` (sun from a place and time) over a floor and a box
+  (tests/test_plugins.py).
 
 Mitsuba's path tracer as each file says (box filter unless the name says otherwise), 16384 spp.
 """
@@ -26,7 +28,7 @@ import numpy as np
 mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
 HERE = Path(__file__).parent
 NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms",
-         "emitter-textures", "rfilter-tent", "rfilter-gaussian")
+         "emitter-textures", "sunsky", "rfilter-tent", "rfilter-gaussian")
 #: references of one file with parameters: name -> (file, parameters)
 VARIANTS = {"rfilter-tent": ("rfilter", {"filter": "tent"}), "rfilter-gaussian": ("rfilter", {"filter": "gaussian"})}
 

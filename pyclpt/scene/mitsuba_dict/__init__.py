@@ -7,7 +7,8 @@ transforms given as 4x4 matrices, Mitsuba ``ScalarTransform4f`` objects, or
 lists of operations (see :func:`pyclpt.scene.transform.from_spec`). Built-in scenes
 in ``scenes/*.json`` use it, and :mod:`pyclpt.scene.mitsuba_xml` translates Mitsuba
 XML files (0.5 to 3.x) into it, adding ``"__where__": "file:line"`` to every
-object so that messages name the line.
+object so that messages name the line, and ``"__version__"`` to the few plug-ins of
+pre-2.0 files that mean something else in Mitsuba 3 (``sunsky``).
 
 The plug-ins are organised by kind, as in Mitsuba, each module with a registry
 mapping a plug-in name to its small loader function:
@@ -35,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from pyclpt.scene.mitsuba_dict.bsdfs import BSDFS, METALS
-from pyclpt.scene.mitsuba_dict.context import IORS, WHERE, LoadContext, SceneDictError
+from pyclpt.scene.mitsuba_dict.context import IORS, VERSION, WHERE, LoadContext, SceneDictError
 from pyclpt.scene.mitsuba_dict.emitters import EMITTERS
 from pyclpt.scene.mitsuba_dict.scene import load_scene
 from pyclpt.scene.mitsuba_dict.sensors import SENSORS
@@ -43,7 +44,7 @@ from pyclpt.scene.mitsuba_dict.shapes import SHAPES
 from pyclpt.scene.mitsuba_dict.textures import TEXTURES
 from pyclpt.scene.model import Scene
 
-__all__ = ["BSDFS", "EMITTERS", "IORS", "METALS", "SENSORS", "SHAPES", "TEXTURES", "WHERE", "SceneDictError",
+__all__ = ["BSDFS", "EMITTERS", "IORS", "METALS", "SENSORS", "SHAPES", "TEXTURES", "VERSION", "WHERE", "SceneDictError",
            "load_dict"]
 
 

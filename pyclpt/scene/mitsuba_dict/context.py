@@ -21,8 +21,12 @@ from pyclpt.scene.model import RGB, Bitmap, Envmap, Light, Material, Mesh, rgb
 
 #: Meta key holding an object's source location ``"file:line"`` (added by :mod:`pyclpt.scene.mitsuba_xml`).
 WHERE = "__where__"
+#: Meta key holding the Mitsuba version (``"0.6.0"``) of the file a plug-in came from, added by
+#: :mod:`pyclpt.scene.mitsuba_xml` to the plug-ins of pre-2.0 files whose meaning (not only their
+#: parameters' names) changed in Mitsuba 3 (``sunsky``); an object without it is read as Mitsuba 3's.
+VERSION = "__version__"
 #: Keys of an object that are not parameters.
-META_KEYS = frozenset({"type", "id", WHERE})
+META_KEYS = frozenset({"type", "id", WHERE, VERSION})
 #: Colour-like objects that hold a constant value.
 CONSTANT_COLOR_TYPES = frozenset({"rgb", "spectrum", "srgb"})
 

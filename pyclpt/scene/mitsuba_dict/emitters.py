@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from pyclpt.scene.mitsuba_dict.context import LoadContext, SceneDictError
+from pyclpt.scene.mitsuba_dict.context import VERSION, LoadContext, SceneDictError
 from pyclpt.scene.mitsuba_dict.textures import Texture, color, color_or_texture
 from pyclpt.scene.model import RGB, Bitmap, Checkerboard, DirectionalLight, Envmap, PointLight, SpotLight
 
@@ -125,28 +125,76 @@ def load_envmap(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environme
         raise ctx.fail(where, str(exc), d) from None
 
 
+#: The sun's place and time (Mitsuba's sun position), each plug-in's default in :class:`SunTime`.
+SUN_TIME_KEYS = ("latitude", "longitude", "timezone", "year", "month", "day", "hour", "minute", "second")
+
+
+def _file_version(d: Mapping[str, Any]) -> tuple[int, ...]:
+    """The version of the file the plug-in came from (its ``__version__``); 3.0.0 when it has none."""
+    v = d.get(VERSION)
+    try:
+        return tuple(int(x) for x in str(v).split(".")) if v is not None else (3, 0, 0)
+    except ValueError:
+        return (3, 0, 0)
+
+
 def load_sunsky(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Environment:
-    """``sunsky``, ``sky`` and ``sun``, baked into an environment map (see :mod:`pyclpt.scene.sunsky`)."""
-    from pyclpt.scene.sunsky import sunsky_envmap
+    """``sunsky`` (and Mitsuba 0.5's ``sky`` and ``sun``), baked into an environment map (see
+    :mod:`pyclpt.scene.sky`). A ``sunsky`` of a pre-2.0 file (``__version__``), ``sky`` and ``sun`` are
+    Mitsuba 0.5's (+y up, its sun model, ``sun_radius_scale`` (0: a directional light beside the map),
+    ``resolution``, ``extend``, ``stretch``); any other ``sunsky`` is Mitsuba 3's (+z up, its sun,
+    ``sun_aperture``, ``complex_sun``)."""
+    from pyclpt.scene.sky import SunTime, directional_sun_05, sunsky_envmap
 
     kind = d.get("type")
-    used = {"turbidity", "sun_direction", "sky_scale", "sun_scale", "sun_radius_scale", "resolution",
-            "albedo", "to_world", "scale"}
+    legacy = kind != "sunsky" or _file_version(d) < (2, 0, 0)
+    used = {"turbidity", "albedo", "sun_direction", "sky_scale", "sun_scale", "to_world", *SUN_TIME_KEYS}
+    used |= {"scale", "sun_radius_scale", "resolution", "extend", "stretch"} if legacy else {"sun_aperture",
+                                                                                            "complex_sun"}
     ctx.note_unused(where, d, used)
+    timed = [k for k in SUN_TIME_KEYS if k in d]
+    if "sun_direction" in d and timed:
+        raise ctx.fail(where, f"give sun_direction or the sun's place and time ({', '.join(timed)}), not both", d)
+    time = None
     if "sun_direction" not in d:
-        raise ctx.fail(where, f"{kind} needs sun_direction (latitude/longitude/time are not supported)", d)
-    direction = ctx.vector(d, "sun_direction", where)
-    scale = ctx.number(d, "scale", 1.0, where)
-    sky_scale = ctx.number(d, "sky_scale", scale, where) if kind != "sun" else 0.0
-    sun_scale = ctx.number(d, "sun_scale", scale, where) if kind != "sky" else 0.0
-    albedo = color(ctx, d.get("albedo", 0.15), f"{where}.albedo", d)
+        values = {k: ctx.number(d, k, getattr(SunTime, k), where) for k in timed}
+        for k in ("year", "month", "day"):
+            if k in values:
+                if values[k] != int(values[k]):
+                    raise ctx.fail(f"{where}.{k}", f"expected an integer, got {values[k]!r}", d)
+                values[k] = int(values[k])
+        time = SunTime(**values)
+    scale = ctx.number(d, "scale", 1.0, where) if legacy else 1.0
+    if kind == "sky":
+        sky_scale, sun_scale = scale, 0.0
+    elif kind == "sun":
+        sky_scale, sun_scale = 0.0, scale
+    else:
+        sky_scale, sun_scale = ctx.number(d, "sky_scale", scale, where), ctx.number(d, "sun_scale", scale, where)
+    albedo = color(ctx, d["albedo"], f"{where}.albedo", d) if "albedo" in d else None
+    options: dict[str, Any] = {}
+    if legacy:
+        options = {"sun_radius_scale": ctx.number(d, "sun_radius_scale", 1.0, where),
+                   "extend": ctx.flag(d, "extend", False, where), "stretch": ctx.number(d, "stretch", 1.0, where)}
+        if "resolution" in d:
+            options["resolution"] = ctx.number(d, "resolution", 512, where)
+    else:
+        options = {"sun_aperture": ctx.number(d, "sun_aperture", 0.5358, where),
+                   "complex_sun": ctx.flag(d, "complex_sun", False, where)}
+    sun_direction = ctx.vector(d, "sun_direction", where) if "sun_direction" in d else None
+    turbidity = ctx.number(d, "turbidity", 3.0, where)
+    to_world = ctx.transform(d, "to_world", where) if "to_world" in d else None
     try:
-        return sunsky_envmap(direction, turbidity=ctx.number(d, "turbidity", 3.0, where),
-                             sky_scale=sky_scale, sun_scale=sun_scale,
-                             sun_radius_scale=ctx.number(d, "sun_radius_scale", 1.0, where),
-                             resolution=int(ctx.number(d, "resolution", 512, where)),
-                             albedo=float(np.mean(albedo)),
-                             to_world=ctx.transform(d, "to_world", where) if "to_world" in d else None)
+        if legacy and options["sun_radius_scale"] == 0.0 and sun_scale > 0.0:  # Mitsuba 0.5's directional sun
+            direction, irradiance = directional_sun_05(sun_direction, time=time, turbidity=turbidity,
+                                                       sun_scale=sun_scale, to_world=to_world,
+                                                       stretch=options["stretch"])
+            _add_light(ctx, d, where, DirectionalLight(tuple(direction), tuple(irradiance)))
+            if sky_scale == 0.0:  # nothing left for the environment
+                return None
+        return sunsky_envmap(sun_direction, convention="mitsuba0.5" if legacy else "mitsuba3", time=time,
+                             turbidity=turbidity, albedo=albedo, sky_scale=sky_scale, sun_scale=sun_scale,
+                             to_world=to_world, name=str(kind), **options)
     except ValueError as exc:
         if isinstance(exc, SceneDictError):
             raise

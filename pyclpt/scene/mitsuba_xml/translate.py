@@ -13,11 +13,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pyclpt.scene.mitsuba_dict import WHERE
+from pyclpt.scene.mitsuba_dict import VERSION, WHERE
 from pyclpt.scene.mitsuba_xml import values
 from pyclpt.scene.mitsuba_xml.document import Document
 from pyclpt.scene.mitsuba_xml.node import Node, expect_attrs, node_error
 from pyclpt.scene.mitsuba_xml.spectra import blackbody_to_rgb
+from pyclpt.scene.mitsuba_xml.upgrade import legacy_version
 
 #: Tags that are always objects (plug-ins); any other tag with a ``type`` attribute is one too.
 OBJECT_TAGS = frozenset({"scene", "bsdf", "shape", "emitter", "texture", "sensor", "film", "sampler",
@@ -106,6 +107,9 @@ class _Translator:
         d: dict[str, Any] = {"type": node.attrs["type"], WHERE: node.where}
         if "id" in node.attrs:
             d["id"] = node.attrs["id"]
+        version = legacy_version(node)
+        if version is not None:
+            d[VERSION] = version
         self.fill(d, node, top_level=False)
         return d
 

@@ -1,6 +1,7 @@
 """Mitsuba 3's upgrade of scene files older than 2.0.0, as tables: parameter names go from camelCase
 to snake_case (:func:`to_snake_case`), some tags are renamed (:data:`TAG_RENAMES`), and some
-parameters are renamed per plug-in kind (:data:`PARAMETER_RENAMES`, keyed by tag and type).
+parameters are renamed per plug-in kind (:data:`PARAMETER_RENAMES`, keyed by tag and type). Plug-ins
+that mean something else in Mitsuba 3 (:data:`VERSIONED_PLUGINS`) keep the file's version.
 """
 from __future__ import annotations
 
@@ -14,6 +15,10 @@ TAG_RENAMES: dict[str, str] = {"lookAt": "lookat"}
 PARAMETER_RENAMES: dict[tuple[str, str], dict[str, str]] = {
     ("bsdf", "diffuse"): {"diffuse_reflectance": "reflectance"},
 }
+#: Plug-ins (tag, type) of old files whose meaning changed in Mitsuba 3 beyond their parameters' names
+#: (Mitsuba 0.5's ``sunsky`` has another sky frame and sun model than Mitsuba 3's; ``sky`` and ``sun``
+#: exist in 0.5 only): their dictionaries carry the file's version (``__version__``).
+VERSIONED_PLUGINS = frozenset({("emitter", "sunsky"), ("emitter", "sky"), ("emitter", "sun")})
 
 
 def to_snake_case(name: str) -> str:
@@ -42,6 +47,13 @@ def upgrade_element(tag: str, attrs: dict[str, str], version: Version) -> str:
     if "name" in attrs and tag != "default":
         attrs["name"] = to_snake_case(attrs["name"])
     return tag
+
+
+def legacy_version(node: Node) -> str | None:
+    """The file's version (``"0.6.0"``) for a plug-in of :data:`VERSIONED_PLUGINS` in an old file, else None."""
+    if node.version >= CURRENT or (node.tag, node.attrs.get("type", "")) not in VERSIONED_PLUGINS:
+        return None
+    return ".".join(str(v) for v in node.version)
 
 
 def upgrade_parameters(node: Node) -> None:
