@@ -49,7 +49,7 @@ class SceneArrays:
     textures: TextureTable
     bounds: np.ndarray  # (2, 3) scene bounding box
     defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, SCENE_HAS_TEXTURES, SCENE_MATERIALS,
-    # SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS
+    # SCENE_HAS_ANISOTROPY, SCENE_HAS_BACK_MATERIALS, SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS
     node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer)
 
     @property
@@ -93,6 +93,7 @@ def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[Mat
 def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, camera: Camera) -> dict:
     return {"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
             "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
+            "SCENE_HAS_ANISOTROPY": mats.has_anisotropy, "SCENE_HAS_BACK_MATERIALS": mats.has_back_materials,
             "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets,
             "SCENE_CAMERA": camera_kind(camera) or None}
 

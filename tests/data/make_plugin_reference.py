@@ -7,7 +7,10 @@
 - ``cylinder.xml``: a textured cylinder given by p0, p1 and radius (tests/test_plugins.py);
 - ``thinlens.xml``, ``orthographic.xml``: the two other cameras, over boxes at several depths;
 - ``uv-shapes.xml``: the texture coordinates of the rectangle, disk, sphere and cube
-  (tests/test_plugins.py).
+  (tests/test_plugins.py);
+- ``anisotropy.xml``: anisotropic rough conductors and a rough dielectric, as it is and, as
+  ``anisotropy-swapped``, with alpha_u and alpha_v swapped (tests/test_plugins.py);
+- ``twosided-pair.xml``: twosided with a different BSDF on each side (tests/test_plugins.py).
 
 Mitsuba's path tracer as each file says (box filter), 16384 spp.
 """
@@ -19,11 +22,15 @@ import numpy as np
 
 mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
 HERE = Path(__file__).parent
-NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes")
+NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "anisotropy", "anisotropy-swapped",
+         "twosided-pair")
+#: references of a file rendered with other <default> values: name -> (file, parameters)
+VARIANTS = {"anisotropy-swapped": ("anisotropy", {"au": "0.35", "av": "0.04"})}
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or NAMES:
-        scene = mi.load_file(str(HERE / f"{name}.xml"))
+        file, params = VARIANTS.get(name, (name, {}))
+        scene = mi.load_file(str(HERE / f"{file}.xml"), **params)
         image = np.array(mi.render(scene, spp=16384, seed=7), dtype=np.float32)[..., :3]
         np.save(HERE / f"{name}-mitsuba.npy", image)
         print(name, image.shape, image.reshape(-1, 3).mean(0))
