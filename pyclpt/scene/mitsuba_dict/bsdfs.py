@@ -178,7 +178,7 @@ def make_twosided(mat: Material) -> Material:
     """The material made two-sided (dielectrics already are; wrappers pass it inward)."""
     if isinstance(mat, (Mask, BumpMap)):
         return dataclasses.replace(mat, material=make_twosided(mat.material))
-    if isinstance(mat, (Dielectric, ThinDielectric)):
+    if isinstance(mat, (Dielectric, ThinDielectric, TwoSided)):  # already two-sided
         return mat
     return dataclasses.replace(mat, twosided=True)
 
