@@ -359,3 +359,13 @@ def test_albedo_of_a_twosided_pair_is_the_side_seen(device):
         left, right = img[row, W // 2 - 5], img[row, W // 2 + 5]  # the sky lights both sides alike
         np.testing.assert_allclose(left / left[0], (1.0, 0.125, 0.125), rtol=1e-5)
         np.testing.assert_allclose(right / right[2], (0.125, 0.25, 1.0), rtol=1e-5)
+
+
+def test_roughness_of_an_anisotropic_material(device):
+    """The G-buffer's roughness of an anisotropic rough conductor: sqrt(alpha_u alpha_v)."""
+    scene = pyclpt.load_dict({
+        "type": "scene", "sensor": sensor(FRONT_CAMERA, fov=20.0, size=8),
+        "wall": {"type": "rectangle", "bsdf": {"type": "roughconductor", "alpha_u": 0.1, "alpha_v": 0.4}},
+    })
+    _, aov = pyclpt.render(scene, spp=1, width=8, height=8, device=device, aovs=["roughness"])
+    np.testing.assert_allclose(aov["roughness"], 0.2, rtol=1e-6)

@@ -216,12 +216,20 @@ static inline vec3 bsdf_albedo(const Bsdf* b) {
     return b->color;
 }
 
-/* The G-buffer's linear roughness: the microfacet alpha of rough conductors and dielectrics, 1 for
- * diffuse and plastic materials (their diffuse base), 0 for smooth conductors and dielectrics. */
+/* The G-buffer's linear roughness: the microfacet alpha of rough conductors and dielectrics (of an
+ * anisotropic one sqrt(alpha_u alpha_v)), 1 for diffuse and plastic materials (their diffuse base), 0 for
+ * smooth conductors and dielectrics. */
+static inline float bsdf_rough_alpha(const Bsdf* b) {
+#ifdef SCENE_HAS_ANISOTROPY
+    if (b->flags & MAT_FLAG_ANISOTROPIC) return m_sqrt(b->alpha * b->alpha_v);
+#endif
+    return b->alpha;
+}
+
 static inline float bsdf_roughness(const Bsdf* b) {
     int t = b->type;
-    if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && t == MAT_ROUGHCONDUCTOR) return b->alpha;
-    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC) return b->alpha;
+    if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && t == MAT_ROUGHCONDUCTOR) return bsdf_rough_alpha(b);
+    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC) return bsdf_rough_alpha(b);
     return bsdf_is_delta(b) ? 0.0f : 1.0f;
 }
 
