@@ -55,6 +55,7 @@ from pyclpt.scene.model import (
     Scene,
     SpotLight,
     ThinDielectric,
+    TwoSided,
 )
 
 __version__ = "0.1.0"
@@ -65,7 +66,6 @@ __all__ = [
     "Dielectric", "Diffuse", "DirectionalLight", "EnvironmentVariableError", "Envmap", "Film", "get_device", "Keyframe",
     "KernelBuildError", "list_devices", "load", "load_dict", "load_xml", "Mask", "Mesh", "open_device", "Plastic",
     "PointLight", "ProgressiveRenderer", "read_image", "ReconstructionFilter", "render", "Renderer", "RenderStats",
-    "Scene", "SceneDictError",
-    "SceneXMLError", "SpotLight", "ThinDielectric", "write_image", "SceneParameters", "optim", "render_backward",
-    "render_forward", "traverse",
+    "Scene", "SceneDictError", "SceneXMLError", "SpotLight", "ThinDielectric", "TwoSided", "write_image",
+    "SceneParameters", "optim", "render_backward", "render_forward", "traverse",
 ]

@@ -331,3 +331,41 @@ def test_layout_matches_the_header():
     for name in ("AOV_ALBEDO", "AOV_NORMAL", "AOV_ROUGHNESS", "AOV_DEPTH", "AOV_HITDIST", "AOV_MOTION",
                  "AOV_EMISSION", "AOV_PRIM", "AOV_MATERIAL", "AOV_COUNT", "AOV_FLOATS"):
         assert int(header[name]) == getattr(aovs, name), name
+
+
+def test_albedo_of_a_twosided_pair_is_the_side_seen(device):
+    """twosided with two BSDFs: the albedo (and the material id) of the side the camera sees. Two rectangles
+    with the same pair, the left one facing the camera (red front), the right one facing away (blue back)."""
+    pair = {"type": "twosided", "id": "pair", "f": {"type": "diffuse", "reflectance": [0.8, 0.1, 0.1]},
+            "b": {"type": "diffuse", "reflectance": [0.1, 0.2, 0.8]}}
+    scene = pyclpt.load_dict({
+        "type": "scene",
+        "sensor": sensor(FRONT_CAMERA, fov=50.0, size=W),
+        "sky": {"type": "constant", "radiance": 1.0},
+        "pair": pair,
+        "left": {"type": "rectangle", "bsdf": {"type": "ref", "id": "pair"},
+                 "to_world": [{"scale": [0.7, 1.0, 1.0]}, {"translate": [-0.8, 0, 0]}]},
+        "right": {"type": "rectangle", "bsdf": {"type": "ref", "id": "pair"}, "flip_normals": True,
+                  "to_world": [{"scale": [0.7, 1.0, 1.0]}, {"translate": [0.8, 0, 0]}]},
+    })
+    for integrator in ("megakernel", "wavefront"):
+        img, aov = pyclpt.render(scene, spp=1, width=W, height=W, device=device, integrator=integrator,
+                                 aovs=["albedo", "material_id"])
+        row = W // 2
+        np.testing.assert_allclose(aov["albedo"][row, W // 2 - 5], (0.8, 0.1, 0.1), rtol=1e-6)
+        np.testing.assert_allclose(aov["albedo"][row, W // 2 + 5], (0.1, 0.2, 0.8), rtol=1e-6)
+        ids = aov["material_id"][row]
+        assert ids[W // 2 - 5] == 0 and ids[W // 2 + 5] == 1  # 1: the back's record, after the scene's one
+        left, right = img[row, W // 2 - 5], img[row, W // 2 + 5]  # the sky lights both sides alike
+        np.testing.assert_allclose(left / left[0], (1.0, 0.125, 0.125), rtol=1e-5)
+        np.testing.assert_allclose(right / right[2], (0.125, 0.25, 1.0), rtol=1e-5)
+
+
+def test_roughness_of_an_anisotropic_material(device):
+    """The G-buffer's roughness of an anisotropic rough conductor: sqrt(alpha_u alpha_v)."""
+    scene = pyclpt.load_dict({
+        "type": "scene", "sensor": sensor(FRONT_CAMERA, fov=20.0, size=8),
+        "wall": {"type": "rectangle", "bsdf": {"type": "roughconductor", "alpha_u": 0.1, "alpha_v": 0.4}},
+    })
+    _, aov = pyclpt.render(scene, spp=1, width=8, height=8, device=device, aovs=["roughness"])
+    np.testing.assert_allclose(aov["roughness"], 0.2, rtol=1e-6)

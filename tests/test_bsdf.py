@@ -11,7 +11,11 @@ against cell integrals of the device's own pdf). Per material and parameter set:
 * energy: white furnaces, and the rough dielectric's reflected / transmitted energy against the independent
   host integrals of pyclpt/microfacet.py;
 * reference formulas (numpy, after Mitsuba 3's plastic.cpp / roughplastic.cpp / thindielectric.cpp);
-* reciprocity, one- and two-sidedness, and finite output at extreme inputs.
+* reciprocity, one- and two-sidedness, and finite output at extreme inputs;
+* anisotropic roughness (alpha_u != alpha_v, -DSCENE_HAS_ANISOTROPY, with which this file's kernels are
+  built): D, G1 and the visible-normal pdf against closed forms, chi-square of the visible normals and of
+  the anisotropic rough conductor and dielectric, Mitsuba 3's eval / pdf, and isotropic materials giving
+  the same bits with and without the define.
 
 Every random input comes from a fixed seed, so every p-value is deterministic.
 """
@@ -51,9 +55,37 @@ FLIP = np.float32([1, 1, -1])
 P_MIN = 1e-4
 
 
+ANISO_KERNELS = r"""
+/* per item (m[3], v[3], alpha_u, alpha_v, beckmann, pad[3]) -> (D(m), G1(v, m), pdf_visible(v, m)) */
+__kernel void mf_aniso_k(__global const float* in, __global float* out) {
+    int i = get_global_id(0);
+    __global const float* p = in + 12 * i;
+    Microfacet d;
+    d.alpha = p[6];
+    d.alpha_v = p[7];
+    d.beckmann = p[8] != 0.0f;
+    vec3 m = load3(p, 0), v = load3(p, 1);
+    vstore3((float3)(mf_d(d, m), mf_g1(d, v, m), mf_pdf_visible(d, v, m)), i, out);
+}
+
+/* per item (wi[3], alpha_u, alpha_v, beckmann, u[2]) -> sampled visible normal */
+__kernel void mf_aniso_sample_k(__global const float* in, __global float* out) {
+    int i = get_global_id(0);
+    __global const float* p = in + 8 * i;
+    Microfacet d;
+    d.alpha = p[3];
+    d.alpha_v = p[4];
+    d.beckmann = p[5] != 0.0f;
+    store3(out, i, mf_sample_visible(d, load3(p, 0), v2(p[6], p[7])));
+}
+"""
+
+
 @pytest.fixture(scope="module")
 def kit(device) -> Kit:
-    return Kit(device)  # the program comes from the device's cache when test_sampling built it
+    """The test kernels with anisotropic roughness compiled in (isotropic materials give the same bits:
+    test_isotropic_unchanged_by_the_anisotropy_define)."""
+    return Kit(device, defines={"SCENE_HAS_ANISOTROPY": 1}, extra=ANISO_KERNELS)
 
 
 # --------------------------------------------------------------------------
@@ -86,6 +118,26 @@ def g1_exact(v, m, alpha, beckmann):
             lam = 0.5 * (np.sqrt(1.0 + 1.0 / (a * a)) - 1.0)
         g = np.where(xy == 0, 1.0, 1.0 / (1.0 + lam))
     return np.where((v * m).sum(-1) * v[..., 2] <= 0, 0.0, g)
+
+
+def ndf_aniso(m, au, av, beckmann):
+    """D(m) of anisotropic GGX or Beckmann (Mitsuba's MicrofacetDistribution::eval)."""
+    c2 = m[..., 2] ** 2
+    q = (m[..., 0] / au) ** 2 + (m[..., 1] / av) ** 2
+    if beckmann:
+        d = np.exp(-q / c2) / (np.pi * au * av * c2 * c2)
+    else:
+        d = 1.0 / (np.pi * au * av * (q + c2) ** 2)
+    return np.where(m[..., 2] > 0, d, 0.0)
+
+
+def g1_aniso(v, m, au, av, beckmann):
+    """Smith G1 of the anisotropic distribution: the isotropic one at the projected roughness
+    sqrt(au^2 cos^2 phi + av^2 sin^2 phi) of v's azimuth."""
+    xy2 = v[..., 0] ** 2 + v[..., 1] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.sqrt(np.where(xy2 > 0, ((au * v[..., 0]) ** 2 + (av * v[..., 1]) ** 2) / xy2, au * av))
+    return g1_exact(v, m, a, beckmann)
 
 
 def spec_weight(mat_obj) -> float:
@@ -153,6 +205,72 @@ def test_visible_normal_sampling_chi2(kit, beckmann, alpha, cos_i):
     assert p > P_MIN, f"visible normals (alpha {alpha}, cos {cos_i}): p={p:.2e} ({diag})"
 
 
+ANISO = [(0.05, 0.4), (0.5, 0.1)]
+
+
+@pytest.mark.parametrize("beckmann", [False, True], ids=["ggx", "beckmann"])
+def test_anisotropic_microfacet_functions(kit, beckmann):
+    """Anisotropic D against its closed form and its normalisation, G1 against scipy at the projected
+    roughness, the visible-normal pdf's normalisation."""
+    dirs, weights = sphere_quadrature(0.0, sub_t=8, sub_p=4)
+    m = dirs.reshape(-1, 3)
+    for au, av in ANISO:
+        for cos_i in (1.0, 0.4, 0.05):
+            wi = np.broadcast_to(direction(cos_i, PHI_I), m.shape)
+            rec = np.zeros((len(m), 12), np.float32)
+            rec[:, 0:3], rec[:, 3:6], rec[:, 6], rec[:, 7], rec[:, 8] = m, wi, au, av, float(beckmann)
+            out = kit.run("mf_aniso_k", len(m), rec, Out(len(m), 3)).astype(np.float64)
+            md, wid = m.astype(np.float64), wi.astype(np.float64)
+            if cos_i == 1.0:
+                np.testing.assert_allclose(out[:, 0], ndf_aniso(md, au, av, beckmann), rtol=2e-5, atol=1e-18)
+                norm = integrate_cells(out[:, 0] * md[:, 2], weights).sum()
+                assert abs(norm - 1.0) < 2e-3, f"integral of D cos = {norm} (alpha {au}, {av})"
+            np.testing.assert_allclose(out[:, 1], g1_aniso(wid, md, au, av, beckmann), rtol=2e-5, atol=2e-6)
+            vis = integrate_cells(out[:, 2], weights).sum()
+            assert abs(vis - 1.0) < 3e-3, f"visible normals of cos_i {cos_i}, alpha ({au}, {av}) integrate to {vis}"
+
+
+@pytest.mark.parametrize("beckmann", [False, True], ids=["ggx", "beckmann"])
+@pytest.mark.parametrize("au,av,cos_i", [(0.05, 0.4, 0.3), (0.5, 0.1, 0.8), (0.3, 0.05, 0.05)])
+def test_anisotropic_visible_normal_sampling_chi2(kit, beckmann, au, av, cos_i):
+    """mf_sample_visible against mf_pdf_visible for alpha_u != alpha_v, in the space of normals."""
+    n = 100_000
+    wi = direction(cos_i, PHI_I)
+    u = uniform(7500 + int(au * 100) + int(cos_i * 10) + 1000 * beckmann, n, 2)
+    rec = np.zeros((n, 8), np.float32)
+    rec[:, 0:3], rec[:, 3], rec[:, 4], rec[:, 5], rec[:, 6:8] = wi, au, av, float(beckmann), u
+    m = kit.run("mf_aniso_sample_k", n, rec, Out(n, 3))
+    assert np.all(np.isfinite(m)) and np.all(m[:, 2] > 0)
+    np.testing.assert_allclose(np.linalg.norm(m, axis=1), 1.0, atol=1e-5)
+    dirs, weights = sphere_quadrature(0.0, sub_t=16, sub_p=8)
+    q = dirs.reshape(-1, 3)
+    rq = np.zeros((len(q), 12), np.float32)
+    rq[:, 0:3], rq[:, 3:6], rq[:, 6], rq[:, 7], rq[:, 8] = q, wi, au, av, float(beckmann)
+    pdf = kit.run("mf_aniso_k", len(q), rq, Out(len(q), 3))[:, 2]
+    cells = integrate_cells(pdf, weights)
+    p, diag = chi2_pvalue(histogram_sphere(m, 0.0), n * cells / cells.sum())
+    assert abs(cells.sum() - 1.0) < 5e-3
+    assert p > P_MIN, f"visible normals (alpha {au}, {av}, cos {cos_i}): p={p:.2e} ({diag})"
+
+
+def test_isotropic_unchanged_by_the_anisotropy_define(device, kit):
+    """Isotropic rough materials evaluate and sample to the same bits with -DSCENE_HAS_ANISOTROPY as
+    without it (the scenes without anisotropic materials compile without it)."""
+    plain = Kit(device)
+    n = 5000
+    wi = random_directions(161, n, hemisphere=False)
+    wo = random_directions(162, n, hemisphere=False)
+    u = uniform(163, n, 3)
+    for obj in (Conductor(*METALS["Cu"], alpha=0.2), Conductor(*METALS["Au"], alpha=0.5, distribution="beckmann"),
+                _glass(0.3, "ggx"), _glass(0.1, "beckmann"), Plastic(alpha=0.3, distribution="beckmann"),
+                Conductor(*METALS["Cu"], alpha=0.2, alpha_v=0.2)):
+        mat = pack_material(obj)
+        np.testing.assert_array_equal(kit.eval(mat, wi, wo), plain.eval(mat, wi, wo))
+        a, b = kit.sample(mat, wi, u), plain.sample(mat, wi, u)
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=f"{obj}: {key}")
+
+
 def test_erfinv(kit):
     x = np.concatenate([np.linspace(-0.999999, 0.999999, 20001), [0.0, 1e-7, -1e-7, 0.9999, -0.99999]])
     x = x.astype(np.float32)
@@ -193,6 +311,15 @@ for _c, _nl in ((0.8, False), (0.3, True), (0.05, False)):
 for _a, _c in ((0.05, 0.6), (0.05, 0.1), (0.3, 1.0), (0.8, 0.1)):
     CASES[f"roughcu-beckmann-a{_a}-cos{_c}"] = (
         Conductor(*METALS["Cu"], alpha=_a, specular_reflectance=(0.9, 1.0, 0.8), distribution="beckmann"), _c, HEMI)
+# anisotropic: alpha (alpha_u) along x, alpha_v along y; wi at azimuth PHI_I sees both
+for _d, (_au, _av), _c in (("ggx", (0.05, 0.4), 0.6), ("beckmann", (0.05, 0.4), 0.3), ("ggx", (0.6, 0.1), 0.1),
+                           ("beckmann", (0.5, 0.15), 0.9)):
+    CASES[f"roughal-{_d}-a{_au}x{_av}-cos{_c}"] = (
+        Conductor(*METALS["Al"], alpha=_au, alpha_v=_av, distribution=_d), _c, HEMI)
+for _d, (_au, _av), _c in (("ggx", (0.1, 0.5), 0.7), ("beckmann", (0.4, 0.05), -0.6), ("ggx", (0.3, 0.08), -0.3),
+                           ("beckmann", (0.08, 0.3), 0.4)):
+    CASES[f"roughglass-{_d}-a{_au}x{_av}-{'out' if _c > 0 else 'in'}{abs(_c)}"] = (
+        Dielectric(1.5, 1.0, (0.9, 0.8, 0.7), (0.6, 0.7, 0.8), alpha=_au, distribution=_d, alpha_v=_av), _c, SPHERE)
 
 
 def run_case(kit, case: str):
@@ -528,6 +655,14 @@ MITSUBA_REFERENCE = {
                              "as roughplastic-ggx-0.3"),
     "roughconductor-beckmann-0.3": (Conductor((0.2, 0.9, 1.1), (3.9, 2.4, 2.2), alpha=0.3, distribution="beckmann"),
                                     1e-2, "as roughglass-beckmann-0.1"),
+    "roughconductor-ggx-0.05x0.4": (Conductor((0.2, 0.9, 1.1), (3.9, 2.4, 2.2), alpha=0.05, alpha_v=0.4), 1e-4,
+                                    "float32"),
+    "roughconductor-beckmann-0.4x0.1": (Conductor((0.2, 0.9, 1.1), (3.9, 2.4, 2.2), alpha=0.4, alpha_v=0.1,
+                                                  distribution="beckmann"), 1e-2, "as roughglass-beckmann-0.1"),
+    "roughglass-ggx-0.1x0.5": (Dielectric(1.5, 1.0, (0.9, 0.8, 0.7), (0.6, 0.7, 0.8), alpha=0.1, alpha_v=0.5), 1e-4,
+                               "float32"),
+    "roughglass-beckmann-0.3x0.05": (Dielectric(1.5, 1.0, alpha=0.3, alpha_v=0.05, distribution="beckmann"), 8e-3,
+                                     "as roughglass-beckmann-0.1"),
 }
 
 
@@ -584,6 +719,8 @@ RECIPROCAL = {
     "roughplastic-beckmann-0.6": Plastic((0.7, 0.4, 0.2), alpha=0.6, distribution="beckmann"),
     "plastic": Plastic((0.7, 0.4, 0.2)),
     "roughcu-beckmann-0.3": Conductor(*METALS["Cu"], alpha=0.3, distribution="beckmann"),
+    "roughal-ggx-0.1x0.5": Conductor(*METALS["Al"], alpha=0.1, alpha_v=0.5),
+    "roughglass-beckmann-0.4x0.1": Dielectric(1.5, 1.0, alpha=0.4, alpha_v=0.1, distribution="beckmann"),
 }
 
 
@@ -626,7 +763,7 @@ def test_reciprocity(kit, name):
 
 
 @pytest.mark.parametrize("name", ["roughplastic-ggx-0.2", "roughplastic-beckmann-0.6", "plastic",
-                                  "roughcu-beckmann-0.3", "diffuse", "roughau-0.3"])
+                                  "roughcu-beckmann-0.3", "diffuse", "roughau-0.3", "roughal-ggx-0.1x0.5"])
 def test_one_sided_and_two_sided(kit, name):
     """Reflective materials are black from behind unless two-sided; two-sided mirrors the front."""
     base = {**RECIPROCITY_MATERIALS, **RECIPROCAL}[name]
@@ -701,6 +838,8 @@ EXTREME = {
     "roughplastic-matched": Plastic(alpha=0.3, int_ior=1.0, ext_ior=1.0),
     "roughcu-beckmann-1e-4": Conductor(*METALS["Cu"], alpha=1e-4, distribution="beckmann"),
     "roughcu-beckmann-0.8": Conductor(*METALS["Cu"], alpha=0.8, distribution="beckmann"),
+    "roughcu-ggx-1e-4x0.8": Conductor(*METALS["Cu"], alpha=1e-4, alpha_v=0.8),
+    "roughglass-beckmann-0.8x1e-4": Dielectric(1.5, 1.0, alpha=0.8, alpha_v=1e-4, distribution="beckmann"),
 }
 
 

@@ -3,6 +3,8 @@ differences with the same seed on both sides (within 5 %, Mitsuba's own bound), 
 reverse mode, analytic furnaces, linearity in emission, seeds, memory, and inverse rendering."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from gradient_scenes import filling_sphere, material_under_sky, sphere_under_envmap, textured_quad
@@ -16,7 +18,6 @@ try:  # the example of docs/differentiable.md (a source checkout: bench/ beside 
     from pyclpt.bench import inverse_rendering
 except ModuleNotFoundError:
     import sys
-    from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
     from bench import inverse_rendering
@@ -55,19 +56,26 @@ def test_traverse_names_every_kind():
         "e": {"type": "cube", "bsdf": {"type": "diffuse", "reflectance": {
             "type": "bitmap", "data": np.full((2, 2, 3), 0.5, np.float32)}}},
         "f": {"type": "cube", "bsdf": {"type": "conductor", "id": "mirror"}},
+        "g": {"type": "cube", "bsdf": {"type": "roughconductor", "id": "brushed", "alpha_u": 0.1, "alpha_v": 0.3}},
+        "h": {"type": "cube", "bsdf": {"type": "twosided", "id": "pair", "f": {"type": "diffuse"},
+                                       "b": {"type": "roughconductor", "alpha": 0.2}}},
     })
     params = pyclpt.traverse(scene)
     for name in ("env.data", "metal.alpha.value", "metal.specular_reflectance.value", "rp.alpha",
                  "rp.diffuse_reflectance.value", "rp.specular_reflectance.value", "glass.alpha.value",
                  "two.brdf_0.diffuse_reflectance.value", "e.bsdf.reflectance.data",
-                 "mirror.specular_reflectance.value"):
+                 "mirror.specular_reflectance.value", "brushed.specular_reflectance.value",
+                 "pair.brdf_0.reflectance.value"):
         assert name in params.differentiable, (name, list(params))
     assert params["env.data"].shape == (4, 8, 3)
     assert params["e.bsdf.reflectance.data"].shape == (2, 2, 3)
     unsupported = params.unsupported()
     for name in ("lamp.intensity.value", "glass.int_ior", "metal.eta.value", "env.scale",
-                 "glass.specular_transmittance.value"):
+                 "glass.specular_transmittance.value", "brushed.alpha_u.value", "brushed.alpha_v.value",
+                 "pair.brdf_1.alpha.value", "pair.brdf_1.specular_reflectance.value"):
         assert name in unsupported and unsupported[name], name
+    assert "anisotropic" in unsupported["brushed.alpha_v.value"] and "back" in unsupported["pair.brdf_1.alpha.value"]
+    assert "brushed.alpha.value" not in params
 
 
 def test_update_checks_values_and_keeps_the_scene(box):
@@ -156,8 +164,29 @@ CASES = {
                            "m.alpha", 256, 3, 0.05),
     "roughdielectric-alpha": (lambda: material_under_sky({"type": "roughdielectric", "alpha": 0.3}),
                               "m.alpha.value", 1024, 3, 0.05),
+    # the front of twosided pairs, whose backs (one a rough conductor) the camera sees too
+    "twosided-front": (lambda: pyclpt.load(Path(__file__).parent / "data" / "twosided-pair.xml"),
+                       "red-blue.brdf_0.reflectance.value", 16, 3, 0.01),
 }
 SIZE = 16
+
+
+def test_moved_alpha_records_cover_the_back_materials():
+    """The roughness-moved records the gradient kernels read by material id include a TwoSided's back
+    records (ids past the scene's materials), with alpha moved and the anisotropic alpha_v kept."""
+    from pyclpt.buffers.materials import MAT_ALPHA, MAT_ALPHA_V, pack_materials
+    from pyclpt.gradients.replay import moved_alpha_records
+
+    scene = pyclpt.load(Path(__file__).parent / "data" / "twosided-pair.xml")
+    scene.materials.append(pyclpt.Conductor(alpha=0.2, alpha_v=0.4))
+    recs = pack_materials(scene.materials).materials
+    up, down = moved_alpha_records(scene)
+    assert up.shape == down.shape == recs.shape and len(recs) > len(scene.materials)
+    rough = recs[:, MAT_ALPHA] > 0
+    assert rough[len(scene.materials):].any()  # the gold back
+    np.testing.assert_allclose(up[rough, MAT_ALPHA] / recs[rough, MAT_ALPHA], 1 + 1 / 64, rtol=1e-6)
+    brushed = len(scene.materials) - 1
+    assert up[brushed, MAT_ALPHA_V] == down[brushed, MAT_ALPHA_V] == np.float32(0.4)
 
 
 def _loss_weights(shape) -> np.ndarray:

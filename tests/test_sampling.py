@@ -138,6 +138,9 @@ __kernel void microfacet_k(__global const float* in, __global float* out) {
     __global const float* p = in + 8 * i;
     Microfacet d;
     d.alpha = p[6];
+#ifdef SCENE_HAS_ANISOTROPY
+    d.alpha_v = p[6];
+#endif
     d.beckmann = p[7] != 0.0f;
     vec3 m = load3(p, 0), v = load3(p, 1);
     vstore3((float3)(mf_d(d, m), mf_g1(d, v, m), mf_pdf_visible(d, v, m)), i, out);
@@ -149,6 +152,9 @@ __kernel void microfacet_sample_k(__global const float* in, __global float* out)
     __global const float* p = in + 8 * i;
     Microfacet d;
     d.alpha = p[3];
+#ifdef SCENE_HAS_ANISOTROPY
+    d.alpha_v = p[3];
+#endif
     d.beckmann = p[4] != 0.0f;
     store3(out, i, mf_sample_visible(d, load3(p, 0), v2(p[5], p[6])));
 }
@@ -178,9 +184,10 @@ class Out:
 
 
 class Kit:
-    def __init__(self, device) -> None:
+    def __init__(self, device, defines: dict | None = None, extra: str = "") -> None:
+        """The test kernels (and ``extra`` ones) built with ``defines`` (test_bsdf: -DSCENE_HAS_ANISOTROPY)."""
         self.ctx, self.queue = device.context, device.queue
-        self.prg = build_program(device, source=KERNELS, name="test_sampling")
+        self.prg = build_program(device, source=KERNELS + extra, defines=defines, name="test_sampling")
         self.kernels: dict[str, cl.Kernel] = {}
         self.cache: dict = {}
 

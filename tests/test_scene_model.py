@@ -14,7 +14,7 @@ import pyclpt
 from pyclpt.scene import transform as tf
 from pyclpt.scene.library import builtin_scenes
 from pyclpt.scene.mitsuba_dict import METALS, SceneDictError, load_dict
-from pyclpt.scene.model import Camera, Conductor, Dielectric, Diffuse, Film, Mesh, Scene
+from pyclpt.scene.model import Camera, Conductor, Dielectric, Diffuse, Film, Mask, Mesh, Plastic, Scene, TwoSided
 
 
 def _geometric_normals(mesh: Mesh) -> np.ndarray:
@@ -201,6 +201,57 @@ def test_twosided():
     assert scene.materials[0] == Diffuse((0.2, 0.2, 0.2), twosided=True)
     assert isinstance(scene.materials[1], Conductor) and scene.materials[1].twosided
     assert scene.materials[2].twosided is False
+
+
+def test_twosided_with_two_bsdfs(caplog):
+    """Mitsuba's twosided with two BSDFs: the first on the front, the second on the back; the same one twice
+    is a plain two-sided material; a mask inside is dropped with a note (around the pair it stays);
+    transmitting materials are refused, as Mitsuba does."""
+    red = {"type": "diffuse", "reflectance": [0.8, 0.1, 0.1]}
+    gold = {"type": "roughconductor", "material": "Au", "alpha": 0.2}
+    with caplog.at_level(logging.WARNING, logger="pyclpt"):
+        scene = load_dict(_scene(
+            red=dict(red, id="red"),
+            a={**RECT, "bsdf": {"type": "twosided", "front": {"type": "ref", "id": "red"}, "back": gold}},
+            b={**RECT, "bsdf": {"type": "twosided", "x": {"type": "ref", "id": "red"},
+                                "y": {"type": "ref", "id": "red"}}},
+            c={**RECT, "bsdf": {"type": "mask", "opacity": 0.5, "bsdf": {
+                "type": "twosided", "f": red, "k": {"type": "mask", "opacity": 0.3, "bsdf": {"type": "plastic"}}}}},
+        ))
+    pair, same, masked = scene.materials
+    assert pair == TwoSided(Diffuse((0.8, 0.1, 0.1)), Conductor(*METALS["Au"], alpha=0.2, distribution="beckmann"))
+    assert same == Diffuse((0.8, 0.1, 0.1), twosided=True)
+    assert isinstance(masked, Mask) and masked.material == TwoSided(Diffuse((0.8, 0.1, 0.1)), Plastic())
+    assert "c.bsdf.bsdf: a mask inside a twosided with two BSDFs is not supported" in caplog.text
+    with pytest.raises(SceneDictError, match=r"s\.bsdf\.g: twosided: only materials without transmission"):
+        load_dict(_scene(s={**RECT, "bsdf": {"type": "twosided", "f": red, "g": {"type": "dielectric"}}}))
+    with pytest.raises(SceneDictError, match="twosided needs one or two nested BSDFs, got 3"):
+        load_dict(_scene(s={**RECT, "bsdf": {"type": "twosided", "f": red, "g": red, "h": red}}))
+    with pytest.raises(TypeError, match="twosided back: expected a reflecting material"):
+        TwoSided(Diffuse(), Dielectric())
+
+
+def test_anisotropic_roughness(caplog):
+    """alpha_u / alpha_v of roughconductor and roughdielectric load as alpha (= alpha_u) and alpha_v (None when
+    equal); roughplastic has only alpha in Mitsuba: the geometric mean, with a note."""
+    with caplog.at_level(logging.WARNING, logger="pyclpt"):
+        scene = load_dict(_scene(
+            a={**RECT, "bsdf": {"type": "roughconductor", "alpha_u": 0.05, "alpha_v": 0.3, "distribution": "ggx"}},
+            b={**RECT, "bsdf": {"type": "roughdielectric", "alpha_u": 0.2, "alpha_v": 0.0}},
+            c={**RECT, "bsdf": {"type": "roughconductor", "alpha_u": 0.2, "alpha_v": 0.2}},
+            d={**RECT, "bsdf": {"type": "roughplastic", "alpha_u": 0.1, "alpha_v": 0.4}},
+        ))
+    a, b, c, d = scene.materials
+    assert (a.alpha, a.alpha_v, a.distribution, a.anisotropic) == (0.05, 0.3, "ggx", True)
+    assert (b.alpha, b.alpha_v, b.anisotropic) == (0.2, 1e-4, True)  # Mitsuba clamps each to 1e-4
+    assert (c.alpha, c.alpha_v, c.anisotropic) == (0.2, None, False)
+    assert d.alpha == pytest.approx(0.2)
+    assert "d.bsdf: anisotropic roughness (0.1, 0.4) not supported by roughplastic" in caplog.text
+    assert "a.bsdf" not in caplog.text and "b.bsdf" not in caplog.text
+    with pytest.raises(SceneDictError, match=r"s\.bsdf\.alpha_v: roughness must be in \[0, 4\]"):
+        load_dict(_scene(s={**RECT, "bsdf": {"type": "roughconductor", "alpha_u": 0.1, "alpha_v": 5}}))
+    with pytest.raises(ValueError, match="anisotropic roughness needs alpha"):
+        Conductor(alpha=0.0, alpha_v=0.3)
 
 
 def test_conductor_by_metal_name_and_by_eta_k():

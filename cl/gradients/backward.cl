@@ -70,7 +70,7 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
             path_miss(sc, &ps);
             return ps.L;
         }
-        Surface s = surface_at(sc, hit.prim, hit.u, hit.v);
+        Surface s = surface_hit(sc, hit.prim, hit.u, hit.v, ps.dir);
 #ifdef GRAD_EMISSION
         if (!replay && !v3_is_zero(light_emitted(sc, s.light, s.ng, ps.dir, s.uv))) {
             float w = 1.0f; /* path_hit_emission's MIS weight */

@@ -39,7 +39,7 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
                 }
                 break;
             }
-            Surface s = surface_at(&sc, hit.prim, hit.u, hit.v);
+            Surface s = surface_hit(&sc, hit.prim, hit.u, hit.v, ps.dir);
             vec3 le = light_emitted(&sc, s.light, s.ng, ps.dir, s.uv);
             if (!v3_is_zero(le)) {
                 float w = 1.0f;

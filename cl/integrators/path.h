@@ -211,7 +211,7 @@ static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int
             path_miss(sc, ps);
             return;
         }
-        Surface s = surface_at(sc, hit.prim, hit.u, hit.v);
+        Surface s = surface_hit(sc, hit.prim, hit.u, hit.v, ps->dir);
 #ifdef AOVS
         gbuffer_hit(sc, aov, hit.prim, &s, hit.t, ps->depth, ps->dir, ps->beta, &ps->flags);
 #endif

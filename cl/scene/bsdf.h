@@ -29,7 +29,13 @@
  * Shared by them: bsdfs/fresnel.h (conductor and dielectric Fresnel) and bsdfs/microfacet.h
  * (GGX (default) or Beckmann (MAT_FLAG_BECKMANN), with Smith's separable masking (the exact
  * erfc form for Beckmann) and visible-normal sampling (Heitz 2018 for GGX; Jakob 2014's
- * numerical inversion for Beckmann)).
+ * numerical inversion for Beckmann)), isotropic or, for rough conductors and dielectrics,
+ * anisotropic (MAT_FLAG_ANISOTROPIC, -DSCENE_HAS_ANISOTROPY).
+ *
+ * Mitsuba's `twosided` with two BSDFs is two records: the front one has MAT_FLAG_BACK and the back
+ * one's id in MAT_BACK, and the hit takes the back one where wi is below the shading normal
+ * (surface_face in scene.h, -DSCENE_HAS_BACK_MATERIALS); both are flagged two-sided, so the back one
+ * sees the directions flipped to its front (bsdf_orient), as Mitsuba's twosided does.
  *
  * Adding a material: a type id below, its header under scene/bsdfs/ (NAME_eval for its
  * non-delta lobes, NAME_sample), its #include and its lines in the dispatch at the end. */
@@ -72,11 +78,18 @@
 #define MAT_RP_TRANS 27    /* roughplastic: RP_KNOTS half floats (5 slots, 27..31): the coating's
                               transmittance t(cos) at cos = (k / (RP_KNOTS - 1))^2 */
 #define RP_KNOTS 10
+#define MAT_ALPHA_V 27     /* roughconductor, roughdielectric with MAT_FLAG_ANISOTROPIC: the roughness
+                              along the shading frame's t (MAT_ALPHA is alpha_u, along s) */
+#define MAT_BACK 10        /* with MAT_FLAG_BACK: the back side's material id (Mitsuba `twosided` with two
+                              BSDFs; the front one has no transmission, so MAT_TRANS's slot is free) */
 
 #define MAT_FLAG_TWOSIDED 1
 #define MAT_FLAG_NONLINEAR 2 /* plastic: Mitsuba's `nonlinear` internal scattering */
 #define MAT_FLAG_BECKMANN 4  /* microfacet distribution: Beckmann instead of GGX */
 #define MAT_FLAG_MASKED 8    /* has an opacity (Mitsuba `mask`) */
+#define MAT_FLAG_ANISOTROPIC 16 /* alpha_u != alpha_v (MAT_ALPHA_V; -DSCENE_HAS_ANISOTROPY) */
+#define MAT_FLAG_BACK 32     /* a different material on the back side (MAT_BACK; -DSCENE_HAS_BACK_MATERIALS) */
+#define MAT_FLAG_UV_FRAME 64 /* shading frame's s from dp/du, as Mitsuba's (anisotropic materials; scene.h) */
 
 /* Relative IORs closer to 1 than this make a rough dielectric an index-matched
  * (invisible) interface: the microfacet refraction lobe degenerates to a delta. */
@@ -95,7 +108,10 @@ typedef struct {
     vec3 trans;    /* specular transmittance */
     vec3 eta, k;   /* conductor */
     float ior;     /* interior / exterior */
-    float alpha;   /* roughness */
+    float alpha;   /* roughness (alpha_u of an anisotropic one) */
+#ifdef SCENE_HAS_ANISOTROPY
+    float alpha_v; /* roughness along t (MAT_ALPHA_V), read where MAT_FLAG_ANISOTROPIC is set */
+#endif
     float fdr_int; /* plastic: internal diffuse reflectance of the coating */
     Material mat;  /* the record (roughplastic reads its transmittance knots from it) */
 } Bsdf;
@@ -124,6 +140,9 @@ static inline Bsdf bsdf_from(Material m, int unit) {
     b.k = mat_rgb(m, MAT_K, unit);
     b.ior = m[MAT_IOR];
     b.alpha = m[MAT_ALPHA];
+#ifdef SCENE_HAS_ANISOTROPY
+    b.alpha_v = m[MAT_ALPHA_V];
+#endif
     b.fdr_int = m[MAT_FDR_INT];
     b.mat = m;
     return b;
@@ -138,6 +157,9 @@ static inline bool bsdf_index_matched(const Bsdf* b) { return m_abs(b->ior - 1.0
 static inline Microfacet microfacet_of(const Bsdf* b) {
     Microfacet d;
     d.alpha = m_max(b->alpha, BSDF_MIN_ALPHA);
+#ifdef SCENE_HAS_ANISOTROPY
+    d.alpha_v = (b->flags & MAT_FLAG_ANISOTROPIC) ? m_max(b->alpha_v, BSDF_MIN_ALPHA) : d.alpha;
+#endif
     d.beckmann = (b->flags & MAT_FLAG_BECKMANN) != 0;
     return d;
 }
@@ -194,12 +216,20 @@ static inline vec3 bsdf_albedo(const Bsdf* b) {
     return b->color;
 }
 
-/* The G-buffer's linear roughness: the microfacet alpha of rough conductors and dielectrics, 1 for
- * diffuse and plastic materials (their diffuse base), 0 for smooth conductors and dielectrics. */
+/* The G-buffer's linear roughness: the microfacet alpha of rough conductors and dielectrics (of an
+ * anisotropic one sqrt(alpha_u alpha_v)), 1 for diffuse and plastic materials (their diffuse base), 0 for
+ * smooth conductors and dielectrics. */
+static inline float bsdf_rough_alpha(const Bsdf* b) {
+#ifdef SCENE_HAS_ANISOTROPY
+    if (b->flags & MAT_FLAG_ANISOTROPIC) return m_sqrt(b->alpha * b->alpha_v);
+#endif
+    return b->alpha;
+}
+
 static inline float bsdf_roughness(const Bsdf* b) {
     int t = b->type;
-    if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && t == MAT_ROUGHCONDUCTOR) return b->alpha;
-    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC) return b->alpha;
+    if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && t == MAT_ROUGHCONDUCTOR) return bsdf_rough_alpha(b);
+    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC) return bsdf_rough_alpha(b);
     return bsdf_is_delta(b) ? 0.0f : 1.0f;
 }
 

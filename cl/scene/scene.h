@@ -128,13 +128,10 @@ static inline Bsdf bsdf_at(const Scene* sc, const Surface* s) {
     return b;
 }
 
-/* Bump mapping (Mitsuba `bumpmap`): displace the surface along the shading normal
- * by scale * height(uv) and take the normal of the displaced surface; the height
- * gradient is a forward difference over one texel (one hundredth of the unit
- * square for procedural textures). Needs the mesh's uv parameterisation. */
-static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, vec2 uv, vec3 ns) {
-    int t = (int)m[MAT_BUMP_TEX];
-    if (t < 0 || !(info & TRI_HAS_UVS)) return ns;
+/* dp/du of triangle prim from its uvs (Mitsuba's Mesh::compute_surface_interaction); false where the
+ * mesh has none or they are degenerate. */
+static inline bool tri_dpdu(const Scene* sc, int prim, int info, vec3* dpdu, vec3* dpdv) {
+    if (!(info & TRI_HAS_UVS)) return false;
     __global const int* vi = sc->tri_vidx + 3 * prim;
     __global const float* tri = sc->tris + 9 * prim;
     vec3 e1 = rgb_at(tri + 3, sc->unit), e2 = rgb_at(tri + 6, sc->unit);
@@ -142,10 +139,21 @@ static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, 
     vec2 d1 = v2(sc->vuvs[2 * vi[1]] - t0.x, sc->vuvs[2 * vi[1] + 1] - t0.y);
     vec2 d2 = v2(sc->vuvs[2 * vi[2]] - t0.x, sc->vuvs[2 * vi[2] + 1] - t0.y);
     float det = d1.x * d2.y - d1.y * d2.x;
-    if (!(m_abs(det) > 1e-12f)) return ns;
+    if (!(m_abs(det) > 1e-12f)) return false;
     float inv = 1.0f / det;
-    vec3 dpdu = v3_scale(v3_sub(v3_scale(e1, d2.y), v3_scale(e2, d1.y)), inv);
-    vec3 dpdv = v3_scale(v3_sub(v3_scale(e2, d1.x), v3_scale(e1, d2.x)), inv);
+    *dpdu = v3_scale(v3_sub(v3_scale(e1, d2.y), v3_scale(e2, d1.y)), inv);
+    *dpdv = v3_scale(v3_sub(v3_scale(e2, d1.x), v3_scale(e1, d2.x)), inv);
+    return true;
+}
+
+/* Bump mapping (Mitsuba `bumpmap`): displace the surface along the shading normal
+ * by scale * height(uv) and take the normal of the displaced surface; the height
+ * gradient is a forward difference over one texel (one hundredth of the unit
+ * square for procedural textures). Needs the mesh's uv parameterisation. */
+static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, vec2 uv, vec3 ns) {
+    int t = (int)m[MAT_BUMP_TEX];
+    vec3 dpdu, dpdv;
+    if (t < 0 || !tri_dpdu(sc, prim, info, &dpdu, &dpdv)) return ns;
     __global const float* rec = sc->tex.info + TEX_STRIDE * t;
     bool bitmap = (int)rec[TEX_KIND] == TEX_BITMAP;
     /* steps of about a texel: the uv transform's column lengths (its diagonal when it has no skew) */
@@ -166,6 +174,24 @@ static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, 
     n = v3_divs(n, len);
     return m_dot(n, ns) < 0.0f ? v3_neg(n) : n;
 }
+
+#ifdef SCENE_HAS_ANISOTROPY
+/* Mitsuba's shading frame (SurfaceInteraction::initialize_sh_frame): s = dp/du made orthogonal to the
+ * shading normal ns, t = ns x s; dp/du from the triangle's uvs, or coordinate_system(ng).s where the
+ * mesh has none (Mitsuba's Mesh::compute_surface_interaction). `fallback` where that degenerates. */
+static inline Frame uv_frame(const Scene* sc, int prim, int info, vec3 ng, vec3 ns, Frame fallback) {
+    vec3 dpdu, dpdv;
+    if (!tri_dpdu(sc, prim, info, &dpdu, &dpdv)) dpdu = frame_from(ng).s;
+    vec3 sv = v3_sub(dpdu, v3_scale(ns, m_dot(ns, dpdu)));
+    float len = m_length(sv);
+    if (!(len > 0.0f) || !m_isfinite(len)) return fallback;
+    Frame f;
+    f.n = ns;
+    f.s = v3_divs(sv, len);
+    f.t = m_cross(ns, f.s);
+    return f;
+}
+#endif
 
 /* Rebuild the surface from a hit record (leaf-order triangle, barycentrics u, v). */
 static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
@@ -191,6 +217,22 @@ static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
     ns = bump_normal(sc, scene_material(sc, s.material), prim, info, s.uv, ns);
 #endif
     s.sh = frame_from(ns);
+#ifdef SCENE_HAS_ANISOTROPY
+    if (mat_flags(scene_material(sc, s.material)) & MAT_FLAG_UV_FRAME) s.sh = uv_frame(sc, prim, info, s.ng, ns, s.sh);
+#endif
+    return s;
+}
+
+/* The surface a path's ray along dir hit, on the side it hit: with -DSCENE_HAS_BACK_MATERIALS a
+ * material with a different back (MAT_FLAG_BACK, Mitsuba `twosided` with two BSDFs) is replaced by its
+ * back material where wi = -dir is below the shading normal (to_local(s.sh, -dir).z < 0, the test
+ * Mitsuba's twosided makes; negation is exact, so the two tests agree to the bit). */
+static inline Surface surface_hit(const Scene* sc, int prim, float u, float v, vec3 dir) {
+    Surface s = surface_at(sc, prim, u, v);
+#ifdef SCENE_HAS_BACK_MATERIALS
+    Material m = scene_material(sc, s.material);
+    if ((mat_flags(m) & MAT_FLAG_BACK) && m_dot(dir, s.sh.n) > 0.0f) s.material = (int)m[MAT_BACK];
+#endif
     return s;
 }
 

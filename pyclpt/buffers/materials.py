@@ -25,6 +25,7 @@ from pyclpt.scene.model import (
     Material,
     Plastic,
     ThinDielectric,
+    back_material,
     base_material,
     uv_matrix,
 )
@@ -37,7 +38,10 @@ MAT_TYPE, MAT_FLAGS, MAT_COLOR, MAT_COLOR_TEX, MAT_SPEC, MAT_SPEC_TEX = 0, 1, 2,
 MAT_TRANS, MAT_IOR, MAT_ETA, MAT_K, MAT_ALPHA = 10, 13, 14, 17, 20
 MAT_OPACITY, MAT_OPACITY_TEX, MAT_BUMP_TEX, MAT_BUMP_SCALE, MAT_FDR_INT, MAT_TRANS_TEX = 21, 22, 23, 24, 25, 26
 MAT_RP_TRANS = 27  # roughplastic: RP_KNOTS half floats of the coating's transmittance (slots 27..31)
+MAT_ALPHA_V = 27  # anisotropic roughconductor / roughdielectric: alpha_v (MAT_ALPHA holds alpha_u)
+MAT_BACK = 10  # the front record of a TwoSided: the back record's index (MAT_TRANS's slot, unused by it)
 FLAG_TWOSIDED, FLAG_NONLINEAR, FLAG_BECKMANN, FLAG_MASKED = 1, 2, 4, 8
+FLAG_ANISOTROPIC, FLAG_BACK, FLAG_UV_FRAME = 16, 32, 64
 
 TEX_STRIDE = 20
 TEX_UV, TEX_SCALE, TEX_COLOR1 = 8, 14, 17  # the (2, 3) uv matrix, row by row; rgb; rgb
@@ -133,8 +137,17 @@ def _color(rec: np.ndarray, at: int, tex_at: int, value: Color, textures: Textur
         rec[tex_at] = -1
 
 
+def _anisotropy(rec: np.ndarray, base: Conductor | Dielectric) -> int:
+    """alpha_v of an anisotropic rough material into its record; its flags."""
+    if not (base.anisotropic and base.alpha > 0):
+        return 0
+    rec[MAT_ALPHA_V] = base.alpha_v
+    return FLAG_ANISOTROPIC | FLAG_UV_FRAME
+
+
 def pack_material(mat: Material, textures: TextureTable | None = None) -> np.ndarray:
-    """The MAT_STRIDE-float record of a material (its textures added to ``textures``)."""
+    """The MAT_STRIDE-float record of a material (its textures added to ``textures``); of a
+    :class:`TwoSided`'s front (:func:`pack_materials` adds the back's record and links the two)."""
     textures = textures if textures is not None else TextureTable()
     rec = np.zeros(MAT_STRIDE, np.float32)
     for slot in (MAT_COLOR_TEX, MAT_SPEC_TEX, MAT_TRANS_TEX, MAT_OPACITY_TEX, MAT_BUMP_TEX):
@@ -166,6 +179,7 @@ def pack_material(mat: Material, textures: TextureTable | None = None) -> np.nda
         rec[MAT_ETA:MAT_ETA + 3] = base.eta
         rec[MAT_K:MAT_K + 3] = base.k
         rec[MAT_ALPHA] = base.alpha
+        flags |= _anisotropy(rec, base)
     elif isinstance(base, (Dielectric, ThinDielectric)):
         rough = isinstance(base, Dielectric) and base.alpha > 0
         kind = "thindielectric" if isinstance(base, ThinDielectric) else (
@@ -174,6 +188,8 @@ def pack_material(mat: Material, textures: TextureTable | None = None) -> np.nda
         _color(rec, MAT_TRANS, MAT_TRANS_TEX, base.specular_transmittance, textures)
         rec[MAT_IOR] = base.int_ior / base.ext_ior
         rec[MAT_ALPHA] = getattr(base, "alpha", 0.0)
+        if isinstance(base, Dielectric):
+            flags |= _anisotropy(rec, base)
     elif isinstance(base, Plastic):
         kind = "roughplastic" if base.alpha > 0 else "plastic"
         _color(rec, MAT_COLOR, MAT_COLOR_TEX, base.diffuse_reflectance, textures)
@@ -191,7 +207,7 @@ def pack_material(mat: Material, textures: TextureTable | None = None) -> np.nda
             flags |= FLAG_NONLINEAR
     else:
         raise TypeError(f"unsupported material {mat!r}")
-    if getattr(base, "twosided", False):
+    if getattr(base, "twosided", False) or back_material(mat) is not None:
         flags |= FLAG_TWOSIDED
     if getattr(base, "distribution", "ggx") == "beckmann":
         flags |= FLAG_BECKMANN
@@ -208,14 +224,34 @@ class MaterialArrays:
     has_bumpmaps: bool
     has_textures: bool  # a reflectance or transmittance is textured (-DSCENE_HAS_TEXTURES)
     kinds: int  # bit MAT_TYPES[kind] set for every material kind present (-DSCENE_MATERIALS)
+    has_anisotropy: bool = False  # an anisotropic rough material (-DSCENE_HAS_ANISOTROPY)
+    has_back_materials: bool = False  # a TwoSided with two materials (-DSCENE_HAS_BACK_MATERIALS)
 
 
 def pack_materials(materials: list[Material], textures: TextureTable | None = None) -> MaterialArrays:
+    """The records of ``materials``, one each at its index, then the back materials of the TwoSided ones
+    (the front record has FLAG_BACK and the back one's index in MAT_BACK; both are two-sided)."""
     textures = textures if textures is not None else TextureTable()
-    recs = np.stack([pack_material(m, textures) for m in materials])
+    front = [pack_material(m, textures) for m in materials]
+    backs = []
+    for rec, mat in zip(front, materials):
+        back = back_material(mat)
+        if back is None:
+            continue
+        brec = pack_material(back, textures)
+        brec[MAT_FLAGS] = int(brec[MAT_FLAGS]) | FLAG_TWOSIDED
+        rec[MAT_BACK] = len(materials) + len(backs)
+        flags = int(rec[MAT_FLAGS]) | FLAG_BACK
+        if int(brec[MAT_FLAGS]) & FLAG_UV_FRAME:  # the frame is the hit's, chosen before the side
+            flags |= FLAG_UV_FRAME
+        rec[MAT_FLAGS] = flags
+        backs.append(brec)
+    recs = np.stack(front + backs)
+    flags = recs[:, MAT_FLAGS].astype(np.int32)
     masked = (recs[:, MAT_FLAGS].astype(np.int32) & FLAG_MASKED) != 0
     textured = bool(np.any(recs[:, [MAT_COLOR_TEX, MAT_SPEC_TEX, MAT_TRANS_TEX]] >= 0))
     kinds = 0
     for t in np.unique(recs[:, MAT_TYPE].astype(np.int64)):
         kinds |= 1 << int(t)
-    return MaterialArrays(recs, textures, masked, bool(np.any(recs[:, MAT_BUMP_TEX] >= 0)), textured, kinds)
+    return MaterialArrays(recs, textures, masked, bool(np.any(recs[:, MAT_BUMP_TEX] >= 0)), textured, kinds,
+                          bool(np.any(flags & FLAG_ANISOTROPIC)), bool(np.any(flags & FLAG_BACK)))

@@ -50,7 +50,8 @@ class SceneArrays:
     textures: TextureTable
     bounds: np.ndarray  # (2, 3) scene bounding box
     defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, SCENE_HAS_TEXTURES, SCENE_MATERIALS,
-    # SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS, SCENE_CAMERA, SCENE_HAS_EMITTER_TEXTURES
+    # SCENE_HAS_ANISOTROPY, SCENE_HAS_BACK_MATERIALS, SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS, SCENE_CAMERA,
+    # SCENE_FILTER, SCENE_HAS_EMITTER_TEXTURES
     node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer)
 
     @property
@@ -95,6 +96,7 @@ def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[Mat
 def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, scene: Scene) -> dict:
     return {"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
             "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
+            "SCENE_HAS_ANISOTROPY": mats.has_anisotropy, "SCENE_HAS_BACK_MATERIALS": mats.has_back_materials,
             "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets,
             "SCENE_CAMERA": camera_kind(scene.camera) or None, "SCENE_FILTER": filter_kind(scene.film.rfilter) or None,
             "SCENE_HAS_EMITTER_TEXTURES": lights.has_textures}

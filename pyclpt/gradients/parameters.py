@@ -40,6 +40,7 @@ from pyclpt.scene.model import (
     Scene,
     SpotLight,
     ThinDielectric,
+    TwoSided,
 )
 
 #: Kinds of differentiable parameters (the -D GRAD_* groups of cl/gradients/params.h).
@@ -58,6 +59,8 @@ NOT_DIFFERENTIABLE = {
     "scale": "environment map scale: not differentiated (its texels are)",
     "mask": "opacity: changes visibility, not differentiated",
     "emission_texture": "the radiance of a textured area emitter: not differentiated yet",
+    "anisotropic": "anisotropic roughness (alpha_u, alpha_v): not differentiated yet",
+    "back": "the back BSDF of a twosided with two BSDFs: not differentiated yet",
 }
 
 
@@ -145,10 +148,13 @@ class _Walker:
         self.scene = scene
         self.params: dict[str, Parameter] = {}
         self.index = -1  # the material being walked
+        self.only_listed = ""  # a reason that holds for every parameter added now (a TwoSided's back)
 
     def add(self, name: str, kind: str, accessors: tuple[Callable, Callable], target: object,
             reason: str = "") -> None:
         get, put = accessors
+        if self.only_listed:
+            kind, reason = "", self.only_listed
         self.params[name] = Parameter(name, kind, get, put, target, NOT_DIFFERENTIABLE.get(reason, reason),
                                       self.index)
 
@@ -168,15 +174,40 @@ class _Walker:
             if isinstance(mat, Mask) and not isinstance(mat.opacity, (Bitmap, Checkerboard)):
                 self.add(f"{prefix}.opacity.value", "", _rgb_param(mat, "opacity"), mat, "mask")
             prefix, mat = f"{prefix}.nested_bsdf", mat.material
+        if isinstance(mat, TwoSided):  # Mitsuba's names: brdf_0 the front, brdf_1 the back
+            self.base(f"{prefix}.brdf_0", mat.front)
+            self.only_listed = "back"
+            self.base(f"{prefix}.brdf_1", mat.back)
+            self.only_listed = ""
+            return
         if getattr(mat, "twosided", False):
             prefix = f"{prefix}.brdf_0"
+        self.base(prefix, mat)
+
+    def alpha(self, prefix: str, mat: Conductor | Dielectric) -> None:
+        """A rough conductor's or dielectric's roughness: alpha, or alpha_u and alpha_v (listed only)."""
+        if mat.anisotropic:
+            self.add(f"{prefix}.alpha_u.value", "", _scalar_param(mat, "alpha", f"{prefix}.alpha_u.value"), mat,
+                     "anisotropic")
+            self.add(f"{prefix}.alpha_v.value", "", _scalar_param(mat, "alpha_v", f"{prefix}.alpha_v.value"),
+                     mat, "anisotropic")
+        else:
+            get, put = _scalar_param(mat, "alpha", f"{prefix}.alpha.value")
+
+            def put_both(v: np.ndarray) -> None:  # an explicit isotropic alpha_v stays equal to alpha
+                put(v)
+                if mat.alpha_v is not None:
+                    mat.alpha_v = mat.alpha
+
+            self.add(f"{prefix}.alpha.value", "alpha", (get, put_both), mat)
+
+    def base(self, prefix: str, mat: Material) -> None:
         if isinstance(mat, Diffuse):
             self.color(prefix, mat, "reflectance", "color")
         elif isinstance(mat, Conductor):
             self.color(prefix, mat, "specular_reflectance", "spec")
             if mat.alpha > 0:
-                self.add(f"{prefix}.alpha.value", "alpha", _scalar_param(mat, "alpha", f"{prefix}.alpha.value"),
-                         mat)
+                self.alpha(prefix, mat)
             for c in ("eta", "k"):
                 self.add(f"{prefix}.{c}.value", "", _rgb_param(mat, c), mat, "conductor")
         elif isinstance(mat, Plastic):
@@ -189,8 +220,7 @@ class _Walker:
             self.color(prefix, mat, "specular_reflectance", "")
             self.color(prefix, mat, "specular_transmittance", "")
             if isinstance(mat, Dielectric) and mat.alpha > 0:
-                self.add(f"{prefix}.alpha.value", "alpha", _scalar_param(mat, "alpha", f"{prefix}.alpha.value"),
-                         mat)
+                self.alpha(prefix, mat)
             self.add(f"{prefix}.int_ior", "", _scalar_param(mat, "int_ior"), mat, "ior")
 
     def mesh(self, mesh: Mesh) -> None:

@@ -17,7 +17,7 @@ from collections.abc import Iterable
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.buffers.materials import MAT_STRIDE, pack_material
+from pyclpt.buffers.materials import MAT_STRIDE, pack_materials
 from pyclpt.buffers.scene import SceneBuffers
 from pyclpt.device.context import Device, alloc, upload
 from pyclpt.device.profile import KernelProfile
@@ -26,7 +26,7 @@ from pyclpt.film.film import Film, frames_per_batch
 from pyclpt.gradients.layout import BUFFERS, buffer_sizes
 from pyclpt.gradients.parameters import KINDS
 from pyclpt.integrators.megakernel import Megakernel
-from pyclpt.scene.model import BumpMap, Mask, Scene, base_material
+from pyclpt.scene.model import BumpMap, Mask, Scene, TwoSided
 
 LAUNCH = 1 << 18  # paths per launch (film slots)
 LOCAL_SIZE = 64
@@ -42,12 +42,17 @@ def moved_alpha_records(scene: Scene, step: float = BSDF_DIFF_STEP) -> tuple[np.
     def moved(mat, factor: float):
         if isinstance(mat, (Mask, BumpMap)):
             return dataclasses.replace(mat, material=moved(mat.material, factor))
-        base = base_material(mat)
-        alpha = getattr(base, "alpha", 0.0)
-        return dataclasses.replace(base, alpha=alpha * factor) if alpha > 0 else base
+        if isinstance(mat, TwoSided):
+            return dataclasses.replace(mat, front=moved(mat.front, factor), back=moved(mat.back, factor))
+        alpha = getattr(mat, "alpha", 0.0)
+        if not alpha > 0:
+            return mat
+        iso = getattr(mat, "alpha_v", None) == alpha  # an isotropic alpha_v moves along
+        return dataclasses.replace(mat, alpha=alpha * factor, **({"alpha_v": alpha * factor} if iso else {}))
 
-    up = np.stack([pack_material(moved(m, 1.0 + step)) for m in scene.materials]).reshape(-1, MAT_STRIDE)
-    down = np.stack([pack_material(moved(m, 1.0 - step)) for m in scene.materials]).reshape(-1, MAT_STRIDE)
+    # every record of the scene's (a TwoSided's back ones after the others), as pack_materials orders them
+    up = pack_materials([moved(m, 1.0 + step) for m in scene.materials]).materials.reshape(-1, MAT_STRIDE)
+    down = pack_materials([moved(m, 1.0 - step) for m in scene.materials]).materials.reshape(-1, MAT_STRIDE)
     return up, down
 
 

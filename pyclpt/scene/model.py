@@ -271,6 +271,17 @@ def _alpha(value: float, what: str) -> float:
     return check_float(value, f"{what}: roughness alpha", lo=0.0, hi=4.0)
 
 
+def _alpha_v(value: float | None, alpha: float, what: str) -> float | None:
+    """None (isotropic) or Mitsuba's alpha_v, which needs a rough material (alpha = alpha_u > 0)."""
+    if value is None:
+        return None
+    v = _alpha(value, f"{what} alpha_v")
+    if v != alpha and not (alpha > 0 and v > 0):
+        raise ValueError(f"{what}: anisotropic roughness needs alpha (alpha_u) and alpha_v both > 0, "
+                         f"got {alpha!r}, {v!r}")
+    return v
+
+
 def _distribution(value: str, what: str) -> str:
     if value not in DISTRIBUTIONS:
         raise ValueError(f"{what}: microfacet distribution must be one of {DISTRIBUTIONS}, got {value!r}")
@@ -307,6 +318,7 @@ class Conductor(Checked):
     specular_reflectance: Color = (1.0, 1.0, 1.0)
     twosided: bool = False
     distribution: str = "ggx"
+    alpha_v: float | None = None  # anisotropic: alpha is then Mitsuba's alpha_u (along the tangent dp/du)
 
     def _check(self) -> None:
         self.eta = radiance(self.eta, "conductor eta")
@@ -315,6 +327,12 @@ class Conductor(Checked):
         self.specular_reflectance = color(self.specular_reflectance, "conductor specular_reflectance")
         self.twosided = check_bool(self.twosided, "conductor twosided")
         self.distribution = _distribution(self.distribution, "conductor")
+        self.alpha_v = _alpha_v(self.alpha_v, self.alpha, "conductor")
+
+    @property
+    def anisotropic(self) -> bool:
+        """alpha_u (``alpha``) != ``alpha_v``."""
+        return self.alpha_v is not None and self.alpha_v != self.alpha
 
 
 @dataclass
@@ -328,6 +346,7 @@ class Dielectric(Checked):
     specular_transmittance: Color = (1.0, 1.0, 1.0)
     alpha: float = 0.0
     distribution: str = "ggx"
+    alpha_v: float | None = None  # anisotropic: alpha is then Mitsuba's alpha_u (along the tangent dp/du)
 
     def _check(self) -> None:
         self.int_ior = _ior(self.int_ior, "dielectric int_ior")
@@ -336,6 +355,12 @@ class Dielectric(Checked):
         self.specular_transmittance = color(self.specular_transmittance, "dielectric specular_transmittance")
         self.alpha = _alpha(self.alpha, "dielectric")
         self.distribution = _distribution(self.distribution, "dielectric")
+        self.alpha_v = _alpha_v(self.alpha_v, self.alpha, "dielectric")
+
+    @property
+    def anisotropic(self) -> bool:
+        """alpha_u (``alpha``) != ``alpha_v``."""
+        return self.alpha_v is not None and self.alpha_v != self.alpha
 
 
 @dataclass
@@ -413,7 +438,25 @@ class BumpMap(Checked):
         self.scale = check_float(self.scale, "bumpmap scale")
 
 
-Material = Diffuse | Conductor | Dielectric | ThinDielectric | Plastic | Mask | BumpMap
+@dataclass
+class TwoSided(Checked):
+    """Mitsuba ``twosided`` with two BSDFs: ``front`` where the path arrives from above the shading normal,
+    ``back`` (which sees the directions mirrored to its own front) from below. Both reflect only (no
+    dielectrics, as Mitsuba requires) and have no wrappers; a mask or bump map goes around the pair.
+    (``twosided`` with one BSDF is the material's own ``twosided`` flag.)"""
+
+    front: BaseMaterial
+    back: BaseMaterial
+
+    def _check(self) -> None:
+        for side in ("front", "back"):
+            mat = getattr(self, side)
+            if not isinstance(mat, (Diffuse, Conductor, Plastic)):
+                raise TypeError(f"twosided {side}: expected a reflecting material (Diffuse, Conductor, Plastic), "
+                                f"got {type(mat).__name__} {mat!r:.60}")
+
+
+Material = Diffuse | Conductor | Dielectric | ThinDielectric | Plastic | TwoSided | Mask | BumpMap
 MATERIALS = get_args(Material)  # the classes, for isinstance
 
 
@@ -569,10 +612,17 @@ class Envmap(Checked):
 
 
 def base_material(mat: Material) -> BaseMaterial:
-    """The BSDF under any mask / bump-map wrappers."""
+    """The BSDF under any mask / bump-map wrappers (the front one of a :class:`TwoSided`)."""
     while isinstance(mat, (Mask, BumpMap)):
         mat = mat.material
-    return mat
+    return mat.front if isinstance(mat, TwoSided) else mat
+
+
+def back_material(mat: Material) -> BaseMaterial | None:
+    """The back BSDF of a :class:`TwoSided` under any wrappers, else None."""
+    while isinstance(mat, (Mask, BumpMap)):
+        mat = mat.material
+    return mat.back if isinstance(mat, TwoSided) else None
 
 
 @dataclass(eq=False)

@@ -47,6 +47,16 @@ MATERIALS = {
                              "specular_reflectance": rgb([0.5, 0.5, 0.5]), "int_ior": 1.33, "ext_ior": 1.0},
     "roughconductor-beckmann-0.3": {"type": "roughconductor", "distribution": "beckmann", "alpha": 0.3,
                                     "eta": rgb([0.2, 0.9, 1.1]), "k": rgb([3.9, 2.4, 2.2])},
+    # anisotropic (the frame's s = (1, 0, 0) carries alpha_u)
+    "roughconductor-ggx-0.05x0.4": {"type": "roughconductor", "distribution": "ggx", "alpha_u": 0.05, "alpha_v": 0.4,
+                                    "eta": rgb([0.2, 0.9, 1.1]), "k": rgb([3.9, 2.4, 2.2])},
+    "roughconductor-beckmann-0.4x0.1": {"type": "roughconductor", "distribution": "beckmann", "alpha_u": 0.4,
+                                        "alpha_v": 0.1, "eta": rgb([0.2, 0.9, 1.1]), "k": rgb([3.9, 2.4, 2.2])},
+    "roughglass-ggx-0.1x0.5": {"type": "roughdielectric", "distribution": "ggx", "alpha_u": 0.1, "alpha_v": 0.5,
+                               "int_ior": 1.5, "ext_ior": 1.0, "specular_reflectance": rgb([0.9, 0.8, 0.7]),
+                               "specular_transmittance": rgb([0.6, 0.7, 0.8])},
+    "roughglass-beckmann-0.3x0.05": {"type": "roughdielectric", "distribution": "beckmann", "alpha_u": 0.3,
+                                     "alpha_v": 0.05, "int_ior": 1.5, "ext_ior": 1.0},
 }
 
 

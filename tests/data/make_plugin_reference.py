@@ -15,7 +15,10 @@
 - ``rfilter.xml`` with ``filter=tent`` and ``filter=gaussian``: ``rfilter-tent-mitsuba.npy``,
   ``rfilter-gaussian-mitsuba.npy``, the reconstruction filters (tests/test_rfilter.py);
 - ``sunsky.xml``: Mitsuba 3's ``sunsky`` (sun from a place and time) over a floor and a box
-  (tests/test_plugins.py).
+  (tests/test_plugins.py);
+- ``anisotropy.xml``: anisotropic rough conductors and a rough dielectric, as it is and, as
+  ``anisotropy-swapped``, with alpha_u and alpha_v swapped (tests/test_plugins.py);
+- ``twosided-pair.xml``: twosided with a different BSDF on each side (tests/test_plugins.py).
 
 Mitsuba's path tracer as each file says (box filter unless the name says otherwise), 16384 spp.
 """
@@ -28,9 +31,11 @@ import numpy as np
 mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
 HERE = Path(__file__).parent
 NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms",
-         "emitter-textures", "sunsky", "rfilter-tent", "rfilter-gaussian")
-#: references of one file with parameters: name -> (file, parameters)
-VARIANTS = {"rfilter-tent": ("rfilter", {"filter": "tent"}), "rfilter-gaussian": ("rfilter", {"filter": "gaussian"})}
+         "emitter-textures", "sunsky", "rfilter-tent", "rfilter-gaussian", "anisotropy", "anisotropy-swapped",
+         "twosided-pair")
+#: references of one file rendered with other parameters (<default> values): name -> (file, parameters)
+VARIANTS = {"rfilter-tent": ("rfilter", {"filter": "tent"}), "rfilter-gaussian": ("rfilter", {"filter": "gaussian"}),
+            "anisotropy-swapped": ("anisotropy", {"au": "0.35", "av": "0.04"})}
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or NAMES:

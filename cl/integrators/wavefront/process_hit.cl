@@ -18,7 +18,7 @@ __kernel void process_hit(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     int slot = hit_queue[i];
     PathState ps = path_load_shading(&P, slot, bounce);
     int prim = path_get_hit_prim(&P, slot);
-    Surface s = surface_at(&sc, prim, path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
+    Surface s = surface_hit(&sc, prim, path_get_hit_u(&P, slot), path_get_hit_v(&P, slot), ps.dir);
 #ifdef AOVS
     gbuffer_hit(&sc, aov_out(aovs, aov_n, path_get_film_slot(&P, slot)), prim, &s, path_get_hit_t(&P, slot), bounce,
                 ps.dir, ps.beta, &ps.flags);

@@ -21,7 +21,7 @@ __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
 #ifdef AOVS
     ps.flags = path_get_flags(&P, slot); /* PATH_ALBEDO_DONE carries on (PATH_KEPT_FLAGS, path.h) */
 #endif
-    Surface s = surface_at(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot));
+    Surface s = surface_hit(&sc, path_get_hit_prim(&P, slot), path_get_hit_u(&P, slot), path_get_hit_v(&P, slot), ps.dir);
     Bsdf b = bsdf_at(&sc, &s);
     bool alive = path_sample_bsdf(path_key(&P, &sc, slot, seed, first_sample), &s, &b, &ps, max_depth);
     if (alive) path_store_ray(&P, slot, &ps);

@@ -1,17 +1,44 @@
-/* microfacet.h: the isotropic microfacet distributions of the rough materials, GGX
- * (Trowbridge-Reitz) and Beckmann, following Walter et al. 2007 and Mitsuba 3's microfacet.h:
- * D(m), Smith's masking G1 and visible-normal sampling with its pdf (Heitz 2018 for GGX, Jakob
- * 2014 for Beckmann). m is a microfacet normal with m.z > 0, v any direction. Needs nothing but
- * core/common.h; scene/bsdf.h makes a Microfacet from a material (microfacet_of). */
+/* microfacet.h: the microfacet distributions of the rough materials, GGX (Trowbridge-Reitz) and
+ * Beckmann, following Walter et al. 2007 and Mitsuba 3's microfacet.h: D(m), Smith's masking G1 and
+ * visible-normal sampling with its pdf (Heitz 2018 for GGX, Jakob 2014 for Beckmann). m is a
+ * microfacet normal with m.z > 0, v any direction. Needs nothing but core/common.h; scene/bsdf.h
+ * makes a Microfacet from a material (microfacet_of).
+ *
+ * Anisotropic roughness (Mitsuba's alpha_u along the shading frame's s = x axis, alpha_v along t = y)
+ * is compiled in with -DSCENE_HAS_ANISOTROPY (pyclpt/buffers/materials.py); an isotropic
+ * distribution (alpha_v == alpha) then still takes the isotropic arithmetic, so its results are the
+ * same bits as without the define. Sampling stretches by (alpha, alpha_v), which for an isotropic
+ * distribution is the same multiplication as before. */
 #ifndef PYCLPT_BSDFS_MICROFACET_H
 #define PYCLPT_BSDFS_MICROFACET_H
 
 #include "core/common.h"
 
 typedef struct {
-    float alpha;
+    float alpha; /* alpha_u: roughness along x (the shading frame's s) */
+#ifdef SCENE_HAS_ANISOTROPY
+    float alpha_v; /* roughness along y (t); == alpha for an isotropic distribution */
+#endif
     bool beckmann;
 } Microfacet;
+
+/* The roughness along y. */
+static inline float mf_alpha_v(Microfacet d) {
+#ifdef SCENE_HAS_ANISOTROPY
+    return d.alpha_v;
+#else
+    return d.alpha;
+#endif
+}
+
+/* True for an anisotropic distribution (never without -DSCENE_HAS_ANISOTROPY). */
+static inline bool mf_anisotropic(Microfacet d) {
+#ifdef SCENE_HAS_ANISOTROPY
+    return d.alpha_v != d.alpha;
+#else
+    return false;
+#endif
+}
 
 #define INV_SQRT_PI_F 0.56418958354775628695f
 
@@ -54,11 +81,22 @@ static inline float mf_d(Microfacet d, vec3 m) {
     float xy2 = m.x * m.x + m.y * m.y;
     float r;
     if (d.beckmann) {
-        float e = m_exp(-xy2 / (a2 * c2));
+        float ex = xy2 / (a2 * c2);
+        if (mf_anisotropic(d)) { /* (x / alpha_u)^2 + (y / alpha_v)^2 in place of xy2 / alpha^2 */
+            float sx = m.x / d.alpha, sy = m.y / mf_alpha_v(d);
+            ex = (sx * sx + sy * sy) / c2;
+            a2 = d.alpha * mf_alpha_v(d);
+        }
+        float e = m_exp(-ex);
         if (e == 0.0f) return 0.0f;
         r = e / (PI_F * a2 * c2 * c2);
     } else {
         float t = xy2 / a2 + c2;
+        if (mf_anisotropic(d)) {
+            float sx = m.x / d.alpha, sy = m.y / mf_alpha_v(d);
+            t = sx * sx + sy * sy + c2;
+            a2 = d.alpha * mf_alpha_v(d);
+        }
         r = 1.0f / (PI_F * a2 * t * t);
     }
     /* as Mitsuba: drop values too small to matter (avoids denormals downstream) */
@@ -69,6 +107,10 @@ static inline float mf_d(Microfacet d, vec3 m) {
 static inline float mf_g1(Microfacet d, vec3 v, vec3 m) {
     if (m_dot(v, m) * v.z <= 0.0f) return 0.0f;
     float xy2 = d.alpha * d.alpha * (v.x * v.x + v.y * v.y);
+    if (mf_anisotropic(d)) { /* (alpha_u v.x)^2 + (alpha_v v.y)^2 */
+        float sx = d.alpha * v.x, sy = mf_alpha_v(d) * v.y;
+        xy2 = sx * sx + sy * sy;
+    }
     if (xy2 <= 0.0f) return 1.0f;
     if (d.beckmann) {
         /* a = 1 / (alpha tan theta); Lambda(a) = (exp(-a^2) / (a sqrt(pi)) - erfc(a)) / 2 */
@@ -124,7 +166,8 @@ static inline vec2 beckmann_sample_visible_11(float cos_i, vec2 u) {
 
 /* A visible normal for wi (wi.z > 0), distributed as D(m) G1(wi, m) max(0, wi.m) / wi.z. */
 static inline vec3 mf_sample_visible(Microfacet d, vec3 wi, vec2 u) {
-    vec3 vh = m_normalize(v3(d.alpha * wi.x, d.alpha * wi.y, wi.z));
+    float ay = mf_alpha_v(d);
+    vec3 vh = m_normalize(v3(d.alpha * wi.x, ay * wi.y, wi.z));
     vec3 m;
     if (d.beckmann) {
         float lensq = vh.x * vh.x + vh.y * vh.y;
@@ -132,11 +175,11 @@ static inline vec3 mf_sample_visible(Microfacet d, vec3 wi, vec2 u) {
         float cos_phi = lensq > 0.0f ? vh.x * inv : 1.0f, sin_phi = vh.y * inv;
         vec2 s = beckmann_sample_visible_11(vh.z, u);
         float sx = (cos_phi * s.x - sin_phi * s.y) * d.alpha;
-        float sy = (sin_phi * s.x + cos_phi * s.y) * d.alpha;
+        float sy = (sin_phi * s.x + cos_phi * s.y) * ay;
         m = v3(-sx, -sy, 1.0f);
     } else {
         vec3 nh = ggx_sample_visible_11(vh, u);
-        m = v3(d.alpha * nh.x, d.alpha * nh.y, m_max(1e-6f, nh.z));
+        m = v3(d.alpha * nh.x, ay * nh.y, m_max(1e-6f, nh.z));
     }
     return m_normalize(m);
 }

@@ -25,6 +25,8 @@ from pyclpt.scene.model import (
     Material,
     Plastic,
     ThinDielectric,
+    TwoSided,
+    base_material,
 )
 
 BsdfLoader = Callable[[LoadContext, Mapping[str, Any], str], Material]
@@ -65,26 +67,36 @@ UNSUPPORTED = frozenset({"blendbsdf", "coating", "roughcoating", "phong", "ward"
 
 # -- shared parameters -----------------------------------------------------------------------------
 
-def roughness(ctx: LoadContext, d: Mapping[str, Any], where: str, used: set[str]) -> tuple[float, str]:
-    """``alpha`` (or the geometric mean of ``alpha_u``/``alpha_v``) and the distribution; adds their keys to
-    ``used``."""
+def roughness(ctx: LoadContext, d: Mapping[str, Any], where: str, used: set[str],
+              anisotropic: bool = True) -> tuple[float, float | None, str]:
+    """``alpha`` (or ``alpha_u``), ``alpha_v`` (None when isotropic) and the distribution; adds their keys to
+    ``used``. ``anisotropic=False`` (Mitsuba's roughplastic, which has only ``alpha``): the geometric mean of
+    ``alpha_u``/``alpha_v``, with a note."""
     used |= {"alpha", "distribution", "alpha_u", "alpha_v", "sample_visible"}
     dist = str(d.get("distribution", "beckmann")).lower()  # Mitsuba's default
     if dist not in ("ggx", "beckmann"):
         ctx.note(d, where, f"microfacet distribution {dist!r} not supported, Beckmann used")
         dist = "beckmann"
+    alpha_v = None
     if "alpha_u" in d or "alpha_v" in d:
         au = ctx.number(d, "alpha_u", 0.1, where)
         av = ctx.number(d, "alpha_v", au, where)
-        if au != av:
-            ctx.note(d, where, f"anisotropic roughness ({au}, {av}) not supported, "
+        for name, a in (("alpha_u", au), ("alpha_v", av)):
+            if not 0.0 <= a <= 4.0:
+                raise ctx.fail(f"{where}.{name}", f"roughness must be in [0, 4], got {a}", d)
+        if au == av:
+            alpha = au
+        elif anisotropic:  # Mitsuba clamps each to 1e-4
+            alpha, alpha_v = au, max(av, 1e-4)
+        else:
+            ctx.note(d, where, f"anisotropic roughness ({au}, {av}) not supported by {d.get('type')}, "
                                f"alpha {np.sqrt(au * av):.4g} used")
-        alpha = float(np.sqrt(au * av))
+            alpha = float(np.sqrt(au * av))
     else:
         alpha = ctx.number(d, "alpha", 0.1, where)
     if not 0.0 <= alpha <= 4.0:
         raise ctx.fail(f"{where}.alpha", f"roughness must be in [0, 4], got {alpha}", d)
-    return max(alpha, 1e-4), dist
+    return max(alpha, 1e-4), alpha_v, dist
 
 
 def iors(ctx: LoadContext, d: Mapping[str, Any], where: str, default_int: float) -> tuple[float, float]:
@@ -109,7 +121,7 @@ def load_diffuse(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Material
 def load_conductor(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Material:
     """``conductor`` and ``roughconductor``: a named metal or explicit eta/k, relative to ``ext_eta``."""
     used = {"material", "eta", "k", "specular_reflectance", "ext_eta"}
-    alpha, dist = roughness(ctx, d, where, used) if _is_rough(d) else (0.0, "ggx")
+    alpha, alpha_v, dist = roughness(ctx, d, where, used) if _is_rough(d) else (0.0, None, "ggx")
     ctx.note_unused(where, d, used)
     metal = d.get("material", "none")
     if "eta" in d or "k" in d:
@@ -125,34 +137,34 @@ def load_conductor(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Materi
     eta = tuple(e / ext for e in eta)
     k = tuple(x / ext for x in k)
     spec = color_or_texture(ctx, d.get("specular_reflectance", 1.0), f"{where}.specular_reflectance", d)
-    return Conductor(eta, k, alpha, spec, distribution=dist)
+    return Conductor(eta, k, alpha, spec, distribution=dist, alpha_v=alpha_v)
 
 
 def _dielectric_params(ctx: LoadContext, d: Mapping[str, Any], where: str, rough: bool):
     used = {"int_ior", "ext_ior", "specular_reflectance", "specular_transmittance"}
-    alpha, dist = roughness(ctx, d, where, used) if rough else (0.0, "ggx")
+    alpha, alpha_v, dist = roughness(ctx, d, where, used) if rough else (0.0, None, "ggx")
     ctx.note_unused(where, d, used)
     int_ior, ext_ior = iors(ctx, d, where, 1.5046)
     spec_r = color_or_texture(ctx, d.get("specular_reflectance", 1.0), f"{where}.specular_reflectance", d)
     spec_t = color_or_texture(ctx, d.get("specular_transmittance", 1.0), f"{where}.specular_transmittance", d)
-    return int_ior, ext_ior, spec_r, spec_t, alpha, dist
+    return int_ior, ext_ior, spec_r, spec_t, alpha, alpha_v, dist
 
 
 def load_dielectric(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Material:
     """``dielectric`` and ``roughdielectric``."""
-    int_ior, ext_ior, spec_r, spec_t, alpha, dist = _dielectric_params(ctx, d, where, _is_rough(d))
-    return Dielectric(int_ior, ext_ior, spec_r, spec_t, alpha, dist)
+    int_ior, ext_ior, spec_r, spec_t, alpha, alpha_v, dist = _dielectric_params(ctx, d, where, _is_rough(d))
+    return Dielectric(int_ior, ext_ior, spec_r, spec_t, alpha, dist, alpha_v)
 
 
 def load_thindielectric(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Material:
-    int_ior, ext_ior, spec_r, spec_t, _, _ = _dielectric_params(ctx, d, where, rough=False)
+    int_ior, ext_ior, spec_r, spec_t, _, _, _ = _dielectric_params(ctx, d, where, rough=False)
     return ThinDielectric(int_ior, ext_ior, spec_r, spec_t)
 
 
 def load_plastic(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Material:
     """``plastic`` and ``roughplastic``."""
     used = {"diffuse_reflectance", "specular_reflectance", "int_ior", "ext_ior", "nonlinear"}
-    alpha, dist = roughness(ctx, d, where, used) if _is_rough(d) else (0.0, "ggx")
+    alpha, _, dist = roughness(ctx, d, where, used, anisotropic=False) if _is_rough(d) else (0.0, None, "ggx")
     ctx.note_unused(where, d, used)
     int_ior, ext_ior = iors(ctx, d, where, 1.49)
     return Plastic(color_or_texture(ctx, d.get("diffuse_reflectance", 0.5), f"{where}.diffuse_reflectance", d),
@@ -166,7 +178,7 @@ def make_twosided(mat: Material) -> Material:
     """The material made two-sided (dielectrics already are; wrappers pass it inward)."""
     if isinstance(mat, (Mask, BumpMap)):
         return dataclasses.replace(mat, material=make_twosided(mat.material))
-    if isinstance(mat, (Dielectric, ThinDielectric)):
+    if isinstance(mat, (Dielectric, ThinDielectric, TwoSided)):  # already two-sided
         return mat
     return dataclasses.replace(mat, twosided=True)
 
@@ -176,13 +188,25 @@ def _inner_bsdfs(ctx: LoadContext, d: Mapping[str, Any], where: str) -> list[tup
 
 
 def load_twosided(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Material:
+    """One nested BSDF: it on both sides. Two: the first on the front, the second on the back (seeing the
+    directions mirrored to its front), as Mitsuba's; neither may transmit (Mitsuba refuses that too)."""
     inner = _inner_bsdfs(ctx, d, where)
-    if not inner:
-        raise ctx.fail(where, "twosided needs a nested BSDF", d)
-    if len(inner) > 1:
-        ctx.note(d, where, "a different back-side BSDF is not supported, the front one used on both")
+    if not inner or len(inner) > 2:
+        raise ctx.fail(where, f"twosided needs one or two nested BSDFs, got {len(inner)}", d)
     ctx.note_unused(where, d, {k for k, _ in inner})
-    return make_twosided(resolve_bsdf(ctx, inner[0][1], f"{where}.{inner[0][0]}"))
+    sides = [resolve_bsdf(ctx, v, f"{where}.{k}") for k, v in inner]
+    if len(sides) == 1 or sides[0] == sides[1]:
+        return make_twosided(sides[0])
+    bases = []
+    for (key, _), mat in zip(inner, sides):
+        if isinstance(mat, (Mask, BumpMap)):
+            ctx.note(d, where, f"a {type(mat).__name__.lower()} inside a twosided with two BSDFs is not "
+                               f"supported (put it around the twosided), {key}'s BSDF used without it")
+            mat = base_material(mat)
+        if isinstance(mat, (Dielectric, ThinDielectric)):
+            raise ctx.fail(f"{where}.{key}", "twosided: only materials without transmission can be nested", d)
+        bases.append(mat)
+    return TwoSided(bases[0], bases[1])
 
 
 def _one_inner_bsdf(ctx: LoadContext, d: Mapping[str, Any], where: str) -> tuple[str, Material]:
