@@ -23,7 +23,8 @@ Protocol (one JSON object per line on stdout; Mitsuba's own log lines may come b
 "variant", "load_s", "warmup_s": [...]}``. Without ``--repeats`` it then reads commands from
 stdin: ``render SEED`` answers ``{"event": "render", "seed", "seconds", "mean": [r, g, b]}``
 (``seconds``: ``mi.render`` and evaluation of the image, the wall time a user waits), ``quit``
-ends. With ``--repeats N`` it renders seeds 1..N itself and exits. Errors: ``{"event": "error",
+ends. With ``--repeats N`` it renders seeds 1..N itself and exits (``--save NPY``: the last image
+as an .npy file, for bench/mitsuba_agreement.py). Errors: ``{"event": "error",
 "message"}`` and exit status 1.
 """
 from __future__ import annotations
@@ -162,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--variant", default="llvm_ad_rgb")
     p.add_argument("--warmup", type=int, default=1)
     p.add_argument("--repeats", type=int, default=None)
+    p.add_argument("--save", default=None, metavar="NPY",
+                   help="with --repeats: write the last render's image (H, W, 3 float32) to this .npy file")
     a = p.parse_args(argv)
     try:
         import drjit as dr
@@ -176,12 +179,15 @@ def main(argv: list[str] | None = None) -> int:
         scene = load_json(mi, path, a) if path.suffix == ".json" else load_xml(mi, path, a)
         load_s = time.perf_counter() - t0
 
+        last = []
+
         def render(seed: int) -> tuple[float, list[float]]:
             t = time.perf_counter()
             img = mi.render(scene, spp=a.spp, seed=dr.opaque(mi.UInt32, seed))
             dr.eval(img)
             dr.sync_thread()
             seconds = time.perf_counter() - t
+            last[:] = [img]
             flat, n = img.array, img.shape[0] * img.shape[1]
             channels = img.shape[2]
             idx = dr.arange(mi.UInt32, n) * channels
@@ -195,6 +201,10 @@ def main(argv: list[str] | None = None) -> int:
             for seed in range(1, a.repeats + 1):
                 s, m = render(seed)
                 _emit({"event": "render", "seed": seed, "seconds": s, "mean": m})
+            if a.save and last:
+                import numpy as np
+
+                np.save(a.save, np.array(last[0], dtype=np.float32)[..., :3])
             return 0
         for line in sys.stdin:
             words = line.split()
