@@ -1,7 +1,8 @@
 /* scene.h: the scene as the kernels see it, a set of plain buffers written by
  * pyclpt/scene_buffers.py (the offsets below are mirrored there).
  *
- *   nodes      BVH nodes, 8 * BVH_WIDTH floats each, then leaf packets with BVH_LEAF_PACKETS (bvh.h)
+ *   nodes      BVH nodes, 8 * BVH_WIDTH floats each, then leaf packets with BVH_LEAF_PACKETS (bvh.h);
+ *              with SCENE_HAS_INSTANCES also the top level and the instance records (instances.h)
  *   tris       triangles in BVH leaf order: v0, e1 = v1 - v0, e2 = v2 - v0 (9 floats)
  *   tri_info   2 ints per triangle: material id | TRI_HAS_* flags, light index or -1
  *   tri_vidx   3 ints per triangle: vertex indices into vnormals / vuvs
@@ -22,6 +23,9 @@
 #include "core/sampling.h"
 #include "scene/texture.h"
 #include "scene/mask.h"
+#ifdef SCENE_HAS_INSTANCES
+#include "scene/instances.h"
+#endif
 
 #define CONST_CAM_ORIGIN 0
 #define CONST_CAM_FORWARD 3
@@ -151,8 +155,8 @@ static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, 
     return m_dot(n, ns) < 0.0f ? v3_neg(n) : n;
 }
 
-/* Rebuild the surface from a hit record (leaf-order triangle, barycentrics u, v). */
-static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
+/* The surface at barycentrics u, v of leaf-order triangle prim, in its mesh's space. */
+static inline Surface surface_local(const Scene* sc, int prim, float u, float v) {
     Surface s;
     __global const float* t = sc->tris + 9 * prim;
     vec3 v0 = rgb_at(t, sc->unit), e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
@@ -178,6 +182,22 @@ static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
     return s;
 }
 
+/* Rebuild the surface from a hit record (hit.prim, barycentrics u, v), in world space. */
+#ifdef SCENE_HAS_INSTANCES
+/* prim is the packed id of instances.h: the triangle's surface through its instance's transforms
+ * (points by object-to-world, normals by its inverse transpose, as Mitsuba's instances). */
+static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
+    Surface s = surface_local(sc, prim & INST_TRI_MASK, u, v);
+    __global const float* rec = inst_record(sc->nodes, prim >> INSTANCE_TRI_BITS);
+    s.p = inst_point(rec + INST_O2W, s.p);
+    s.ng = m_normalize(inst_normal(rec + INST_NORMAL, s.ng));
+    s.sh = frame_from(m_normalize(inst_normal(rec + INST_NORMAL, s.sh.n)));
+    return s;
+}
+#else
+static inline Surface surface_at(const Scene* sc, int prim, float u, float v) { return surface_local(sc, prim, u, v); }
+#endif
+
 /* The opacity test of a path's query: dim is DIM_MASK_CLOSEST or DIM_MASK_SHADOW. */
 static inline AlphaTest scene_alpha(const Scene* sc, RngKey key, int bounce, uint dim) {
     AlphaTest a = {sc->tri_info, sc->tri_vidx, sc->vuvs, sc->materials, sc->tex, key, (uint)bounce, dim};
@@ -187,13 +207,21 @@ static inline AlphaTest scene_alpha(const Scene* sc, RngKey key, int bounce, uin
 /* Closest hit of a path's ray at `bounce`, honouring opacity. */
 static inline bool scene_closest(const Scene* sc, RngKey key, int bounce, vec3 org, vec3 dir, Hit* hit) {
     AlphaTest a = scene_alpha(sc, key, bounce, DIM_MASK_CLOSEST);
+#ifdef SCENE_HAS_INSTANCES
+    return inst_closest(sc->nodes, sc->tris, org, dir, INF_F, hit, &a);
+#else
     return bvh_closest_alpha(sc->nodes, sc->tris, org, dir, INF_F, hit, &a);
+#endif
 }
 
 /* True when a shadow ray of `bounce` is blocked before tmax, honouring opacity. */
 static inline bool scene_occluded(const Scene* sc, RngKey key, int bounce, vec3 org, vec3 dir, float tmax) {
     AlphaTest a = scene_alpha(sc, key, bounce, DIM_MASK_SHADOW);
+#ifdef SCENE_HAS_INSTANCES
+    return inst_any(sc->nodes, sc->tris, org, dir, tmax, &a);
+#else
     return bvh_any_alpha(sc->nodes, sc->tris, org, dir, tmax, &a);
+#endif
 }
 
 /* Origin for a ray leaving s in direction d: offset to d's side of the surface. */

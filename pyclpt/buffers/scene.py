@@ -15,6 +15,7 @@ import numpy as np
 import pyopencl as cl
 
 from pyclpt.accel.bvh import FlatBVH, build_bvh, leaf_packet_buffer
+from pyclpt.accel.instances import build_instanced, instanced_node_buffer
 from pyclpt.buffers.lights import LightArrays, camera_consts, camera_kind, pack_lights
 from pyclpt.buffers.materials import (  # noqa: F401
     MAT_STRIDE,
@@ -24,7 +25,7 @@ from pyclpt.buffers.materials import (  # noqa: F401
     pack_materials,
 )
 from pyclpt.device.context import Device, upload
-from pyclpt.scene.model import Camera, Scene
+from pyclpt.scene.model import Camera, Mesh, Scene
 
 #: Test an 8-wide BVH's leaf triangles 8 at a time (cl/scene/bvh.h BVH_LEAF_PACKETS, docs/bvh.md);
 #: the same hits as the scalar loop, faster on PoCL and Intel's runtime (measured for width 8 only).
@@ -50,7 +51,9 @@ class SceneArrays:
     bounds: np.ndarray  # (2, 3) scene bounding box
     defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, SCENE_HAS_TEXTURES, SCENE_MATERIALS,
     # SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS
-    node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer)
+    node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer);
+    # instanced scenes: then the top level and the instance records (pyclpt.accel.instances)
+    geometry_defines: dict | None = None  # the instancing -D (SCENE_HAS_INSTANCES, INSTANCE_*), None without
 
     @property
     def triangle_count(self) -> int:
@@ -73,10 +76,23 @@ class SceneArrays:
         return sum(a.nbytes for _, a in self.device_arrays())
 
 
+def instanced_groups(scene: Scene) -> list[str]:
+    """The shapegroups the scene's instances use, in order of first use."""
+    return list(dict.fromkeys(i.group for i in scene.instances))
+
+
+def scene_meshes(scene: Scene) -> list[Mesh]:
+    """Every mesh whose triangles are packed, in packing order: the plain meshes, then the meshes of each
+    instanced shapegroup (once, however many instances)."""
+    if not scene.instances:
+        return scene.meshes
+    return [*scene.meshes, *(m for g in instanced_groups(scene) for m in scene.groups[g].meshes)]
+
+
 def triangle_emission(scene: Scene) -> np.ndarray:
-    """(T, 3) float32: the emitted radiance of every triangle of the scene, in mesh order."""
+    """(T, 3) float32: the emitted radiance of every triangle of the scene, in mesh order (scene_meshes)."""
     parts = []
-    for mesh in scene.meshes:
+    for mesh in scene_meshes(scene):
         em = mesh.emission if mesh.emission is not None and max(mesh.emission) > 0 else (0.0, 0.0, 0.0)
         parts.append(np.tile(np.asarray(em, np.float32), (mesh.triangle_count, 1)))
     return np.concatenate(parts)
@@ -90,8 +106,9 @@ def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[Mat
     return mats, lights
 
 
-def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, camera: Camera) -> dict:
-    return {"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
+def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, camera: Camera,
+                  geometry: dict | None = None) -> dict:
+    return {**(geometry or {}), "SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
             "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
             "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets,
             "SCENE_CAMERA": camera_kind(camera) or None}
@@ -100,7 +117,7 @@ def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packe
 def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order: np.ndarray) -> np.ndarray:
     """(T, 2) int32 in leaf order: material | TRI_* flags, light index."""
     info = []
-    for mesh in scene.meshes:
+    for mesh in scene_meshes(scene):
         flags = ((TRI_HAS_NORMALS if mesh.normals is not None else 0) | (TRI_HAS_UVS if mesh.uvs is not None else 0)
                  | (TRI_MASKED if mats.masked[mesh.material] else 0))
         info.append(np.full(mesh.triangle_count, mesh.material | flags, np.int32))
@@ -110,36 +127,73 @@ def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order
     return tri_info
 
 
-def pack_scene(scene: Scene) -> SceneArrays:
-    scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
+def _concat(meshes: list[Mesh]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Positions, indices (offset), normals and uvs of the meshes, concatenated."""
     positions, indices, normals, uvs = [], [], [], []
     offset = 0
-    for mesh in scene.meshes:
+    for mesh in meshes:
         positions.append(mesh.positions)
         indices.append(mesh.indices + offset)
         nv = mesh.positions.shape[0]
         normals.append(mesh.normals if mesh.normals is not None else np.zeros((nv, 3), np.float32))
         uvs.append(mesh.uvs if mesh.uvs is not None else np.zeros((nv, 2), np.float32))
         offset += nv
-    P = np.concatenate(positions)
-    tris = np.concatenate(indices)
-    bvh = build_bvh(P, tris)
-    packets = LEAF_PACKETS and bvh.width == 8
+    return np.concatenate(positions), np.concatenate(indices), np.concatenate(normals), np.concatenate(uvs)
+
+
+def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool, dict]:
+    """Instanced scenes: one bottom-level BVH per instanced shapegroup (built once, cached) and one for the
+    plain meshes (an instance with the identity transform), the top level over the instances
+    (pyclpt.accel.instances). Returns the merged bottom levels, the bounds, the node buffer, whether it
+    has leaf packets and the -D of instancing."""
+    groups = instanced_groups(scene)
+    blocks = [scene.groups[g].meshes for g in groups]
+    which = [groups.index(i.group) for i in scene.instances]
+    to_world = [i.to_world for i in scene.instances]
+    if scene.meshes:  # the plain meshes are packed first (scene_meshes), as one more bottom level
+        blocks.insert(0, scene.meshes)
+        which = [w + 1 for w in which] + [0]
+        to_world.append(np.eye(4))
+    bvhs = []
+    for meshes in blocks:
+        P, tris, _, _ = _concat(meshes)
+        bvhs.append(build_bvh(P, tris))
+    inst = build_instanced(bvhs, np.array(which), np.array(to_world))
+    # The merged tri_order indexes the blocks' triangles concatenated, which is scene_meshes' order.
+    packets = LEAF_PACKETS and inst.width == 8
+    buf, root, records_at = instanced_node_buffer(inst, packets)
+    bounds = inst.bounds
+    defines = {"SCENE_HAS_INSTANCES": True, "INSTANCE_TLAS_ROOT": root, "INSTANCE_RECORDS": records_at,
+               "INSTANCE_TRI_BITS": inst.tri_bits}
+    return inst.blas, bounds, buf, packets, defines
+
+
+def pack_scene(scene: Scene) -> SceneArrays:
+    scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
+    P, tris, vnormals, vuvs = _concat(scene_meshes(scene))
+    geometry = None
+    if scene.instances:
+        bvh, bounds, node_buffer, packets, geometry = _instanced_bvh(scene)
+    else:
+        bvh = build_bvh(P, tris)
+        packets = LEAF_PACKETS and bvh.width == 8
+        bounds = np.stack([P.min(0), P.max(0)])
+        node_buffer = leaf_packet_buffer(bvh) if packets else bvh.nodes
     order = bvh.tri_order
-    bounds = np.stack([P.min(0), P.max(0)])
     mats, lights = pack_appearance(scene, bvh, bounds)
     return SceneArrays(
         bvh=bvh,
         tri_info=triangle_info(scene, mats, lights, order),
         tri_vidx=np.ascontiguousarray(tris[order]),
-        vnormals=np.concatenate(normals).astype(np.float32),
-        vuvs=np.concatenate(uvs).astype(np.float32),
+        vnormals=vnormals.astype(np.float32),
+        vuvs=vuvs.astype(np.float32),
         materials=mats.materials,
         lights=lights,
         textures=mats.textures,
         bounds=bounds,
-        defines=scene_defines(mats, lights, bvh, packets, scene.camera),
-        node_buffer=leaf_packet_buffer(bvh) if packets else bvh.nodes,
+        defines=scene_defines(mats, lights, bvh, packets, scene.camera, geometry),
+        node_buffer=node_buffer,
+        geometry_defines=geometry,
     )
 
 
@@ -170,7 +224,7 @@ class SceneBuffers:
         old = self.arrays
         mats, lights = pack_appearance(self.scene, old.bvh, old.bounds)
         packets = old.defines["BVH_LEAF_PACKETS"]
-        defines = scene_defines(mats, lights, old.bvh, packets, self.scene.camera)
+        defines = scene_defines(mats, lights, old.bvh, packets, self.scene.camera, old.geometry_defines)
         changed = {k: (old.defines[k], v) for k, v in defines.items() if old.defines[k] != v}
         if changed:
             what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items())
@@ -179,7 +233,7 @@ class SceneBuffers:
         new = SceneArrays(bvh=old.bvh, tri_info=triangle_info(self.scene, mats, lights, old.bvh.tri_order),
                           tri_vidx=old.tri_vidx, vnormals=old.vnormals, vuvs=old.vuvs, materials=mats.materials,
                           lights=lights, textures=mats.textures, bounds=old.bounds, defines=defines,
-                          node_buffer=old.node_buffer)
+                          node_buffer=old.node_buffer, geometry_defines=old.geometry_defines)
         uploaded = []
         for k, ((name, before), (_, after)) in enumerate(zip(old.device_arrays(), new.device_arrays())):
             if before is not after and (before.dtype != after.dtype or before.tobytes() != after.tobytes()):

@@ -7,7 +7,9 @@
 - ``cylinder.xml``: a textured cylinder given by p0, p1 and radius (tests/test_plugins.py);
 - ``thinlens.xml``, ``orthographic.xml``: the two other cameras, over boxes at several depths;
 - ``uv-shapes.xml``: the texture coordinates of the rectangle, disk, sphere and cube
-  (tests/test_plugins.py).
+  (tests/test_plugins.py);
+- ``instances.xml``: a shapegroup of three shapes instanced four times (rotations, a non-uniform scale)
+  (tests/test_instances.py).
 
 Mitsuba's path tracer as each file says (box filter), 16384 spp.
 """
@@ -19,7 +21,7 @@ import numpy as np
 
 mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb")
 HERE = Path(__file__).parent
-NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes")
+NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "instances")
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or NAMES:
