@@ -47,11 +47,13 @@ from pyclpt.scene.model import (
     DirectionalLight,
     Envmap,
     Film,
+    Instance,
     Mask,
     Mesh,
     Plastic,
     PointLight,
     Scene,
+    ShapeGroup,
     SpotLight,
     ThinDielectric,
 )
@@ -61,9 +63,9 @@ __version__ = "0.1.0"
 __all__ = [
     "Accumulator", "AccumulatorError", "Bitmap", "builtin_scenes", "BumpMap", "Camera", "CameraPath", "Checkerboard",
     "Conductor", "default_device", "Denoiser", "DenoiserSettings", "Device", "DeviceError", "DeviceMemoryError",
-    "Dielectric", "Diffuse", "DirectionalLight", "EnvironmentVariableError", "Envmap", "Film", "get_device", "Keyframe",
-    "KernelBuildError", "list_devices", "load", "load_dict", "load_xml", "Mask", "Mesh", "open_device", "Plastic",
-    "PointLight", "ProgressiveRenderer", "read_image", "render", "Renderer", "RenderStats", "Scene", "SceneDictError",
-    "SceneXMLError", "SpotLight", "ThinDielectric", "write_image", "SceneParameters", "optim", "render_backward",
-    "render_forward", "traverse",
+    "Dielectric", "Diffuse", "DirectionalLight", "EnvironmentVariableError", "Envmap", "Film", "get_device",
+    "Instance", "Keyframe", "KernelBuildError", "list_devices", "load", "load_dict", "load_xml", "Mask", "Mesh",
+    "open_device", "Plastic", "PointLight", "ProgressiveRenderer", "read_image", "render", "Renderer", "RenderStats",
+    "Scene", "SceneDictError", "SceneXMLError", "ShapeGroup", "SpotLight", "ThinDielectric", "write_image",
+    "SceneParameters", "optim", "render_backward", "render_forward", "traverse",
 ]

@@ -3,8 +3,8 @@
 A :class:`LoadContext` knows where the scene came from (``origin``, ``base_dir`` for relative file
 names), which objects carry an id (``named``) and which of them something referenced, collects the
 notes that become the one warning of the load, and holds what the loaders have built so far
-(materials, meshes, shapegroups and instances, point lights, the environment). Its readers turn one dictionary value into a
-checked Python value (number, flag, existing path, transform, constant colour) and raise
+(materials, meshes, shapegroups and instances, point lights, the environment). Its readers turn one
+dictionary value into a checked Python value (number, flag, existing path, transform, constant colour) and raise
 :class:`SceneDictError` naming the element and its source line otherwise.
 """
 from __future__ import annotations
