@@ -106,17 +106,29 @@ class InstancedBVH:
         return max(1, int(self.blas.triangle_count - 1).bit_length())
 
 
-def _world_boxes(blas: FlatBVH, firsts: np.ndarray, counts: np.ndarray, which: np.ndarray,
+def _world_boxes(blas: FlatBVH, roots: np.ndarray, which: np.ndarray,
                  to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World boxes of the instances: their bottom level's vertices (v0, v0 + e1, v0 + e2 as the
-    intersector forms them) through to_world, padded by a relative 1e-5 against rounding."""
-    lo = np.empty((len(which), 3))
-    hi = np.empty((len(which), 3))
+    """World boxes of the instances: the corners of their bottom level's boxes two levels below the root
+    (at most W² boxes, each holding its triangles as the intersector forms them) through to_world, padded
+    by a relative 1e-5 against rounding. Conservative, and far cheaper than transforming every vertex."""
+    lo_all, hi_all, links = blas.children()
     corners = {}
     for b in np.unique(which):
-        t = blas.tris[firsts[b]:firsts[b] + counts[b]].astype(np.float64)
-        v = np.concatenate([t[:, 0:3], t[:, 0:3] + t[:, 3:6], t[:, 0:3] + t[:, 6:9]])
-        corners[int(b)] = v
+        node = int(roots[b])
+        boxes = []
+        for c in range(blas.width):
+            link = int(links[node, c])
+            if link >= 0:  # an internal child: its children's boxes
+                keep = np.all(lo_all[link] <= hi_all[link], axis=1)
+                boxes.extend(zip(lo_all[link][keep], hi_all[link][keep]))
+            elif np.all(lo_all[node, c] <= hi_all[node, c]):
+                boxes.append((lo_all[node, c], hi_all[node, c]))
+        lo = np.array([x for x, _ in boxes], np.float64)
+        hi = np.array([y for _, y in boxes], np.float64)
+        sel = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], bool)  # the 8 corners
+        corners[int(b)] = np.where(sel[None], hi[:, None], lo[:, None]).reshape(-1, 3)
+    lo = np.empty((len(which), 3))
+    hi = np.empty((len(which), 3))
     for k, (b, m) in enumerate(zip(which, to_world)):
         w = corners[int(b)] @ m[:3, :3].T + m[:3, 3]
         lo[k], hi[k] = w.min(0), w.max(0)
@@ -132,8 +144,7 @@ def build_instanced(bvhs: list[FlatBVH], which: np.ndarray, to_world: np.ndarray
     W = blas.width
     which = np.asarray(which, np.int64)
     to_world = np.asarray(to_world, np.float64).reshape(-1, 4, 4)
-    counts = np.array([b.triangle_count for b in bvhs], np.int64)
-    lo, hi = _world_boxes(blas, firsts, counts, which, to_world)
+    lo, hi = _world_boxes(blas, roots, which, to_world)
     settings = settings or BuildSettings(width=W, min_leaf=1, max_leaf=1, intersection_cost=1.0)
     tlas, order, seconds = build_box_bvh(lo, hi, settings)
     records = np.zeros((len(which), INST_STRIDE), np.float32)
