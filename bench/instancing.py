@@ -70,17 +70,17 @@ def build_seconds(scene) -> tuple[float, float]:
     """Uncached builds: (instanced: each group's BVH + the top level, flattened: one BVH over all)."""
     from pyclpt.accel.bvh import build_bvh
     from pyclpt.accel.instances import build_instanced
-    from pyclpt.buffers.scene import _concat
+    from pyclpt.buffers.scene import concat_meshes
 
     t = time.perf_counter()
-    blas = [build_bvh(*_concat(g.meshes)[:2], use_cache=False) for g in scene.groups.values()]
-    plain = build_bvh(*_concat(scene.meshes)[:2], use_cache=False)
+    blas = [build_bvh(*concat_meshes(g.meshes)[:2], use_cache=False) for g in scene.groups.values()]
+    plain = build_bvh(*concat_meshes(scene.meshes)[:2], use_cache=False)
     build_instanced([plain, *blas], np.array([0] + [1] * len(scene.instances)),
                     np.array([np.eye(4)] + [i.to_world for i in scene.instances]))
     inst = time.perf_counter() - t
     flat = scene.flattened()
     t = time.perf_counter()
-    build_bvh(*_concat(flat.meshes)[:2], use_cache=False)
+    build_bvh(*concat_meshes(flat.meshes)[:2], use_cache=False)
     return inst, time.perf_counter() - t
 
 

@@ -2,7 +2,10 @@
 
 All meshes are concatenated, the BVH is built over every triangle (Embree,
 :mod:`pyclpt.accel.bvh`) and the per-triangle arrays are put into the BVH's leaf
-order so that kernels index everything by the triangle a traversal returns.
+order so that kernels index everything by the triangle a traversal returns. A scene with instances
+(Mitsuba ``shapegroup`` + ``instance``) packs each instanced group's triangles once after the plain
+meshes (:func:`scene_meshes`) and gets the two-level BVH of :mod:`pyclpt.accel.instances` and its
+``-DSCENE_HAS_INSTANCES`` defines; the per-triangle arrays are the same.
 The layout of each array is documented in ``cl/scene/scene.h``, ``cl/scene/bsdf.h`` and
 ``cl/scene/lights.h``; the offsets below mirror those headers.
 """
@@ -127,7 +130,7 @@ def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order
     return tri_info
 
 
-def _concat(meshes: list[Mesh]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def concat_meshes(meshes: list[Mesh]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Positions, indices (offset), normals and uvs of the meshes, concatenated."""
     positions, indices, normals, uvs = [], [], [], []
     offset = 0
@@ -156,7 +159,7 @@ def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool,
         to_world.append(np.eye(4))
     bvhs = []
     for meshes in blocks:
-        P, tris, _, _ = _concat(meshes)
+        P, tris, _, _ = concat_meshes(meshes)
         bvhs.append(build_bvh(P, tris))
     inst = build_instanced(bvhs, np.array(which), np.array(to_world))
     # The merged tri_order indexes the blocks' triangles concatenated, which is scene_meshes' order.
@@ -170,7 +173,7 @@ def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool,
 
 def pack_scene(scene: Scene) -> SceneArrays:
     scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
-    P, tris, vnormals, vuvs = _concat(scene_meshes(scene))
+    P, tris, vnormals, vuvs = concat_meshes(scene_meshes(scene))
     geometry = None
     if scene.instances:
         bvh, bounds, node_buffer, packets, geometry = _instanced_bvh(scene)
