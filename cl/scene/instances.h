@@ -1,18 +1,20 @@
 /* instances.h: two-level traversal for instanced scenes (Mitsuba shapegroup + instance), compiled in
  * with -DSCENE_HAS_INSTANCES (pyclpt/accel/instances.py builds the buffers; docs/bvh.md "Instances").
  *
- * The node buffer holds every bottom-level BVH (one per shapegroup and one for the plain meshes, links
- * relocated into one array, one global leaf-order triangle index; leaf packets for width 8), then at
- * node INSTANCE_TLAS_ROOT (-D) the top level: a BVH of the same width over the instances' world boxes,
- * whose leaves index instance records, INST_STRIDE words each from word INSTANCE_RECORDS (-D):
+ * The node buffer starts with a header (node 0, which no traversal visits; int32 words): the top
+ * level's root node, the instance records' first word and INST_TRI_BITS below, so that one program
+ * serves every instanced scene. Then every bottom-level BVH (one per shapegroup and one for the plain
+ * meshes, links relocated into one array, one global leaf-order triangle index; leaf packets for
+ * width 8), then the top level: a BVH of the same width over the instances' world boxes, whose
+ * leaves index instance records, INST_STRIDE words each:
  *   [0:12]  world-to-object 3x4, row-major      [12:24] object-to-world 3x4 (points)
  *   [24:33] inverse transpose of object-to-world's 3x3 (normals)   [33] root node (int32 bits)
  * A ray is taken to object space (direction not normalised, so t is the same in both spaces and one
  * `best` carries across instances) and the instance's bottom level is traversed from its root with
  * bvh.h's own functions. The plain meshes are an instance with the identity transform (exact).
  *
- * A hit's prim is the packed id tri | record << INSTANCE_TRI_BITS (the triangle's global leaf-order
- * index and the instance record), so the hit record, the wavefront's path state and the G-buffer keep
+ * A hit's prim is the packed id tri | record << bits (the triangle's global leaf-order index and the
+ * instance record; bits from the header), so the hit record, the wavefront's path state and the G-buffer keep
  * their one int; surface_at (scene.h) unpacks it and transforms the surface to world space. */
 #ifndef PYCLPT_INSTANCES_H
 #define PYCLPT_INSTANCES_H
@@ -29,10 +31,15 @@
 #define INST_O2W 12
 #define INST_NORMAL 24
 #define INST_ROOT 33
-#define INST_TRI_MASK ((1 << INSTANCE_TRI_BITS) - 1)
+/* header words (pyclpt.accel.instances.HEADER_*) */
+#define INST_HEADER_ROOT 0
+#define INST_HEADER_RECORDS 1
+#define INST_HEADER_TRI_BITS 2
+
+static inline int inst_tri_bits(__global const float* nodes) { return as_int(nodes[INST_HEADER_TRI_BITS]); }
 
 static inline __global const float* inst_record(__global const float* nodes, int r) {
-    return nodes + INSTANCE_RECORDS + INST_STRIDE * r;
+    return nodes + as_int(nodes[INST_HEADER_RECORDS]) + INST_STRIDE * r;
 }
 
 /* m: a 3x4 row-major matrix. */
@@ -53,10 +60,10 @@ static inline vec3 inst_normal(__global const float* n, vec3 v) {
 }
 
 /* The opacity test inside instance record r (its random numbers keyed by the packed id). */
-static inline const AlphaTest* inst_alpha(const AlphaTest* alpha, int r, AlphaTest* out) {
+static inline const AlphaTest* inst_alpha(const AlphaTest* alpha, int r, int bits, AlphaTest* out) {
     if (alpha == 0) return 0;
     *out = *alpha;
-    out->inst_id = (uint)r << INSTANCE_TRI_BITS;
+    out->inst_id = (uint)r << bits;
     return out;
 }
 
@@ -95,7 +102,8 @@ static inline bool inst_closest(__global const float* nodes, __global const floa
     int sp = 0;
     float best = tmax, bu = 0.0f, bv = 0.0f;
     int id = -1;
-    int cur = INSTANCE_TLAS_ROOT;
+    int bits = inst_tri_bits(nodes);
+    int cur = as_int(nodes[INST_HEADER_ROOT]);
     for (;;) {
         if (cur >= 0) {
             int n = inst_push(nodes, cur, &r, best, stack_node, stack_t, sp);
@@ -111,11 +119,11 @@ static inline bool inst_closest(__global const float* nodes, __global const floa
                 AlphaTest a;
                 Hit h;
                 if (bvh_closest_from(nodes, tris, as_int(rec[INST_ROOT]), inst_point(rec + INST_W2O, org),
-                                     inst_vector(rec + INST_W2O, dir), best, &h, inst_alpha(alpha, k, &a))) {
+                                     inst_vector(rec + INST_W2O, dir), best, &h, inst_alpha(alpha, k, bits, &a))) {
                     best = h.t;
                     bu = h.u;
                     bv = h.v;
-                    id = h.prim | (k << INSTANCE_TRI_BITS);
+                    id = h.prim | (k << bits);
                 }
             }
         }
@@ -133,7 +141,8 @@ static inline bool inst_any(__global const float* nodes, __global const float* t
     int stack_node[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
     int sp = 0;
-    int cur = INSTANCE_TLAS_ROOT;
+    int bits = inst_tri_bits(nodes);
+    int cur = as_int(nodes[INST_HEADER_ROOT]);
     for (;;) {
         if (cur >= 0) {
             sp += inst_push(nodes, cur, &r, tmax, stack_node, stack_t, sp);
@@ -143,7 +152,7 @@ static inline bool inst_any(__global const float* nodes, __global const float* t
                 __global const float* rec = inst_record(nodes, k);
                 AlphaTest a;
                 if (bvh_any_from(nodes, tris, as_int(rec[INST_ROOT]), inst_point(rec + INST_W2O, org),
-                                 inst_vector(rec + INST_W2O, dir), tmax, inst_alpha(alpha, k, &a)))
+                                 inst_vector(rec + INST_W2O, dir), tmax, inst_alpha(alpha, k, bits, &a)))
                     return true;
             }
         }

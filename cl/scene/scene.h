@@ -187,8 +187,9 @@ static inline Surface surface_local(const Scene* sc, int prim, float u, float v)
 /* prim is the packed id of instances.h: the triangle's surface through its instance's transforms
  * (points by object-to-world, normals by its inverse transpose, as Mitsuba's instances). */
 static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
-    Surface s = surface_local(sc, prim & INST_TRI_MASK, u, v);
-    __global const float* rec = inst_record(sc->nodes, prim >> INSTANCE_TRI_BITS);
+    int bits = inst_tri_bits(sc->nodes);
+    Surface s = surface_local(sc, prim & ((1 << bits) - 1), u, v);
+    __global const float* rec = inst_record(sc->nodes, prim >> bits);
     s.p = inst_point(rec + INST_O2W, s.p);
     s.ng = m_normalize(inst_normal(rec + INST_NORMAL, s.ng));
     s.sh = frame_from(m_normalize(inst_normal(rec + INST_NORMAL, s.sh.n)));

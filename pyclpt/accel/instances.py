@@ -16,9 +16,10 @@ top level's leaf order), mirrored by ``cl/scene/instances.h``::
     [34:36] zero
 
 The plain meshes are one more instance, with the identity transform (exact: x * 1 + y * 0 ... = x).
-The node buffer of an instanced scene (:func:`instanced_node_buffer`) is the merged bottom levels (with
-their leaf packets for width 8), zero padding to a node boundary, the top-level nodes (links relocated),
-then the records; the kernels get the top level's root and the records' offset by ``-D``.
+The node buffer of an instanced scene (:func:`instanced_node_buffer`) is a header node (node 0: the
+top level's root, the records' first word and the packed hit id's triangle bits, as int32, so that one
+program serves every instanced scene), the merged bottom levels (with their leaf packets for width 8),
+zero padding to a node boundary, the top-level nodes (links relocated), then the records.
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.accel.bvh import (
+    EMPTY_LINK,
     MAX_TRIANGLES,
     BuildSettings,
     FlatBVH,
@@ -34,7 +36,8 @@ from pyclpt.accel.bvh import (
     leaf_packet_buffer,
 )
 
-__all__ = ["INST_STRIDE", "InstancedBVH", "build_instanced", "instanced_node_buffer", "merge_bvhs"]
+__all__ = ["HEADER_RECORDS", "HEADER_ROOT", "HEADER_TRI_BITS", "INST_STRIDE", "InstancedBVH", "build_instanced",
+           "instanced_node_buffer", "merge_bvhs"]
 
 #: Words of an instance record (cl/scene/instances.h INST_STRIDE).
 INST_STRIDE = 36
@@ -59,16 +62,29 @@ def _relocate(nodes: np.ndarray, width: int, node_off: int, tri_off: int) -> np.
     return out
 
 
-def merge_bvhs(bvhs: list[FlatBVH]) -> tuple[FlatBVH, np.ndarray, np.ndarray]:
-    """The BVHs in one node array and one triangle array: (merged, root node of each, first leaf-order
-    triangle of each). ``tri_order`` of the merged BVH maps to the concatenation of the inputs' triangles."""
+def _empty_nodes(n: int, width: int) -> np.ndarray:
+    """n nodes of empty children only (inverted boxes, EMPTY_LINK links)."""
+    nodes = np.zeros((n, 8 * width), np.float32)
+    if width == 2:
+        nodes[:, 0:6] = nodes[:, 6:12] = np.repeat([[np.inf] * 3 + [-np.inf] * 3], n, 0).astype(np.float32)
+    else:
+        f = nodes.reshape(n, 8, width)
+        f[:, 0:6:2], f[:, 1:6:2] = np.inf, -np.inf
+    _links(nodes, width)[:] = np.int64(EMPTY_LINK).astype(np.uint32).view(np.int32)
+    return nodes
+
+
+def merge_bvhs(bvhs: list[FlatBVH], reserve: int = 0) -> tuple[FlatBVH, np.ndarray, np.ndarray]:
+    """The BVHs in one node array and one triangle array, after ``reserve`` empty nodes: (merged, root node
+    of each, first leaf-order triangle of each). ``tri_order`` of the merged BVH maps to the concatenation of
+    the inputs' triangles."""
     width = bvhs[0].width
     if any(b.width != width for b in bvhs):
         raise ValueError("merge_bvhs: every BVH must have the same width")
-    nodes, tris, order = [], [], []
+    nodes, tris, order = [_empty_nodes(reserve, width)], [], []
     roots = np.zeros(len(bvhs), np.int64)
     firsts = np.zeros(len(bvhs), np.int64)
-    n_off = t_off = 0
+    n_off, t_off = reserve, 0
     for k, b in enumerate(bvhs):
         roots[k], firsts[k] = n_off, t_off
         nodes.append(_relocate(b.nodes, width, n_off, t_off))
@@ -140,7 +156,7 @@ def build_instanced(bvhs: list[FlatBVH], which: np.ndarray, to_world: np.ndarray
                     settings: BuildSettings | None = None) -> InstancedBVH:
     """The two-level BVH of instances ``k`` of bottom level ``which[k]`` placed by ``to_world[k]`` (4x4,
     invertible). ``settings``: the top level's build (default: the bottom levels' width, leaves of 1)."""
-    blas, roots, firsts = merge_bvhs(bvhs)
+    blas, roots, _ = merge_bvhs(bvhs, reserve=1)  # node 0: the header (instanced_node_buffer)
     W = blas.width
     which = np.asarray(which, np.int64)
     to_world = np.asarray(to_world, np.float64).reshape(-1, 4, 4)
@@ -164,9 +180,14 @@ def build_instanced(bvhs: list[FlatBVH], which: np.ndarray, to_world: np.ndarray
                         bounds=np.stack([lo.min(0), hi.max(0)]).astype(np.float32), tlas_seconds=seconds)
 
 
+#: Words of the node buffer's header (node 0 of an instanced scene; cl/scene/instances.h INST_HEADER_*).
+HEADER_ROOT, HEADER_RECORDS, HEADER_TRI_BITS = 0, 1, 2
+
+
 def instanced_node_buffer(inst: InstancedBVH, packets: bool) -> tuple[np.ndarray, int, int]:
     """The node buffer of an instanced scene (module docstring): (buffer, the top level's root node
-    index, the records' first word)."""
+    index, the records' first word). Its first words (node 0, which no traversal visits) are the header
+    the kernels read: the root, the records' first word and the packed id's triangle bits (int32)."""
     W = inst.width
     base = leaf_packet_buffer(inst.blas) if packets else inst.blas.nodes.ravel()
     node_words = 8 * W
@@ -177,4 +198,5 @@ def instanced_node_buffer(inst: InstancedBVH, packets: bool) -> tuple[np.ndarray
     buf = np.concatenate([base, pad, tlas.ravel(), inst.records.ravel()]).astype(np.float32)
     if buf.size >= 1 << 31:
         raise ValueError("the instanced node buffer exceeds 2^31 words")
+    buf.view(np.int32)[[HEADER_ROOT, HEADER_RECORDS, HEADER_TRI_BITS]] = [root, records_at, inst.tri_bits]
     return buf, int(root), int(records_at)

@@ -56,7 +56,8 @@ class SceneArrays:
     # SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS
     node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer);
     # instanced scenes: then the top level and the instance records (pyclpt.accel.instances)
-    geometry_defines: dict | None = None  # the instancing -D (SCENE_HAS_INSTANCES, INSTANCE_*), None without
+    geometry_defines: dict | None = None  # the instancing -D (SCENE_HAS_INSTANCES), None without instances
+    instance_tri_bits: int | None = None  # instanced scenes: the packed hit id's triangle bits (AOV ids)
 
     @property
     def triangle_count(self) -> int:
@@ -144,11 +145,11 @@ def concat_meshes(meshes: list[Mesh]) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return np.concatenate(positions), np.concatenate(indices), np.concatenate(normals), np.concatenate(uvs)
 
 
-def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool, dict]:
+def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool, int]:
     """Instanced scenes: one bottom-level BVH per instanced shapegroup (built once, cached) and one for the
     plain meshes (an instance with the identity transform), the top level over the instances
-    (pyclpt.accel.instances). Returns the merged bottom levels, the bounds, the node buffer, whether it
-    has leaf packets and the -D of instancing."""
+    (pyclpt.accel.instances). Returns the merged bottom levels, the bounds, the node buffer (with its
+    header), whether it has leaf packets and the packed hit id's triangle bits."""
     groups = instanced_groups(scene)
     blocks = [scene.groups[g].meshes for g in groups]
     which = [groups.index(i.group) for i in scene.instances]
@@ -164,19 +165,18 @@ def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool,
     inst = build_instanced(bvhs, np.array(which), np.array(to_world))
     # The merged tri_order indexes the blocks' triangles concatenated, which is scene_meshes' order.
     packets = LEAF_PACKETS and inst.width == 8
-    buf, root, records_at = instanced_node_buffer(inst, packets)
+    buf, _, _ = instanced_node_buffer(inst, packets)
     bounds = inst.bounds
-    defines = {"SCENE_HAS_INSTANCES": True, "INSTANCE_TLAS_ROOT": root, "INSTANCE_RECORDS": records_at,
-               "INSTANCE_TRI_BITS": inst.tri_bits}
-    return inst.blas, bounds, buf, packets, defines
+    return inst.blas, bounds, buf, packets, inst.tri_bits
 
 
 def pack_scene(scene: Scene) -> SceneArrays:
     scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
     P, tris, vnormals, vuvs = concat_meshes(scene_meshes(scene))
-    geometry = None
+    geometry, tri_bits = None, None
     if scene.instances:
-        bvh, bounds, node_buffer, packets, geometry = _instanced_bvh(scene)
+        bvh, bounds, node_buffer, packets, tri_bits = _instanced_bvh(scene)
+        geometry = {"SCENE_HAS_INSTANCES": True}
     else:
         bvh = build_bvh(P, tris)
         packets = LEAF_PACKETS and bvh.width == 8
@@ -197,6 +197,7 @@ def pack_scene(scene: Scene) -> SceneArrays:
         defines=scene_defines(mats, lights, bvh, packets, scene.camera, geometry),
         node_buffer=node_buffer,
         geometry_defines=geometry,
+        instance_tri_bits=tri_bits,
     )
 
 
@@ -236,7 +237,8 @@ class SceneBuffers:
         new = SceneArrays(bvh=old.bvh, tri_info=triangle_info(self.scene, mats, lights, old.bvh.tri_order),
                           tri_vidx=old.tri_vidx, vnormals=old.vnormals, vuvs=old.vuvs, materials=mats.materials,
                           lights=lights, textures=mats.textures, bounds=old.bounds, defines=defines,
-                          node_buffer=old.node_buffer, geometry_defines=old.geometry_defines)
+                          node_buffer=old.node_buffer, geometry_defines=old.geometry_defines,
+                          instance_tri_bits=old.instance_tri_bits)
         uploaded = []
         for k, ((name, before), (_, after)) in enumerate(zip(old.device_arrays(), new.device_arrays())):
             if before is not after and (before.dtype != after.dtype or before.tobytes() != after.tobytes()):

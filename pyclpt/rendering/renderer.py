@@ -165,8 +165,7 @@ class Renderer:
         arrays = self.scene_buffers.arrays
         meshes = scene_meshes(self.scene)  # instanced scenes: the plain meshes, then the shapegroups' meshes
         starts = np.cumsum([0] + [m.triangle_count for m in meshes[:-1]])
-        bits = (arrays.geometry_defines or {}).get("INSTANCE_TRI_BITS")
-        return unpack(self.film.aov.read(), wanted, arrays.bvh.tri_order, starts, bits)
+        return unpack(self.film.aov.read(), wanted, arrays.bvh.tri_order, starts, arrays.instance_tri_bits)
 
     def collect_stats(self, spp: int, seconds: float) -> RenderStats:
         """Fill ``stats`` after frames were rendered (profile, bounces, memory, counters); returns it."""
