@@ -2,8 +2,8 @@
  * with -DSCENE_HAS_INSTANCES (pyclpt/accel/instances.py builds the buffers; docs/bvh.md "Instances").
  *
  * The node buffer starts with a header (node 0, which no traversal visits; int32 words): the top
- * level's root node, the instance records' first word and INST_TRI_BITS below, so that one program
- * serves every instanced scene. Then every bottom-level BVH (one per shapegroup and one for the plain
+ * level's root node, the instance records' first word and the packed id's triangle bits (below), so
+ * that one program serves every instanced scene. Then every bottom-level BVH (one per shapegroup and one for the plain
  * meshes, links relocated into one array, one global leaf-order triangle index; leaf packets for
  * width 8), then the top level: a BVH of the same width over the instances' world boxes, whose
  * leaves index instance records, INST_STRIDE words each:
@@ -14,8 +14,8 @@
  * bvh.h's own functions. The plain meshes are an instance with the identity transform (exact).
  *
  * A hit's prim is the packed id tri | record << bits (the triangle's global leaf-order index and the
- * instance record; bits from the header), so the hit record, the wavefront's path state and the G-buffer keep
- * their one int; surface_at (scene.h) unpacks it and transforms the surface to world space. */
+ * instance record; bits from the header), so the hit record, the wavefront's path state and the
+ * G-buffer keep their one int; surface_at (scene.h) unpacks it and transforms the surface to world space. */
 #ifndef PYCLPT_INSTANCES_H
 #define PYCLPT_INSTANCES_H
 
