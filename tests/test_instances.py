@@ -16,9 +16,11 @@ from pyclpt.scene.mitsuba_xml import load_xml
 DATA = Path(__file__).parent / "data"
 
 
-def _scene(n: int, *, mask: bool = False, extra: dict | None = None) -> dict:
+def _scene(n: int, *, mask: bool = False, extra: dict | None = None, anisotropic: bool = False) -> dict:
     """A sphere group instanced n times in a row over a floor, an area light and a constant environment."""
     bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.2]}}
+    if anisotropic:  # its highlights follow the tangent frame, which the instances turn
+        bsdf = {"type": "roughconductor", "material": "Au", "alpha_u": 0.04, "alpha_v": 0.4}
     if mask:
         bsdf = {"type": "mask", "opacity": 0.5, "bsdf": bsdf}
     d = {"type": "scene",
@@ -56,12 +58,13 @@ def test_instances_match_mitsuba():
                                   pyclpt.render(scene, spp=2, seed=5, width=16, height=12, integrator="wavefront"))
 
 
-@pytest.mark.parametrize("mask", [False, True])
-def test_instanced_scene_renders_as_flattened(mask):
+@pytest.mark.parametrize("mask, anisotropic", [(False, False), (True, False), (False, True)])
+def test_instanced_scene_renders_as_flattened(mask, anisotropic):
     """The same scene with its instances expanded into plain meshes (Scene.flattened): the same image within
     noise (the same random numbers; paths part only where a hit differs by rounding, or, with an alpha mask
-    in the group, where instances draw their own opacity decisions); megakernel == wavefront bit for bit."""
-    scene = load_dict(_scene(3, mask=mask))
+    in the group, where instances draw their own opacity decisions); an anisotropic rough conductor's
+    tangent frame turned with its instance; megakernel == wavefront bit for bit."""
+    scene = load_dict(_scene(3, mask=mask, anisotropic=anisotropic))
     flat = scene.flattened()
     assert not flat.instances and len(flat.meshes) == len(scene.meshes) + 3 * 2
     a = pyclpt.render(scene, spp=64, seed=1)
