@@ -291,6 +291,10 @@ MUTANTS: list[Mutant] = [
     Mutant("area-light-texture-at-one-point", "sc->tri_info[2 * prim], b.x, b.y)));",
            "sc->tri_info[2 * prim], 0.0f, 0.0f)));",
            (T_EMITTER_TEXTURES,), "light sampling reads a textured area light's texture at one vertex"),
+    Mutant("instance-drops-the-uv-frame", "    if (mat_flags(scene_material(sc, s.material)) & MAT_FLAG_UV_FRAME) {",
+           "    if (false) {", ("tests/test_instances.py::test_instanced_scene_renders_as_flattened[False-True]",),
+           "an instanced anisotropic material's tangent frame rebuilt from the normal, not turned with it",
+           after="static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {"),
 ]
 
 

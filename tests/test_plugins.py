@@ -80,12 +80,12 @@ def test_a_registry_entry_is_all_the_loader_needs(monkeypatch, caplog):
 
 def test_unsupported_plugins_share_one_warning_line(caplog):
     with caplog.at_level(logging.WARNING, logger="pyclpt"):
-        scene = load_dict({"type": "scene", "a": {**RECT, "bsdf": {"type": "phong"}}, "c": {"type": "instance"},
+        scene = load_dict({"type": "scene", "a": {**RECT, "bsdf": {"type": "phong"}}, "c": {"type": "hair"},
                            "s": {"type": "projector"}}, origin="o.json")
     assert scene.materials == [Diffuse()] and len(scene.meshes) == 1
     (record,) = caplog.records
     assert record.getMessage() == ("o.json: not used by pyclpt (3): a.bsdf: BSDF type 'phong' not supported, "
-                                   "grey diffuse (0.5) used; c: shape type 'instance' not supported, shape "
+                                   "grey diffuse (0.5) used; c: shape type 'hair' not supported, shape "
                                    "skipped; s: emitter type 'projector' not supported, ignored")
 
 

@@ -206,10 +206,11 @@ static inline bool bvh_leaf_any(__global const float* tris, int cur, const BvhRa
 }
 
 #if BVH_WIDTH == 2
-/* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
- * On a miss hit->prim = -1 and hit->t = tmax. */
-static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, vec3 org,
-                                     vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
+/* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque), in the tree
+ * whose root is node `root` (0: the scene's; instances.h: a shapegroup's). On a miss hit->prim = -1 and
+ * hit->t = tmax. */
+static inline bool bvh_closest_from(__global const float* nodes, __global const float* tris, int root, vec3 org,
+                                    vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
@@ -217,7 +218,7 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
     float best = tmax;
     float bu = 0.0f, bv = 0.0f;
     int prim = -1;
-    int cur = 0;
+    int cur = root;
     for (;;) {
         if (cur >= 0) {
             float tl, tr;
@@ -246,13 +247,14 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
     return bvh_hit_out(hit, best, bu, bv, prim);
 }
 
-/* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */
-static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, vec3 org,
-                                 vec3 dir, float tmax, const AlphaTest* alpha) {
+/* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first), in the
+ * tree whose root is node `root`. */
+static inline bool bvh_any_from(__global const float* nodes, __global const float* tris, int root, vec3 org,
+                                vec3 dir, float tmax, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     int sp = 0;
-    int cur = 0;
+    int cur = root;
     for (;;) {
         if (cur >= 0) {
             float tl, tr;
@@ -434,10 +436,11 @@ static inline bool bvh_packet_leaf_any(__global const float* nodes, int cur, con
 }
 #endif /* BVH_LEAF_PACKETS */
 
-/* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque).
- * On a miss hit->prim = -1 and hit->t = tmax. */
-static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, vec3 org,
-                                     vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
+/* Closest hit with 0 < t < tmax that passes the opacity test (alpha may be 0: all opaque), in the tree
+ * whose root is node `root` (0: the scene's; instances.h: a shapegroup's). On a miss hit->prim = -1 and
+ * hit->t = tmax. */
+static inline bool bvh_closest_from(__global const float* nodes, __global const float* tris, int root, vec3 org,
+                                    vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
@@ -445,7 +448,7 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
     float best = tmax;
     float bu = 0.0f, bv = 0.0f;
     int prim = -1;
-    int cur = 0;
+    int cur = root;
     for (;;) {
         if (cur >= 0) {
             BvhVi l;
@@ -472,14 +475,15 @@ static inline bool bvh_closest_alpha(__global const float* nodes, __global const
     return bvh_hit_out(hit, best, bu, bv, prim);
 }
 
-/* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first). */
-static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, vec3 org,
-                                 vec3 dir, float tmax, const AlphaTest* alpha) {
+/* True if anything that passes the opacity test is hit with 0 < t < tmax (returns at the first), in the
+ * tree whose root is node `root`. */
+static inline bool bvh_any_from(__global const float* nodes, __global const float* tris, int root, vec3 org,
+                                vec3 dir, float tmax, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
     int sp = 0;
-    int cur = 0;
+    int cur = root;
     for (;;) {
         if (cur >= 0) {
             BvhVi l;
@@ -498,6 +502,17 @@ static inline bool bvh_any_alpha(__global const float* nodes, __global const flo
 }
 
 #endif /* BVH_WIDTH */
+
+/* The scene's tree (root node 0), honouring opacity. */
+static inline bool bvh_closest_alpha(__global const float* nodes, __global const float* tris, vec3 org,
+                                     vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
+    return bvh_closest_from(nodes, tris, 0, org, dir, tmax, hit, alpha);
+}
+
+static inline bool bvh_any_alpha(__global const float* nodes, __global const float* tris, vec3 org,
+                                 vec3 dir, float tmax, const AlphaTest* alpha) {
+    return bvh_any_from(nodes, tris, 0, org, dir, tmax, alpha);
+}
 
 /* The queries without opacity (every triangle opaque). */
 static inline bool bvh_closest(__global const float* nodes, __global const float* tris, vec3 org,

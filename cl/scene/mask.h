@@ -31,6 +31,9 @@ typedef struct {
     RngKey key;
     uint bounce;
     uint dim;
+#ifdef SCENE_HAS_INSTANCES
+    uint inst_id; /* the instance's bits of a hit's packed id (instances.h): instances draw apart */
+#endif
 } AlphaTest;
 
 /* Texture coordinates of barycentrics (u, v) on leaf-order triangle prim
@@ -63,7 +66,11 @@ static inline bool alpha_accept(const AlphaTest* a, int prim, float u, float v) 
     float opacity = material_opacity(&a->tex, m, tri_uv(a->tri_vidx, a->vuvs, prim, info, u, v));
     if (opacity >= 1.0f) return true;
     if (opacity <= 0.0f) return false;
+#ifdef SCENE_HAS_INSTANCES
+    return rng_1d_at(a->key, a->bounce, a->dim, (uint)prim | a->inst_id) < opacity;
+#else
     return rng_1d_at(a->key, a->bounce, a->dim, (uint)prim) < opacity;
+#endif
 #else
     return true;
 #endif

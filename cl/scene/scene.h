@@ -1,7 +1,8 @@
 /* scene.h: the scene as the kernels see it, a set of plain buffers written by
  * pyclpt/scene_buffers.py (the offsets below are mirrored there).
  *
- *   nodes      BVH nodes, 8 * BVH_WIDTH floats each, then leaf packets with BVH_LEAF_PACKETS (bvh.h)
+ *   nodes      BVH nodes, 8 * BVH_WIDTH floats each, then leaf packets with BVH_LEAF_PACKETS (bvh.h);
+ *              with SCENE_HAS_INSTANCES also the top level and the instance records (instances.h)
  *   tris       triangles in BVH leaf order: v0, e1 = v1 - v0, e2 = v2 - v0 (9 floats)
  *   tri_info   2 ints per triangle: material id | TRI_HAS_* flags, light index or -1
  *   tri_vidx   3 ints per triangle: vertex indices into vnormals / vuvs
@@ -22,6 +23,9 @@
 #include "core/sampling.h"
 #include "scene/texture.h"
 #include "scene/mask.h"
+#ifdef SCENE_HAS_INSTANCES
+#include "scene/instances.h"
+#endif
 
 #define CONST_CAM_ORIGIN 0
 #define CONST_CAM_FORWARD 3
@@ -193,8 +197,8 @@ static inline Frame uv_frame(const Scene* sc, int prim, int info, vec3 ng, vec3 
 }
 #endif
 
-/* Rebuild the surface from a hit record (leaf-order triangle, barycentrics u, v). */
-static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
+/* The surface at barycentrics u, v of leaf-order triangle prim, in its mesh's space. */
+static inline Surface surface_local(const Scene* sc, int prim, float u, float v) {
     Surface s;
     __global const float* t = sc->tris + 9 * prim;
     vec3 v0 = rgb_at(t, sc->unit), e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
@@ -223,6 +227,38 @@ static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
     return s;
 }
 
+/* Rebuild the surface from a hit record (hit.prim, barycentrics u, v), in world space. */
+#ifdef SCENE_HAS_INSTANCES
+/* prim is the packed id of instances.h: the triangle's surface through its instance's transforms
+ * (points by object-to-world, normals by its inverse transpose, as Mitsuba's instances). */
+static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
+    int bits = inst_tri_bits(sc->nodes);
+    Surface s = surface_local(sc, prim & ((1 << bits) - 1), u, v);
+    __global const float* rec = inst_record(sc->nodes, prim >> bits);
+    s.p = inst_point(rec + INST_O2W, s.p);
+    s.ng = m_normalize(inst_normal(rec + INST_NORMAL, s.ng));
+    vec3 ns = m_normalize(inst_normal(rec + INST_NORMAL, s.sh.n));
+#ifdef SCENE_HAS_ANISOTROPY
+    if (mat_flags(scene_material(sc, s.material)) & MAT_FLAG_UV_FRAME) {
+        /* the tangent carried into the world (a vector, by object-to-world), orthogonal to the normal */
+        vec3 tw = inst_vector(rec + INST_O2W, s.sh.s);
+        vec3 sv = v3_sub(tw, v3_scale(ns, m_dot(ns, tw)));
+        float len = m_length(sv);
+        if (len > 0.0f && m_isfinite(len)) {
+            s.sh.n = ns;
+            s.sh.s = v3_divs(sv, len);
+            s.sh.t = m_cross(ns, s.sh.s);
+            return s;
+        }
+    }
+#endif
+    s.sh = frame_from(ns);
+    return s;
+}
+#else
+static inline Surface surface_at(const Scene* sc, int prim, float u, float v) { return surface_local(sc, prim, u, v); }
+#endif
+
 /* The surface a path's ray along dir hit, on the side it hit: with -DSCENE_HAS_BACK_MATERIALS a
  * material with a different back (MAT_FLAG_BACK, Mitsuba `twosided` with two BSDFs) is replaced by its
  * back material where wi = -dir is below the shading normal (to_local(s.sh, -dir).z < 0, the test
@@ -245,13 +281,21 @@ static inline AlphaTest scene_alpha(const Scene* sc, RngKey key, int bounce, uin
 /* Closest hit of a path's ray at `bounce`, honouring opacity. */
 static inline bool scene_closest(const Scene* sc, RngKey key, int bounce, vec3 org, vec3 dir, Hit* hit) {
     AlphaTest a = scene_alpha(sc, key, bounce, DIM_MASK_CLOSEST);
+#ifdef SCENE_HAS_INSTANCES
+    return inst_closest(sc->nodes, sc->tris, org, dir, INF_F, hit, &a);
+#else
     return bvh_closest_alpha(sc->nodes, sc->tris, org, dir, INF_F, hit, &a);
+#endif
 }
 
 /* True when a shadow ray of `bounce` is blocked before tmax, honouring opacity. */
 static inline bool scene_occluded(const Scene* sc, RngKey key, int bounce, vec3 org, vec3 dir, float tmax) {
     AlphaTest a = scene_alpha(sc, key, bounce, DIM_MASK_SHADOW);
+#ifdef SCENE_HAS_INSTANCES
+    return inst_any(sc->nodes, sc->tris, org, dir, tmax, &a);
+#else
     return bvh_any_alpha(sc->nodes, sc->tris, org, dir, tmax, &a);
+#endif
 }
 
 /* Origin for a ray leaving s in direction d: offset to d's side of the surface. */

@@ -115,7 +115,8 @@ from pyclpt.common.cache import cache_path, content_key, save_npz
 
 log = logging.getLogger("pyclpt.accel.bvh")
 
-__all__ = ["FlatBVH", "BuildSettings", "DEFAULT_SETTINGS", "build_bvh", "leaf_packet_buffer", "LAYOUT_VERSION"]
+__all__ = ["FlatBVH", "BuildSettings", "DEFAULT_SETTINGS", "build_bvh", "build_box_bvh", "leaf_packet_buffer",
+           "LAYOUT_VERSION"]
 
 #: Bumped whenever the flattened layout or the build changes meaning.
 LAYOUT_VERSION = "bvh-layout-1"
@@ -678,3 +679,26 @@ def build_bvh(positions: np.ndarray, indices: np.ndarray, *, use_cache: bool = T
     except OSError as exc:
         log.warning("could not write BVH cache entry %s (%s)", path, exc)
     return bvh
+
+
+def build_box_bvh(lo: np.ndarray, hi: np.ndarray, settings: BuildSettings) -> tuple[np.ndarray, np.ndarray, float]:
+    """A BVH over boxes (the top level of instancing, :mod:`pyclpt.accel.instances`): ``lo``, ``hi`` (N, 3)
+    finite boxes. Returns the nodes (the layout of :class:`FlatBVH`, leaves' starts index the boxes in leaf
+    order), the leaf order (leaf-order slot -> box index) and the build seconds. Not cached (a few
+    hundred boxes build in milliseconds)."""
+    start = time.perf_counter()
+    lo = np.ascontiguousarray(lo, np.float32).reshape(-1, 3)
+    hi = np.ascontiguousarray(hi, np.float32).reshape(-1, 3)
+    N = lo.shape[0]
+    if N == 0 or not (np.isfinite(lo).all() and np.isfinite(hi).all() and (lo <= hi).all()):
+        raise ValueError("build_box_bvh needs one or more finite boxes with lo <= hi")
+    if N >= MAX_TRIANGLES:
+        raise ValueError(f"{N} boxes: the BVH layout holds at most {MAX_TRIANGLES - 1}")
+    prims = np.zeros((N, 8), dtype=np.float32)
+    prims[:, 0:3] = lo
+    prims[:, 4:7] = hi
+    prims.view(np.uint32)[:, 7] = np.arange(N, dtype=np.uint32)
+    root, n_nodes, kids, copies = _embree_build(prims, settings)
+    nodes, _, order = _flatten(root, n_nodes, kids, settings.width, copies, prims,
+                               np.zeros((N, 9), np.float32), lo, hi)
+    return nodes, order, time.perf_counter() - start

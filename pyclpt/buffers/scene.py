@@ -2,7 +2,10 @@
 
 All meshes are concatenated, the BVH is built over every triangle (Embree,
 :mod:`pyclpt.accel.bvh`) and the per-triangle arrays are put into the BVH's leaf
-order so that kernels index everything by the triangle a traversal returns.
+order so that kernels index everything by the triangle a traversal returns. A scene with instances
+(Mitsuba ``shapegroup`` + ``instance``) packs each instanced group's triangles once after the plain
+meshes (:func:`scene_meshes`) and gets the two-level BVH of :mod:`pyclpt.accel.instances` and its
+``-DSCENE_HAS_INSTANCES`` defines; the per-triangle arrays are the same.
 The layout of each array is documented in ``cl/scene/scene.h``, ``cl/scene/bsdf.h`` and
 ``cl/scene/lights.h``; the offsets below mirror those headers.
 """
@@ -15,6 +18,7 @@ import numpy as np
 import pyopencl as cl
 
 from pyclpt.accel.bvh import FlatBVH, build_bvh, leaf_packet_buffer
+from pyclpt.accel.instances import build_instanced, instanced_node_buffer
 from pyclpt.buffers.lights import LightArrays, camera_consts, camera_kind, pack_lights
 from pyclpt.buffers.materials import (  # noqa: F401
     MAT_STRIDE,
@@ -25,7 +29,7 @@ from pyclpt.buffers.materials import (  # noqa: F401
 )
 from pyclpt.buffers.rfilter import filter_kind
 from pyclpt.device.context import Device, upload
-from pyclpt.scene.model import Camera, Scene
+from pyclpt.scene.model import Camera, Mesh, Scene
 
 #: Test an 8-wide BVH's leaf triangles 8 at a time (cl/scene/bvh.h BVH_LEAF_PACKETS, docs/bvh.md);
 #: the same hits as the scalar loop, faster on PoCL and Intel's runtime (measured for width 8 only).
@@ -51,8 +55,11 @@ class SceneArrays:
     bounds: np.ndarray  # (2, 3) scene bounding box
     defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, SCENE_HAS_TEXTURES, SCENE_MATERIALS,
     # SCENE_HAS_ANISOTROPY, SCENE_HAS_BACK_MATERIALS, SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS, SCENE_CAMERA,
-    # SCENE_FILTER, SCENE_HAS_EMITTER_TEXTURES
-    node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer)
+    # SCENE_FILTER, SCENE_HAS_EMITTER_TEXTURES, SCENE_HAS_INSTANCES
+    node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer);
+    # instanced scenes: then the top level and the instance records (pyclpt.accel.instances)
+    geometry_defines: dict | None = None  # the instancing -D (SCENE_HAS_INSTANCES), None without instances
+    instance_tri_bits: int | None = None  # instanced scenes: the packed hit id's triangle bits (AOV ids)
 
     @property
     def triangle_count(self) -> int:
@@ -75,10 +82,23 @@ class SceneArrays:
         return sum(a.nbytes for _, a in self.device_arrays())
 
 
+def instanced_groups(scene: Scene) -> list[str]:
+    """The shapegroups the scene's instances use, in order of first use."""
+    return list(dict.fromkeys(i.group for i in scene.instances))
+
+
+def scene_meshes(scene: Scene) -> list[Mesh]:
+    """Every mesh whose triangles are packed, in packing order: the plain meshes, then the meshes of each
+    instanced shapegroup (once, however many instances)."""
+    if not scene.instances:
+        return scene.meshes
+    return [*scene.meshes, *(m for g in instanced_groups(scene) for m in scene.groups[g].meshes)]
+
+
 def triangle_emission(scene: Scene) -> np.ndarray:
-    """(T, 3) float32: the emitted radiance of every triangle of the scene, in mesh order."""
+    """(T, 3) float32: the emitted radiance of every triangle of the scene, in mesh order (scene_meshes)."""
     parts = []
-    for mesh in scene.meshes:
+    for mesh in scene_meshes(scene):
         em = mesh.emission if mesh.emission is not None and max(mesh.emission) > 0 else (0.0, 0.0, 0.0)
         parts.append(np.tile(np.asarray(em, np.float32), (mesh.triangle_count, 1)))
     return np.concatenate(parts)
@@ -87,14 +107,16 @@ def triangle_emission(scene: Scene) -> np.ndarray:
 def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[MaterialArrays, LightArrays]:
     """The materials, textures and emitters of ``scene`` for its BVH: everything but the geometry."""
     mats = pack_materials(scene.materials)
-    tri_mesh = np.repeat(np.arange(len(scene.meshes)), [m.triangle_count for m in scene.meshes])
+    meshes = scene_meshes(scene)  # the plain meshes first (emitters are never in a shapegroup)
+    tri_mesh = np.repeat(np.arange(len(meshes)), [m.triangle_count for m in meshes])
     lights = pack_lights(scene, bvh.tris.reshape(-1, 9), triangle_emission(scene)[bvh.tri_order], bounds,
                          mats.textures, tri_mesh[bvh.tri_order])
     return mats, lights
 
 
-def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, scene: Scene) -> dict:
-    return {"SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
+def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, scene: Scene,
+                  geometry: dict | None = None) -> dict:
+    return {**(geometry or {}), "SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
             "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
             "SCENE_HAS_ANISOTROPY": mats.has_anisotropy, "SCENE_HAS_BACK_MATERIALS": mats.has_back_materials,
             "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets,
@@ -105,7 +127,7 @@ def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packe
 def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order: np.ndarray) -> np.ndarray:
     """(T, 2) int32 in leaf order: material | TRI_* flags, light index."""
     info = []
-    for mesh in scene.meshes:
+    for mesh in scene_meshes(scene):
         flags = ((TRI_HAS_NORMALS if mesh.normals is not None else 0) | (TRI_HAS_UVS if mesh.uvs is not None else 0)
                  | (TRI_MASKED if mats.masked[mesh.material] else 0))
         info.append(np.full(mesh.triangle_count, mesh.material | flags, np.int32))
@@ -115,36 +137,73 @@ def triangle_info(scene: Scene, mats: MaterialArrays, lights: LightArrays, order
     return tri_info
 
 
-def pack_scene(scene: Scene) -> SceneArrays:
-    scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
+def concat_meshes(meshes: list[Mesh]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Positions, indices (offset), normals and uvs of the meshes, concatenated."""
     positions, indices, normals, uvs = [], [], [], []
     offset = 0
-    for mesh in scene.meshes:
+    for mesh in meshes:
         positions.append(mesh.positions)
         indices.append(mesh.indices + offset)
         nv = mesh.positions.shape[0]
         normals.append(mesh.normals if mesh.normals is not None else np.zeros((nv, 3), np.float32))
         uvs.append(mesh.uvs if mesh.uvs is not None else np.zeros((nv, 2), np.float32))
         offset += nv
-    P = np.concatenate(positions)
-    tris = np.concatenate(indices)
-    bvh = build_bvh(P, tris)
-    packets = LEAF_PACKETS and bvh.width == 8
+    return np.concatenate(positions), np.concatenate(indices), np.concatenate(normals), np.concatenate(uvs)
+
+
+def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool, int]:
+    """Instanced scenes: one bottom-level BVH per instanced shapegroup (built once, cached) and one for the
+    plain meshes (an instance with the identity transform), the top level over the instances
+    (pyclpt.accel.instances). Returns the merged bottom levels, the bounds, the node buffer (with its
+    header), whether it has leaf packets and the packed hit id's triangle bits."""
+    groups = instanced_groups(scene)
+    blocks = [scene.groups[g].meshes for g in groups]
+    which = [groups.index(i.group) for i in scene.instances]
+    to_world = [i.to_world for i in scene.instances]
+    if scene.meshes:  # the plain meshes are packed first (scene_meshes), as one more bottom level
+        blocks.insert(0, scene.meshes)
+        which = [w + 1 for w in which] + [0]
+        to_world.append(np.eye(4))
+    bvhs = []
+    for meshes in blocks:
+        P, tris, _, _ = concat_meshes(meshes)
+        bvhs.append(build_bvh(P, tris))
+    inst = build_instanced(bvhs, np.array(which), np.array(to_world))
+    # The merged tri_order indexes the blocks' triangles concatenated, which is scene_meshes' order.
+    packets = LEAF_PACKETS and inst.width == 8
+    buf, _, _ = instanced_node_buffer(inst, packets)
+    bounds = inst.bounds
+    return inst.blas, bounds, buf, packets, inst.tri_bits
+
+
+def pack_scene(scene: Scene) -> SceneArrays:
+    scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
+    P, tris, vnormals, vuvs = concat_meshes(scene_meshes(scene))
+    geometry, tri_bits = None, None
+    if scene.instances:
+        bvh, bounds, node_buffer, packets, tri_bits = _instanced_bvh(scene)
+        geometry = {"SCENE_HAS_INSTANCES": True}
+    else:
+        bvh = build_bvh(P, tris)
+        packets = LEAF_PACKETS and bvh.width == 8
+        bounds = np.stack([P.min(0), P.max(0)])
+        node_buffer = leaf_packet_buffer(bvh) if packets else bvh.nodes
     order = bvh.tri_order
-    bounds = np.stack([P.min(0), P.max(0)])
     mats, lights = pack_appearance(scene, bvh, bounds)
     return SceneArrays(
         bvh=bvh,
         tri_info=triangle_info(scene, mats, lights, order),
         tri_vidx=np.ascontiguousarray(tris[order]),
-        vnormals=np.concatenate(normals).astype(np.float32),
-        vuvs=np.concatenate(uvs).astype(np.float32),
+        vnormals=vnormals.astype(np.float32),
+        vuvs=vuvs.astype(np.float32),
         materials=mats.materials,
         lights=lights,
         textures=mats.textures,
         bounds=bounds,
-        defines=scene_defines(mats, lights, bvh, packets, scene),
-        node_buffer=leaf_packet_buffer(bvh) if packets else bvh.nodes,
+        defines=scene_defines(mats, lights, bvh, packets, scene, geometry),
+        node_buffer=node_buffer,
+        geometry_defines=geometry,
+        instance_tri_bits=tri_bits,
     )
 
 
@@ -175,7 +234,7 @@ class SceneBuffers:
         old = self.arrays
         mats, lights = pack_appearance(self.scene, old.bvh, old.bounds)
         packets = old.defines["BVH_LEAF_PACKETS"]
-        defines = scene_defines(mats, lights, old.bvh, packets, self.scene)
+        defines = scene_defines(mats, lights, old.bvh, packets, self.scene, old.geometry_defines)
         changed = {k: (old.defines[k], v) for k, v in defines.items() if old.defines[k] != v}
         if changed:
             what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items())
@@ -184,7 +243,8 @@ class SceneBuffers:
         new = SceneArrays(bvh=old.bvh, tri_info=triangle_info(self.scene, mats, lights, old.bvh.tri_order),
                           tri_vidx=old.tri_vidx, vnormals=old.vnormals, vuvs=old.vuvs, materials=mats.materials,
                           lights=lights, textures=mats.textures, bounds=old.bounds, defines=defines,
-                          node_buffer=old.node_buffer)
+                          node_buffer=old.node_buffer, geometry_defines=old.geometry_defines,
+                          instance_tri_bits=old.instance_tri_bits)
         uploaded = []
         for k, ((name, before), (_, after)) in enumerate(zip(old.device_arrays(), new.device_arrays())):
             if before is not after and (before.dtype != after.dtype or before.tobytes() != after.tobytes()):

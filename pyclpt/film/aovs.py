@@ -134,16 +134,20 @@ class AovFilm:
 
 
 def unpack(planes: np.ndarray, names: Iterable[str], tri_order: np.ndarray | None = None,
-           mesh_starts: np.ndarray | None = None) -> dict[str, np.ndarray]:
+           mesh_starts: np.ndarray | None = None, tri_bits: int | None = None) -> dict[str, np.ndarray]:
     """Named arrays from :meth:`AovFilm.read`'s planes: (H, W, C) float32 for the vector AOVs, (H, W)
     float32 for roughness/depth/hitdist, (H, W) int32 for the ids (-1: no hit). ``tri_order`` maps the
     kernels' triangle (BVH leaf order) to the scene's (meshes concatenated), ``mesh_starts`` the first
-    triangle of every mesh (for ``mesh_id``)."""
+    triangle of every mesh (for ``mesh_id``). ``tri_bits``: instanced scenes' kernels record a packed id
+    (cl/scene/instances.h) whose low ``tri_bits`` bits are the triangle; the ids are then those of the
+    shapegroup's triangle and mesh, the same for every instance."""
     ints = planes.view(np.int32)
     out: dict[str, np.ndarray] = {}
     for name in names:
         if name in ("prim_id", "mesh_id"):
             prim = ints[AOV_LAYOUT["prim_id"][0]]
+            if tri_bits is not None:
+                prim = np.where(prim >= 0, prim & ((1 << tri_bits) - 1), -1)
             if tri_order is not None:
                 prim = np.where(prim >= 0, tri_order[np.clip(prim, 0, None)], -1).astype(np.int32)
             if name == "mesh_id":

@@ -30,6 +30,8 @@ LEAF_PACKET_BYTES_PER_TRIANGLE = 128
 BYTES_PER_TRIANGLE = 36 + 8 + 12 + 32 + 32 + LEAF_PACKET_BYTES_PER_TRIANGLE
 BYTES_PER_VERTEX = 12 + 8  # shading normal, uv
 BYTES_PER_MATERIAL = 4 * 32
+# An instance: its record (pyclpt.accel.instances.INST_STRIDE words) and about two top-level 8-wide nodes.
+BYTES_PER_INSTANCE = 4 * 36 + 2 * 256
 # The parts of render_memory() that are one buffer each (the others add up several).
 FILM_BUFFERS = ("frame buffer", "accumulation sum", "accumulated image")
 
@@ -42,8 +44,11 @@ def _texture_bytes(tex: object) -> int:
 
 def scene_bytes(scene: Scene) -> int:
     """An estimate (from above) of the scene's device buffers."""
-    total = BYTES_PER_TRIANGLE * scene.triangle_count
-    total += BYTES_PER_VERTEX * sum(int(m.positions.shape[0]) for m in scene.meshes)
+    groups = {i.group for i in scene.instances}  # instanced shapegroups: stored once
+    meshes = [*scene.meshes, *(m for g in groups for m in scene.groups[g].meshes)]
+    total = BYTES_PER_TRIANGLE * sum(m.triangle_count for m in meshes)
+    total += BYTES_PER_VERTEX * sum(int(m.positions.shape[0]) for m in meshes)
+    total += BYTES_PER_INSTANCE * (len(scene.instances) + 1)
     total += BYTES_PER_MATERIAL * len(scene.materials) + 64 * (len(scene.lights) + 1)
     seen: set[int] = set()
     stack: list[object] = list(scene.materials)

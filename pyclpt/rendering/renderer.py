@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pyclpt.buffers.scene import SceneBuffers
+from pyclpt.buffers.scene import SceneBuffers, scene_meshes
 from pyclpt.common.checks import check_choice, check_int, check_optional_bool, check_optional_int
 from pyclpt.device.context import Device, get_device
 from pyclpt.film.accumulator import check_options
@@ -163,8 +163,9 @@ class Renderer:
             raise ValueError("this renderer records no AOVs: make it with aovs=[...] (or aovs=True)")
         wanted = self.aov_names if names is None else check_aovs(names)
         arrays = self.scene_buffers.arrays
-        starts = np.cumsum([0] + [m.triangle_count for m in self.scene.meshes[:-1]])
-        return unpack(self.film.aov.read(), wanted, arrays.bvh.tri_order, starts)
+        meshes = scene_meshes(self.scene)  # instanced scenes: the plain meshes, then the shapegroups' meshes
+        starts = np.cumsum([0] + [m.triangle_count for m in meshes[:-1]])
+        return unpack(self.film.aov.read(), wanted, arrays.bvh.tri_order, starts, arrays.instance_tri_bits)
 
     def collect_stats(self, spp: int, seconds: float) -> RenderStats:
         """Fill ``stats`` after frames were rendered (profile, bounces, memory, counters); returns it."""

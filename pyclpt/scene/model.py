@@ -686,6 +686,65 @@ class Mesh(Checked):
             self.emission_texture.check_colour(f"{where} emission_texture")
 
 
+@dataclass(eq=False)
+class ShapeGroup(Checked):
+    """Mitsuba's ``shapegroup``: meshes in object space, drawn only through :class:`Instance` s. The
+    group is stored (and its BVH built) once however many instances use it. Emitters are not allowed
+    (Mitsuba 3 refuses them too: "Instancing of emitters is not supported")."""
+
+    name: str
+    meshes: list[Mesh]
+
+    @property
+    def triangle_count(self) -> int:
+        return sum(m.triangle_count for m in self.meshes)
+
+    def _check(self) -> None:
+        where = f"shapegroup {self.name!r}"
+        if not isinstance(self.meshes, list) or not all(isinstance(m, Mesh) for m in self.meshes):
+            raise TypeError(f"{where} meshes: expected a list of pyclpt.Mesh")
+        if not self.meshes:
+            raise ValueError(f"{where} has no shapes")
+        for m in self.meshes:
+            if m.emission is not None:
+                raise ValueError(f"{where}: mesh {m.name!r} is an area emitter; emitters inside a shapegroup are "
+                                 "not supported (nor by Mitsuba 3): put it outside the group")
+
+
+def check_instance_transform(m: object, where: str) -> np.ndarray:
+    """``m`` as a 4x4 float64 affine object-to-world matrix whose 3x3 part is invertible (ValueError naming
+    ``where`` otherwise)."""
+    a = np.array(m, dtype=np.float64)
+    if a.shape != (4, 4):
+        raise ValueError(f"{where}: to_world must be a 4x4 matrix, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{where}: to_world has NaN or infinite entries")
+    if not np.array_equal(a[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"{where}: to_world must be affine (last row 0 0 0 1), got {a[3].tolist()}")
+    lin = a[:3, :3]
+    scale = float(np.abs(lin).max())
+    det = float(np.linalg.det(lin))
+    if not (scale > 0 and abs(det) > 1e-9 * scale ** 3):
+        raise ValueError(f"{where}: degenerate to_world (determinant {det:.3g} of its 3x3 part): an instance "
+                         "must be an invertible transform of its shapegroup")
+    return a
+
+
+@dataclass(eq=False)
+class Instance(Checked):
+    """Mitsuba's ``instance``: the shapegroup named ``group`` placed by ``to_world`` (4x4, invertible).
+    Normals transform by the inverse transpose (Mitsuba's instances), also under a mirroring transform."""
+
+    group: str
+    to_world: np.ndarray
+    name: str = "instance"
+
+    def _check(self) -> None:
+        if not isinstance(self.group, str):
+            raise TypeError(f"instance {self.name!r}: group must be a shapegroup name, got {self.group!r:.60}")
+        self.to_world = check_instance_transform(self.to_world, f"instance {self.name!r}")
+
+
 @dataclass
 class Camera(Checked):
     """A camera; ``to_world`` maps camera space (looking along +z) to world.
@@ -821,10 +880,14 @@ class Scene(Checked):
     # Mitsuba's names of objects the meshes' names do not give ("material:3" -> "red", "environment",
     # "light:0"): set by the dict and XML loaders, used by pyclpt.traverse
     ids: dict[str, str] = field(default_factory=dict)
+    # Mitsuba's shapegroups by name, and the instances placing them (docs/bvh.md, "Instances")
+    groups: dict[str, ShapeGroup] = field(default_factory=dict)
+    instances: list[Instance] = field(default_factory=list)
 
     def _check(self) -> None:
         where = f"scene {self.name!r}"
-        for attr, kind in (("meshes", Mesh), ("materials", MATERIALS), ("lights", LIGHTS)):
+        for attr, kind in (("meshes", Mesh), ("materials", MATERIALS), ("lights", LIGHTS),
+                           ("instances", Instance)):
             items = getattr(self, attr)
             if not isinstance(items, list):
                 raise TypeError(f"{where} {attr}: expected a list, got {type(items).__name__}")
@@ -833,12 +896,18 @@ class Scene(Checked):
                     names = ", ".join(t.__name__ for t in (kind if isinstance(kind, tuple) else (kind,)))
                     raise TypeError(f"{where} {attr}[{i}]: expected {names}, got {type(item).__name__} "
                                     f"{item!r:.60}")
-        if not self.meshes:
+        if not self.meshes and not self.instances:
             raise ValueError(f"scene {self.name!r} has no shapes")
-        for mesh in self.meshes:
+        if not isinstance(self.groups, dict) or not all(isinstance(g, ShapeGroup) for g in self.groups.values()):
+            raise TypeError(f"{where} groups: expected a dict of names to pyclpt.ShapeGroup")
+        for mesh in (*self.meshes, *(m for g in self.groups.values() for m in g.meshes)):
             if not 0 <= mesh.material < len(self.materials):
                 raise ValueError(f"mesh {mesh.name!r} has material {mesh.material}, "
                                  f"but the scene has {len(self.materials)} materials")
+        for inst in self.instances:
+            if inst.group not in self.groups:
+                raise ValueError(f"instance {inst.name!r} refers to shapegroup {inst.group!r}, which the scene does "
+                                 f"not have (shapegroups: {', '.join(map(repr, self.groups)) or 'none'})")
         if self.environment is not None and not isinstance(self.environment, Envmap):
             self.environment = radiance(self.environment, f"{where} environment radiance")
         if not isinstance(self.camera, Camera):
@@ -867,7 +936,8 @@ class Scene(Checked):
         self._run_check()
         for i in range(len(self.materials)):
             check_material(self.materials[i], f"scene {self.name!r} {self.material_label(i)}")
-        for element in (*self.meshes, *self.lights, self.camera, self.film):
+        for element in (*self.meshes, *self.lights, *self.groups.values(),
+                        *(m for g in self.groups.values() for m in g.meshes), *self.instances, self.camera, self.film):
             element.validate()
         if isinstance(self.environment, Envmap):
             self.environment.validate()
@@ -880,3 +950,31 @@ class Scene(Checked):
     def emitter_count(self) -> int:
         return (sum(m.triangle_count for m in self.meshes if m.emission is not None)
                 + (1 if self.environment is not None else 0) + len(self.lights))
+
+    @property
+    def instanced_triangle_count(self) -> int:
+        """Triangles drawn through instances (each instance counts its group's triangles)."""
+        return sum(self.groups[i.group].triangle_count for i in self.instances)
+
+    def flattened(self) -> Scene:
+        """This scene with every instance expanded into plain world-space meshes (copies of its group's
+        meshes through its ``to_world``, normals by the inverse transpose, the winding reversed under a
+        mirroring transform so the geometric normal is the transformed one, as for instances) and no
+        groups: what instancing saves memory on. Materials, camera and the rest are shared."""
+        meshes = list(self.meshes)
+        for k, inst in enumerate(self.instances):
+            m = inst.to_world
+            lin = m[:3, :3]
+            flip = np.linalg.det(lin) < 0
+            inv_t = np.linalg.inv(lin).T
+            for mesh in self.groups[inst.group].meshes:
+                pos = (mesh.positions.astype(np.float64) @ lin.T + m[:3, 3]).astype(np.float32)
+                normals = None
+                if mesh.normals is not None:
+                    n = mesh.normals.astype(np.float64) @ inv_t.T
+                    length = np.linalg.norm(n, axis=1, keepdims=True)
+                    normals = (n / np.where(length > 0, length, 1)).astype(np.float32)
+                idx = mesh.indices[:, ::-1].copy() if flip else mesh.indices
+                meshes.append(Mesh(f"{inst.name}/{k}/{mesh.name}", pos, idx, mesh.material, normals, mesh.uvs))
+        return Scene(meshes, self.materials, self.camera, self.film, self.environment, self.spp, self.max_depth,
+                     self.name, self.source, self.lights, dict(self.ids))

@@ -18,7 +18,9 @@
   (tests/test_plugins.py);
 - ``anisotropy.xml``: anisotropic rough conductors and a rough dielectric, as it is and, as
   ``anisotropy-swapped``, with alpha_u and alpha_v swapped (tests/test_plugins.py);
-- ``twosided-pair.xml``: twosided with a different BSDF on each side (tests/test_plugins.py).
+- ``twosided-pair.xml``: twosided with a different BSDF on each side (tests/test_plugins.py);
+- ``instances.xml``: a shapegroup of three shapes instanced four times (rotations, a non-uniform scale)
+  (tests/test_instances.py).
 
 Mitsuba's path tracer as each file says (box filter unless the name says otherwise), 16384 spp.
 """
@@ -32,7 +34,7 @@ mi.set_variant("llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() else "scalar_rgb"
 HERE = Path(__file__).parent
 NAMES = ("delta-emitters", "cylinder", "thinlens", "orthographic", "uv-shapes", "uv-transforms",
          "emitter-textures", "sunsky", "rfilter-tent", "rfilter-gaussian", "anisotropy", "anisotropy-swapped",
-         "twosided-pair")
+         "twosided-pair", "instances")
 #: references of one file rendered with other parameters (<default> values): name -> (file, parameters)
 VARIANTS = {"rfilter-tent": ("rfilter", {"filter": "tent"}), "rfilter-gaussian": ("rfilter", {"filter": "gaussian"}),
             "anisotropy-swapped": ("anisotropy", {"au": "0.35", "av": "0.04"})}

@@ -3,8 +3,8 @@
 A :class:`LoadContext` knows where the scene came from (``origin``, ``base_dir`` for relative file
 names), which objects carry an id (``named``) and which of them something referenced, collects the
 notes that become the one warning of the load, and holds what the loaders have built so far
-(materials, meshes, point lights, the environment). Its readers turn one dictionary value into a
-checked Python value (number, flag, existing path, transform, constant colour) and raise
+(materials, meshes, shapegroups and instances, point lights, the environment). Its readers turn one
+dictionary value into a checked Python value (number, flag, existing path, transform, constant colour) and raise
 :class:`SceneDictError` naming the element and its source line otherwise.
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from pyclpt.scene import transform as tf
-from pyclpt.scene.model import RGB, Bitmap, Envmap, Light, Material, Mesh, rgb
+from pyclpt.scene.model import RGB, Bitmap, Envmap, Instance, Light, Material, Mesh, ShapeGroup, rgb
 
 #: Meta key holding an object's source location ``"file:line"`` (added by :mod:`pyclpt.scene.mitsuba_xml`).
 WHERE = "__where__"
@@ -59,6 +59,8 @@ class LoadContext:
         self.material_ids: dict[str, int] = {}
         self.ids: dict[str, str] = {}  # Scene.ids: Mitsuba's names of the scene's objects
         self.meshes: list[Mesh] = []
+        self.groups: dict[str, ShapeGroup] = {}  # shapegroups by id, loaded when met or first instanced
+        self.instances: list[Instance] = []
         self.lights: list[Light] = []
         self.environment: RGB | Envmap | None = None
         self.bitmaps: dict[tuple, Bitmap] = {}  # one Bitmap per file and sampling settings

@@ -27,7 +27,7 @@ def classify(key: str, value: Mapping[str, Any]) -> str:
         return "bsdf"
     if kind in textures.TEXTURES:
         return "texture"
-    if kind in shapes.SHAPES or kind in shapes.UNSUPPORTED:
+    if kind in shapes.SHAPES or kind in shapes.UNSUPPORTED or kind in shapes.INSTANCING:
         return "shape"
     if kind in emitters.KNOWN:
         return "emitter"
@@ -83,8 +83,12 @@ def load_scene(ctx: LoadContext, d: Mapping[str, Any], name: str) -> Scene:
             ctx.note(value, key, f"{value.get('type')!r} not supported, ignored")
         else:
             raise ctx.fail(key, f"unsupported element type {value.get('type')!r}", value)
-    if not ctx.meshes:
+    if not ctx.meshes and not ctx.instances:
         raise ctx.fail("<root>", "the scene has no shapes", d)
+    used_groups = {i.group for i in ctx.instances}
+    for gid in ctx.groups:
+        if gid not in used_groups:
+            ctx.note(ctx.named.get(gid), gid, "shapegroup never instanced, not drawn")
     for key, value in entries:
         ident = str(value.get("id", key))
         if classify(key, value) in ("bsdf", "texture") and ident not in ctx.referenced:
@@ -92,4 +96,4 @@ def load_scene(ctx: LoadContext, d: Mapping[str, Any], name: str) -> Scene:
     if ctx.notes:
         log.warning("%s: not used by pyclpt (%d): %s", ctx.origin, len(ctx.notes), "; ".join(ctx.notes))
     return Scene(ctx.meshes, ctx.materials, camera, film, ctx.environment, spp, max_depth, name, lights=ctx.lights,
-                 ids=ctx.ids)
+                 ids=ctx.ids, groups=ctx.groups, instances=ctx.instances)

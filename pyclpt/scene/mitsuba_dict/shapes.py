@@ -4,7 +4,8 @@
 :class:`Geometry` in object space; :func:`load_shape` does what every shape shares (``to_world``,
 ``flip_normals``, ``face_normals``, the nested or referenced BSDF and area emitter) and adds the
 :class:`~pyclpt.scene.model.Mesh` to the scene. :data:`UNSUPPORTED` names the Mitsuba shapes pyclpt
-skips with a note.
+skips with a note. ``shapegroup`` and ``instance`` are :func:`load_shapegroup` and :func:`load_instance`
+(the group's meshes in object space, stored once; instances place them, docs/bvh.md "Instances").
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from pyclpt.scene import shapes as shape_lib
 from pyclpt.scene import transform as tf
 from pyclpt.scene.mitsuba_dict import bsdfs, emitters
 from pyclpt.scene.mitsuba_dict.context import META_KEYS, LoadContext, is_dict
-from pyclpt.scene.model import Mesh
+from pyclpt.scene.model import Instance, Mesh, ShapeGroup
 
 
 @dataclass
@@ -39,7 +40,7 @@ class Geometry:
 ShapeLoader = Callable[[LoadContext, Mapping[str, Any], str, np.ndarray], Geometry]
 
 #: Mitsuba shapes pyclpt does not have: reported, and skipped.
-UNSUPPORTED = frozenset({"hair", "heightfield", "shapegroup", "instance", "bsplinecurve",
+UNSUPPORTED = frozenset({"hair", "heightfield", "bsplinecurve",
                          "linearcurve", "sdfgrid", "ellipsoids", "ellipsoidsmesh"})
 
 
@@ -128,10 +129,79 @@ SHAPES: dict[str, ShapeLoader] = {
 }
 
 
+#: The shape plug-ins of instancing, loaded by :func:`load_shape` itself.
+INSTANCING = frozenset({"shapegroup", "instance"})
+
+
+def load_shapegroup(ctx: LoadContext, name: str, d: Mapping[str, Any]) -> ShapeGroup:
+    """The :class:`ShapeGroup` of ``shapegroup`` object ``d`` (its id, else ``name``), loaded once: its nested
+    shapes (with their BSDFs) as object-space meshes. Nested groups, instances and emitters are errors."""
+    gid = str(d.get("id", name))
+    if gid in ctx.groups:
+        return ctx.groups[gid]
+    outer = ctx.meshes
+    ctx.meshes = []
+    try:
+        for k, v in d.items():
+            if k in META_KEYS:
+                continue
+            if not is_dict(v):
+                raise ctx.fail(f"{name}.{k}", f"a shapegroup holds shapes only, got {v!r}", d)
+            child = ctx.deref(v, f"{name}.{k}")
+            kind = child.get("type")
+            if kind in INSTANCING:
+                raise ctx.fail(f"{name}.{k}", f"a {kind} inside shapegroup {gid!r}: nested instancing is not "
+                                              "supported (nor by Mitsuba 3)", child)
+            if kind not in SHAPES and kind not in UNSUPPORTED:
+                raise ctx.fail(f"{name}.{k}", f"a shapegroup holds shapes only, got type {kind!r}", child)
+            load_shape(ctx, f"{name}.{k}", child)
+        meshes = ctx.meshes
+    finally:
+        ctx.meshes = outer
+    for m in meshes:
+        if m.emission is not None:
+            raise ctx.fail(m.name, f"an area emitter inside shapegroup {gid!r}: emitters cannot be instanced "
+                                   "(Mitsuba 3 refuses them too); put the emitter outside the group", d)
+    if not meshes:
+        raise ctx.fail(name, f"shapegroup {gid!r} has no shapes pyclpt can load", d)
+    ctx.groups[gid] = group = ShapeGroup(gid, meshes)
+    return group
+
+
+def load_instance(ctx: LoadContext, name: str, d: Mapping[str, Any]) -> None:
+    """Add the :class:`Instance` of ``instance`` object ``d``: its one nested shapegroup (a reference or an
+    inline group) placed by ``to_world``."""
+    refs = [(k, v) for k, v in d.items() if k not in META_KEYS and is_dict(v)]
+    if len(refs) != 1:
+        raise ctx.fail(name, f"an instance needs exactly one shapegroup (a <ref id=.../>), got {len(refs)} "
+                             "nested objects", d)
+    key, ref = refs[0]
+    if ref.get("type") == "ref" and ref.get("id") not in ctx.named:
+        raise ctx.fail(f"{name}.{key}", f"instance of unknown shapegroup {ref.get('id')!r}", d)
+    target = ctx.deref(ref, f"{name}.{key}")
+    if target.get("type") != "shapegroup":
+        raise ctx.fail(f"{name}.{key}", f"an instance must refer to a shapegroup, got type {target.get('type')!r}",
+                       d)
+    group = load_shapegroup(ctx, str(ref.get("id", key)), target)
+    ctx.note_unused(name, d, {"to_world", key})
+    to_world = ctx.transform(d, "to_world", name)
+    try:
+        ctx.instances.append(Instance(group.name, to_world, name))
+    except ValueError as exc:
+        raise ctx.fail(name, str(exc), d) from None
+
+
 def load_shape(ctx: LoadContext, name: str, d: Mapping[str, Any]) -> None:
-    """Add shape ``d`` (keyed ``name`` in the scene) to ``ctx.meshes``, with its material and emission."""
+    """Add shape ``d`` (keyed ``name`` in the scene) to ``ctx.meshes``, with its material and emission; a
+    ``shapegroup`` to ``ctx.groups``, an ``instance`` to ``ctx.instances``."""
     kind = d.get("type")
     where = name
+    if kind == "shapegroup":
+        load_shapegroup(ctx, name, d)
+        return
+    if kind == "instance":
+        load_instance(ctx, name, d)
+        return
     if kind in UNSUPPORTED:
         ctx.note(d, where, f"shape type {kind!r} not supported, shape skipped")
         return
