@@ -221,3 +221,19 @@ def test_emitter_textures_in_the_model_loader_and_gradients(tmp_path):
     assert lamp.emission == (1.0, 1.0, 1.0) and isinstance(lamp.emission_texture, Bitmap)
     reasons = pyclpt.traverse(scene).unsupported()
     assert "textured area emitter" in reasons[f"{lamp.name}.emitter.radiance.value"]
+
+
+@pytest.mark.parametrize("version, reflectance", [("3.0.0", 0.0), ("0.5.0", 0.5)])
+def test_an_emitters_shape_without_bsdf_is_black_in_mitsuba_3(tmp_path, version, reflectance):
+    """Mitsuba 3 gives an area emitter's shape that names no BSDF a black diffuse (its Shape constructor);
+    Mitsuba 0.5 a grey one, as it gives every shape; a shape that does not emit is grey in both."""
+    import pyclpt
+    from pyclpt.scene.model import Diffuse
+
+    (tmp_path / "s.xml").write_text(f"""<scene version="{version}">
+        <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1, 1, 1"/></emitter></shape>
+        <shape type="sphere"/></scene>""")
+    scene = pyclpt.load(tmp_path / "s.xml")
+    lamp, ball = scene.meshes
+    assert scene.materials[lamp.material] == Diffuse((reflectance,) * 3)
+    assert scene.materials[ball.material] == Diffuse((0.5, 0.5, 0.5))

@@ -278,11 +278,12 @@ def resolve_bsdf(ctx: LoadContext, d: Mapping[str, Any], where: str) -> Material
     return load_bsdf(ctx, d, where)
 
 
-def material_index(ctx: LoadContext, d: Mapping[str, Any] | None, where: str) -> int:
-    """The index into the scene's materials of BSDF ``d`` (None: the default grey diffuse), loading it the
-    first time; a referenced or named BSDF (and the default) is one material however many shapes use it."""
+def material_index(ctx: LoadContext, d: Mapping[str, Any] | None, where: str, *, black: bool = False) -> int:
+    """The index into the scene's materials of BSDF ``d`` (None: the default grey diffuse, or with ``black``
+    a black one: Mitsuba 3's default for an area emitter's shape), loading it the first time; a referenced
+    or named BSDF (and each default) is one material however many shapes use it."""
     if d is None:
-        key = "<default>"
+        key = "<default-black>" if black else "<default>"
     elif d.get("type") == "ref":
         key = f"id:{d.get('id')}"
     elif "id" in d:
@@ -291,7 +292,7 @@ def material_index(ctx: LoadContext, d: Mapping[str, Any] | None, where: str) ->
         key = None
     if key is not None and key in ctx.material_ids:
         return ctx.material_ids[key]
-    mat: Material = Diffuse() if d is None else resolve_bsdf(ctx, d, where)
+    mat: Material = (Diffuse((0.0, 0.0, 0.0)) if black else Diffuse()) if d is None else resolve_bsdf(ctx, d, where)
     ctx.materials.append(mat)
     idx = len(ctx.materials) - 1
     # Mitsuba's name of the BSDF: its id, else its place in the shape (traverse's names)

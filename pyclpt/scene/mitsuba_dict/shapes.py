@@ -18,7 +18,7 @@ import numpy as np
 from pyclpt.scene import shapes as shape_lib
 from pyclpt.scene import transform as tf
 from pyclpt.scene.mitsuba_dict import bsdfs, emitters
-from pyclpt.scene.mitsuba_dict.context import META_KEYS, LoadContext, is_dict
+from pyclpt.scene.mitsuba_dict.context import META_KEYS, VERSION, LoadContext, is_dict
 from pyclpt.scene.model import Instance, Mesh, ShapeGroup
 
 
@@ -250,8 +250,11 @@ def load_shape(ctx: LoadContext, name: str, d: Mapping[str, Any]) -> None:
             normals = -normals
     if len(materials) > 1:
         ctx.note(d, where, f"{len(materials)} BSDFs given, the first used")
+    # no BSDF: grey diffuse, but black for an area emitter's shape in Mitsuba 3 (not in 0.5: old files' shapes
+    # carry their version)
     material = bsdfs.material_index(ctx, materials[0][1] if materials else None,
-                                    f"{where}.{materials[0][0]}" if materials else where)
+                                    f"{where}.{materials[0][0]}" if materials else where,
+                                    black=bool(lights) and VERSION not in d)
     emission = texture = None
     for key, em in lights:
         emission, texture = emitters.area_radiance(ctx, ctx.deref(em, f"{where}.{key}"), f"{where}.{key}")

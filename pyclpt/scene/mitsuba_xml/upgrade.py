@@ -19,6 +19,9 @@ PARAMETER_RENAMES: dict[tuple[str, str], dict[str, str]] = {
 #: (Mitsuba 0.5's ``sunsky`` has another sky frame and sun model than Mitsuba 3's; ``sky`` and ``sun``
 #: exist in 0.5 only): their dictionaries carry the file's version (``__version__``).
 VERSIONED_PLUGINS = frozenset({("emitter", "sunsky"), ("emitter", "sky"), ("emitter", "sun")})
+#: Tags whose every plug-in carries an old file's version: a ``shape`` (an area emitter's shape without
+#: a BSDF is grey diffuse in Mitsuba 0.5, black in Mitsuba 3).
+VERSIONED_TAGS = frozenset({"shape"})
 
 
 def to_snake_case(name: str) -> str:
@@ -50,8 +53,10 @@ def upgrade_element(tag: str, attrs: dict[str, str], version: Version) -> str:
 
 
 def legacy_version(node: Node) -> str | None:
-    """The file's version (``"0.6.0"``) for a plug-in of :data:`VERSIONED_PLUGINS` in an old file, else None."""
-    if node.version >= CURRENT or (node.tag, node.attrs.get("type", "")) not in VERSIONED_PLUGINS:
+    """The file's version (``"0.6.0"``) for a plug-in of :data:`VERSIONED_PLUGINS` or :data:`VERSIONED_TAGS` in
+    an old file, else None."""
+    if node.version >= CURRENT or ((node.tag, node.attrs.get("type", "")) not in VERSIONED_PLUGINS
+                                   and node.tag not in VERSIONED_TAGS):
         return None
     return ".".join(str(v) for v in node.version)
 
