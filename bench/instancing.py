@@ -13,8 +13,8 @@ through the top level as the identity instance.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -92,11 +92,22 @@ def main() -> None:
     ap.add_argument("--depth", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--integrator", default="megakernel")
-    ap.add_argument("--mesh", default=str(Path(os.environ.get("PYCLPT_SCENES", "/work/shared/scenes"))
-                                          / "meshes" / "bunny.ply"))
+    ap.add_argument("--mesh", default=None, help="a mesh file (default: the shared scenes' meshes/bunny.ply)")
     a = ap.parse_args()
-    # the flattened scenes' BVHs (millions of triangles) are not worth keeping in the user's cache
-    os.environ.setdefault("PYCLPT_CACHE_DIR", tempfile.mkdtemp(prefix="pyclpt-instancing-"))
+    from pyclpt.common import env
+    from pyclpt.scene.library import scenes_root
+
+    if env.get("PYCLPT_CACHE_DIR") is None:
+        # the flattened scenes' BVHs (millions of triangles) are not worth keeping in the user's cache: run
+        # again with a cache folder of this run
+        with tempfile.TemporaryDirectory(prefix="pyclpt-instancing-") as tmp:
+            child = env.child_environment(PYCLPT_CACHE_DIR=tmp)
+            sys.exit(subprocess.run([sys.executable, __file__, *sys.argv[1:]], env=child).returncode)
+    if a.mesh is None:
+        root = scenes_root()
+        if root is None:
+            sys.exit("no --mesh and no shared scene folder: set PYCLPT_SCENES (docs/bvh.md, 'Instances')")
+        a.mesh = str(root / "meshes" / "bunny.ply")
     from pyclpt.buffers.scene import pack_scene
     from pyclpt.rendering.renderer import Renderer
     from pyclpt.scene.mitsuba_dict import load_dict

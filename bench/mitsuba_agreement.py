@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import subprocess
 import sys
 import tempfile
@@ -28,21 +27,14 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+from bench.machine import cpu_model  # noqa: E402
+
 DATA = HERE.parent / "tests" / "data"
 SHARED = ["cornell-box", "classroom", "living-room", "staircase", "staircase2"]
 #: tests/data references that are variants of one file: name -> (file, loader parameters)
 VARIANTS = {"rfilter-tent": ("rfilter", {"filter": "tent"}), "rfilter-gaussian": ("rfilter", {"filter": "gaussian"}),
             "anisotropy-swapped": ("anisotropy", {"au": 0.35, "av": 0.04})}
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def compare(img: np.ndarray, ref: np.ndarray) -> dict:

@@ -165,7 +165,7 @@ def test_rectangle_with_area_emitter():
     np.testing.assert_allclose(lamp.positions[:, 2], 0.0)  # rectangle: [-1, 1]^2 at z = 0
     np.testing.assert_allclose(np.sort(lamp.positions[:, 1]), [1, 1, 3, 3])
     np.testing.assert_allclose(_geometric_normals(lamp), [[0, 0, 1]] * 2, atol=1e-6)
-    assert scene.materials == [Diffuse()]  # no bsdf: Mitsuba's default diffuse 0.5
+    assert scene.materials == [Diffuse((0.0, 0.0, 0.0))]  # no bsdf: Mitsuba 3 makes an emitter's shape black
     # scalar radiance
     scene = load_dict(_scene(lamp={**RECT, "emitter": {"type": "area", "radiance": 5}}))
     assert scene.meshes[0].emission == (5.0, 5.0, 5.0)
