@@ -633,15 +633,21 @@ def _build(pos32: np.ndarray, idx: np.ndarray, settings: BuildSettings) -> FlatB
     if not (np.isfinite(prim_lo).all() and np.isfinite(prim_hi).all()):
         bad = int(np.flatnonzero(~(np.isfinite(prim_lo) & np.isfinite(prim_hi)).all(axis=1))[0])
         raise ValueError(f"triangle {bad}: edge vectors overflow float32")
-    prims = np.zeros((T, 8), dtype=np.float32)
-    prims[:, 0:3] = prim_lo
-    prims[:, 4:7] = prim_hi
-    prims.view(np.uint32)[:, 7] = np.arange(T, dtype=np.uint32)
+    prims = _build_prims(prim_lo, prim_hi)
     root, n_nodes, kids, copies = _embree_build(prims, settings)
     nodes, tris, tri_order = _flatten(root, n_nodes, kids, settings.width, copies, prims, tri9,
                                       prim_lo, prim_hi)
     return FlatBVH(nodes=nodes, tris=tris, tri_order=tri_order,
                    build_seconds=time.perf_counter() - start)
+
+
+def _build_prims(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Embree's build primitives (RTCBuildPrimitive: lower xyz, geomID, upper xyz, primID) of boxes lo, hi."""
+    prims = np.zeros((lo.shape[0], 8), dtype=np.float32)
+    prims[:, 0:3] = lo
+    prims[:, 4:7] = hi
+    prims.view(np.uint32)[:, 7] = np.arange(lo.shape[0], dtype=np.uint32)
+    return prims
 
 
 def build_bvh(positions: np.ndarray, indices: np.ndarray, *, use_cache: bool = True,
@@ -694,10 +700,7 @@ def build_box_bvh(lo: np.ndarray, hi: np.ndarray, settings: BuildSettings) -> tu
         raise ValueError("build_box_bvh needs one or more finite boxes with lo <= hi")
     if N >= MAX_TRIANGLES:
         raise ValueError(f"{N} boxes: the BVH layout holds at most {MAX_TRIANGLES - 1}")
-    prims = np.zeros((N, 8), dtype=np.float32)
-    prims[:, 0:3] = lo
-    prims[:, 4:7] = hi
-    prims.view(np.uint32)[:, 7] = np.arange(N, dtype=np.uint32)
+    prims = _build_prims(lo, hi)
     root, n_nodes, kids, copies = _embree_build(prims, settings)
     nodes, _, order = _flatten(root, n_nodes, kids, settings.width, copies, prims,
                                np.zeros((N, 9), np.float32), lo, hi)
