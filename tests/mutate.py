@@ -272,8 +272,9 @@ MUTANTS: list[Mutant] = [
            "if (ps.depth < VIS_BITS) *visible |= 0u;",
            ("tests/test_gradients.py::test_replay_gives_the_gradients_of_the_deferred_pass",),
            "the replay sees every shadow ray occluded (its radiance bookkeeping goes wrong)"),
-    Mutant("gradient-alpha-not-moved", "return dataclasses.replace(base, alpha=alpha * factor) if alpha > 0 else base",
-           "return dataclasses.replace(base, alpha=alpha) if alpha > 0 else base",
+    Mutant("gradient-alpha-not-moved",
+           'return dataclasses.replace(mat, alpha=alpha * factor, **({"alpha_v": alpha * factor} if iso else {}))',
+           'return dataclasses.replace(mat, alpha=alpha, **({"alpha_v": alpha} if iso else {}))',
            (f"{T_GRAD_FD}[roughconductor-alpha]",), "the roughness records are not moved: no alpha gradient",
            root="host"),
     # ---- issue 14: texture-coordinate conventions ------------------------------------------------
@@ -294,7 +295,7 @@ MUTANTS: list[Mutant] = [
     Mutant("instance-drops-the-uv-frame", "    if (mat_flags(scene_material(sc, s.material)) & MAT_FLAG_UV_FRAME) {",
            "    if (false) {", ("tests/test_instances.py::test_instanced_scene_renders_as_flattened[False-True]",),
            "an instanced anisotropic material's tangent frame rebuilt from the normal, not turned with it",
-           after="static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {"),
+           after="    int bits = inst_tri_bits(sc->nodes);"),
 ]
 
 
