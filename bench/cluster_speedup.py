@@ -1,18 +1,19 @@
 """Distributed rendering on this machine (pyclpt.distributed on a dask LocalCluster): the speed-up of 2
 workers over 1 with each worker held to one core (PoCL's POCL_MAX_PTHREAD_COUNT=1), the cost of a
-2-worker cluster of whole-machine workers over a plain local render of the same spp, and the fixed
+2-worker cluster of whole-machine workers (and of one) over a plain local render of the same spp, the fixed
 cost per task (a sweep of task sizes on one worker, fitted as time = a + b * tasks), from which the
 task size that keeps that cost under 5 % follows; and the largest relative difference of the merged
 image from the local one (double means). Medians of --repeats; every worker has loaded the
 scene (and compiled) before the timings. docs/distributed.md quotes its output.
 
     python bench/cluster_speedup.py [--scene /work/shared/scenes/living-room/scene.xml] [--width 128]
-        [--height 72] [--spp 256] [--repeats 3] [--sweep 256,64,16,4] [--json out.json]
+        [--height 72] [--spp 256] [--repeats 3] [--sweep 256,64,16,4] [--whole-sweep 128,32,8] [--json out.json]
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import time
@@ -37,15 +38,29 @@ def _warm(source, settings) -> str:
     return r.device.name
 
 
+def _cpu_seconds() -> float:
+    """This process's CPU time (user + system), children excluded."""
+    t = os.times()
+    return t.user + t.system
+
+
 def _timed(dr, spp: int, task_spp: int | None, repeats: int) -> dict:
-    times, busy = [], []
+    """Medians over ``repeats`` renders: wall time, time inside the tasks (all workers together), CPU time
+    of the workers and of this process (the client and, in a LocalCluster, the scheduler)."""
+    times, busy, workers_cpu, client_cpu = [], [], [], []
     for _ in range(repeats):
+        w0, c0 = dr.client.run(_cpu_seconds), _cpu_seconds()
         t0 = time.perf_counter()
         dr.render(spp, 0, task_spp=task_spp)
         times.append(time.perf_counter() - t0)
-        busy.append(sum(p.seconds for p in dr.parts))  # time inside the tasks, all workers together
+        c1, w1 = _cpu_seconds(), dr.client.run(_cpu_seconds)
+        busy.append(sum(p.seconds for p in dr.parts))
+        workers_cpu.append(sum(w1[k] - w0[k] for k in w0 if k in w1))
+        client_cpu.append(c1 - c0)
     return {"median_s": statistics.median(times), "times_s": [round(t, 3) for t in times],
-            "tasks": len(dr.parts), "busy_s": round(statistics.median(busy), 3)}
+            "tasks": len(dr.parts), "busy_s": round(statistics.median(busy), 3),
+            "workers_cpu_s": round(statistics.median(workers_cpu), 3),
+            "client_scheduler_cpu_s": round(statistics.median(client_cpu), 3)}
 
 
 def _cluster_runs(scene: str, size: dict, workers: int, env: dict | None, spp: int, repeats: int,
@@ -97,6 +112,8 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--sweep", default="256,64,16,4", help="task sizes (spp) of the per-task cost fit")
+    ap.add_argument("--whole-sweep", default="", help="task sizes (spp) of a per-task cost fit on the 2-worker "
+                                                      "cluster of whole-machine workers (none by default)")
     ap.add_argument("--json", default=None, help="write the results here")
     a = ap.parse_args()
     size = {"width": a.width, "height": a.height}
@@ -109,8 +126,11 @@ def main() -> None:
     res["one_core_workers"] = {"1": one, "2": two, "speedup": one["render"]["median_s"] / two["render"]["median_s"]}
     # whole-machine workers against a plain local render
     local = _local_runs(a.scene, size, a.spp, a.repeats)
-    whole = _cluster_runs(a.scene, size, 2, None, a.spp, a.repeats, None, reference=local.pop("mean"))
-    res["whole_machine"] = {"local": local, "cluster2": whole,
+    whole1 = _cluster_runs(a.scene, size, 1, None, a.spp, a.repeats, None)
+    whole_sweep = [int(x) for x in a.whole_sweep.split(",") if x]
+    whole = _cluster_runs(a.scene, size, 2, None, a.spp, a.repeats, None, whole_sweep, reference=local.pop("mean"))
+    res["whole_machine"] = {"local": local, "cluster1": whole1, "cluster2": whole,
+                            "overhead_1_worker": whole1["render"]["median_s"] / local["median_s"] - 1,
                             "overhead": whole["render"]["median_s"] / local["median_s"] - 1}
     per_task = one.get("per_task_s")
     if per_task:
