@@ -11,7 +11,8 @@ scene file -> scene model (:mod:`pyclpt.scene`) -> BVH (:mod:`pyclpt.accel`) -> 
 (:mod:`pyclpt.film`, with the G-buffer: :mod:`pyclpt.film.aovs`) -> denoiser (:mod:`pyclpt.denoise`)
 -> image (:mod:`pyclpt.common.image_io`); gradients by path replay: :mod:`pyclpt.gradients`.
 Camera motion: :mod:`pyclpt.scene.camera_path`. OpenCL devices and programs:
-:mod:`pyclpt.device`; rendering sessions: :mod:`pyclpt.rendering`; the command line: :mod:`pyclpt.cli`.
+:mod:`pyclpt.device`; rendering sessions: :mod:`pyclpt.rendering`; renders on a Dask cluster:
+:mod:`pyclpt.distributed`; the command line: :mod:`pyclpt.cli`.
 """
 from __future__ import annotations
 
@@ -28,10 +29,11 @@ from pyclpt.device.context import (
     open_device,
 )
 from pyclpt.device.program import KernelBuildError
+from pyclpt.distributed import DistributedRenderer, render  # render: local, or on a Dask cluster (client=)
 from pyclpt.film.accumulator import Accumulator, AccumulatorError
 from pyclpt.gradients import SceneParameters, optim, render_backward, render_forward, traverse
 from pyclpt.rendering.progressive import ProgressiveRenderer
-from pyclpt.rendering.renderer import Renderer, RenderStats, render
+from pyclpt.rendering.renderer import Renderer, RenderStats
 from pyclpt.scene.camera_path import CameraPath, Keyframe
 from pyclpt.scene.library import builtin_scenes, load
 from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict
@@ -65,7 +67,8 @@ __version__ = "0.1.0"
 __all__ = [
     "Accumulator", "AccumulatorError", "Bitmap", "builtin_scenes", "BumpMap", "Camera", "CameraPath", "Checkerboard",
     "Conductor", "default_device", "Denoiser", "DenoiserSettings", "Device", "DeviceError", "DeviceMemoryError",
-    "Dielectric", "Diffuse", "DirectionalLight", "EnvironmentVariableError", "Envmap", "Film", "get_device",
+    "Dielectric", "Diffuse", "DirectionalLight", "DistributedRenderer", "EnvironmentVariableError", "Envmap", "Film",
+    "get_device",
     "Instance", "Keyframe", "KernelBuildError", "list_devices", "load", "load_dict", "load_xml", "Mask", "Mesh",
     "open_device", "Plastic", "PointLight", "ProgressiveRenderer", "read_image", "ReconstructionFilter", "render",
     "Renderer", "RenderStats", "Scene", "SceneDictError", "SceneXMLError", "ShapeGroup", "SpotLight", "ThinDielectric",

@@ -132,6 +132,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sequence", action="store_true",
                    help="write every frame: -o out_####.exr (#### is the frame number; added before the "
                         "extension when the name has no #)")
+    r.add_argument("--workers", type=_positive, default=None, metavar="N",
+                   help="render on a local Dask cluster of N worker processes (the [distributed] extra; "
+                        "docs/distributed.md)")
+    r.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="render on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786); the workers "
+                        "open SCENE at the same path")
+    r.add_argument("--task-spp", type=_positive, default=None, metavar="SPP",
+                   help="with --workers/--scheduler: samples per task (default: about 4 tasks a worker)")
     r.add_argument("--stats", action="store_true", help="print per-kernel and per-bounce statistics")
     r.add_argument("--quiet", action="store_true", help="no progress bar (shown on renders longer than a "
                                                        "couple of seconds otherwise)")
@@ -161,6 +169,10 @@ def _cmd_render(a: argparse.Namespace) -> int:
         check_output_path(sequence_path(a.output, 0) if a.sequence else a.output)
     if aovs and a.output and not a.output.lower().endswith(".exr"):
         raise ValueError(f"--aov writes its layers into a multi-layer OpenEXR file: give -o NAME.exr, not {a.output}")
+    if a.workers is not None or a.scheduler is not None:
+        return _render_distributed(a)
+    if a.task_spp is not None:
+        raise ValueError("--task-spp splits a render over a cluster: give --workers N or --scheduler ADDRESS")
     scene = load(a.scene, **dict(a.define))
     out = a.output or f"{scene.name}.{'exr' if aovs else 'png'}"
     if not a.output:
@@ -211,6 +223,68 @@ def _cmd_render(a: argparse.Namespace) -> int:
         print(json.dumps({"kernels": st.kernels, "bounces": st.bounces, "memory": st.memory,
                           "dropped_samples": st.dropped_samples, "accumulation": acc, "denoise": st.denoise},
                          indent=1))
+    return 0
+
+
+def _render_distributed(a: argparse.Namespace) -> int:
+    """``render`` on a Dask cluster (pyclpt.distributed): the samples split into tasks, or the frames of a
+    --sequence one task each (--orbit: independent views) or split by sample range (the running average)."""
+    from pyclpt.common.image_io import check_output_path, write_image
+    from pyclpt.distributed import DistributedRenderer, connect
+    from pyclpt.distributed.cluster import import_distributed
+    from pyclpt.scene.camera_path import CameraPath
+    from pyclpt.scene.library import load
+
+    if a.workers is not None and a.scheduler is not None:
+        raise ValueError("give --workers N (a local cluster) or --scheduler ADDRESS (an existing one), not both")
+    refused = {"--device": a.device is not None, "--aov": a.aov is not None, "--denoise": a.denoise is not None,
+               "--max-frames": bool(a.max_frames), "--stats": a.stats}
+    bad = [k for k, v in refused.items() if v]
+    if bad:
+        why = {"--device": "each worker picks its own device (PYCLPT_DEVICE in its environment)",
+               "--denoise": "the denoiser needs the frames in order on one device",
+               "--aov": "AOVs are rendered on one machine", "--max-frames": "it limits one accumulation",
+               "--stats": "the statistics are per device"}
+        raise ValueError(f"{bad[0]} does not combine with --workers/--scheduler: {why[bad[0]]}")
+    if a.orbit is not None and not a.sequence:
+        raise ValueError("--orbit with --workers/--scheduler needs --sequence (every frame is its own view)")
+    import_distributed()  # ImportError naming the extra; and Dask sets up its loggers on import
+    if not a.verbose:  # Dask's own INFO lines (scheduler, nannies) only with -v
+        logging.getLogger("distributed").setLevel(logging.ERROR)
+    needs_scene = a.orbit is not None or a.spp is None and a.frames is None
+    scene = load(a.scene, **dict(a.define)) if needs_scene else None
+    name = scene.name if scene is not None else Path(a.scene).stem
+    out = a.output or f"{name}.png"
+    check_output_path(sequence_path(out, 0) if a.sequence else out)
+    spp = a.frames or a.spp or scene.spp
+    t0 = time.perf_counter()
+    with connect(a.scheduler, a.workers) as client:
+        t1 = time.perf_counter()
+        workers = len(client.nthreads())
+        dr = DistributedRenderer(client, a.scene, defines=dict(a.define), integrator=a.integrator, layout=a.layout,
+                                 max_depth=a.max_depth, width=a.width, height=a.height, precision=a.precision)
+        if a.sequence and a.orbit is not None:  # independent views: a frame a task
+            path = CameraPath.orbit(scene, a.orbit, spp)
+            images = dr.render_frames([path.camera(k) for k in range(spp)], 1, a.seed, progress=not a.quiet)
+        elif a.sequence:  # the running average after every sample: sample ranges, added in order here
+            images = dr.render_progressive(spp, a.seed, task_spp=a.task_spp, progress=not a.quiet)
+        else:
+            images = [dr.render(spp, a.seed, task_spp=a.task_spp, progress=not a.quiet)]
+        seconds = time.perf_counter() - t1
+        dr.close()
+    if a.sequence:
+        for k, image in enumerate(images):
+            write_image(sequence_path(out, k), image, exposure=a.exposure)
+            a.written = sequence_path(out, k)
+    else:
+        write_image(out, images[0], exposure=a.exposure)
+        a.written = out
+    h, w = images[0].shape[:2]
+    where = f"{workers} workers at {a.scheduler}" if a.scheduler else f"a local cluster of {workers} workers"
+    print(f"{out}: {w}x{h}, {spp} {'frames' if a.sequence else 'spp'}, {a.integrator} on {where}: "
+          f"{len(dr.parts)} tasks, render {seconds:.2f} s, total {time.perf_counter() - t0:.2f} s")
+    if a.sequence:
+        print(f"wrote {spp} frames: {sequence_path(out, 0)} .. {sequence_path(out, spp - 1)}")
     return 0
 
 

@@ -516,7 +516,7 @@ def test_documented_class_attributes_exist() -> None:
 
 BARE_CLASS = re.compile(r"^([A-Z][a-z]\w*)(?=$|[.(\[])")
 # Names of other projects that the docs mention in inline code.
-FOREIGN_NAMES = {"ForAllQueued", "ScalarTransform4f"}  # pbrt-v4; Mitsuba 3
+FOREIGN_NAMES = {"ForAllQueued", "ScalarTransform4f", "LocalCluster", "Client"}  # pbrt-v4; Mitsuba 3; Dask
 
 
 def test_documented_classes_exist() -> None:

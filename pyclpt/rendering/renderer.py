@@ -132,6 +132,23 @@ class Renderer:
         """Average of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float32.
         ``progress``: True shows a bar once the render has run a couple of seconds; None or False
         show none. Ctrl-C raises KeyboardInterrupt within about a second, and no image is returned."""
+        start = self._render_samples(spp, seed, progress, first_sample)
+        image = self.film.image()
+        self.collect_stats(spp, time.perf_counter() - start)
+        return image
+
+    def render_sum(self, spp: int, seed: int = 0, progress: bool | None = None, first_sample: int = 0) -> np.ndarray:
+        """The sum of samples [first_sample, first_sample + spp) of every pixel as the film's accumulator
+        keeps it, (H, W, 3) float64 (with ``precision="double"``: the float32 samples added in sample
+        order in double). Partial sums of a split sample range add up to :meth:`render`'s sum up to the
+        rounding of double (:mod:`pyclpt.distributed` merges them)."""
+        start = self._render_samples(spp, seed, progress, first_sample)
+        total = self.film.accumulator.sum()
+        self.collect_stats(spp, time.perf_counter() - start)
+        return total
+
+    def _render_samples(self, spp: int, seed: int, progress: bool | None, first_sample: int) -> float:
+        """Clear the film and accumulate samples [first_sample, first_sample + spp); returns the start time."""
         spp = check_int(spp, "spp", lo=1, hi=2**32)
         seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
         progress = check_optional_bool(progress, "progress")
@@ -150,9 +167,7 @@ class Renderer:
                 self.film.add_frames(frames)
                 bar.update(self.pacer.frame(self.device.queue, frames))
                 s += frames
-        image = self.film.image()
-        self.collect_stats(spp, time.perf_counter() - start)
-        return image
+        return start
 
     def aovs(self, names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
         """The G-buffer of the samples rendered since the film was last cleared (:meth:`render`: all its

@@ -1,0 +1,181 @@
+"""Renders spread over a Dask cluster: :class:`DistributedRenderer` and :func:`render`.
+
+A render of ``spp`` samples becomes tasks of ``task_spp`` samples each (:mod:`.tasks`); the workers
+render them with the renderer they keep for the scene (:mod:`.worker`) and send back the sums; the
+client adds them in sample order (:mod:`.merge`). The image equals the one-machine render of the
+same spp and seed within 1e-12 relative (only the joins of the ranges round differently).
+
+A sequence (:meth:`DistributedRenderer.render_frames`) is one task per frame when the frames are
+independent (each view its own samples); a sequence whose frames accumulate
+(:meth:`DistributedRenderer.render_progressive`: the image after each sample) is split by sample
+range with every sample's frame sent back, and the client adds them in order.
+
+Faults: Dask reruns the task of a worker that died (tasks are pure: a rerun renders the same
+samples), so a lost worker changes nothing; a task that fails (:class:`~.worker.WorkerError`: the
+scene cannot be opened, no OpenCL device) fails the job with that error and the other tasks are
+cancelled, as they are when the client stops waiting (Ctrl-C, ``timeout``).
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from pyclpt.common.checks import check_int, check_optional_bool, check_optional_int
+from pyclpt.distributed.cluster import import_distributed
+from pyclpt.distributed.merge import PartialSum, average, merge, running_averages
+from pyclpt.distributed.tasks import RENDERER_SETTINGS, RenderTask, SceneSource, default_task_spp, split_samples
+from pyclpt.distributed.worker import run_task
+from pyclpt.film.film import DEFAULT_PRECISION
+from pyclpt.rendering.frame_loop import PROGRESS_DELAY_S
+from pyclpt.rendering.renderer import render as render_local
+from pyclpt.scene.model import Camera, Scene
+
+
+class DistributedRenderer:
+    """A scene rendered on the workers of a Dask ``client``.
+
+    ``scene``: a scene file path or built-in name (every worker opens it; ``defines``: Mitsuba ``-D``
+    parameters) or a Scene (sent to the workers once). The settings are
+    :class:`~pyclpt.rendering.renderer.Renderer`'s; each worker picks its own device."""
+
+    def __init__(self, client: Any, scene: Scene | str | os.PathLike, *, defines: dict[str, object] | None = None,
+                 integrator: str = "megakernel", layout: str = "soa", max_depth: int | None = None,
+                 width: int | None = None, height: int | None = None, wave_size: int | None = None,
+                 precision: str = DEFAULT_PRECISION) -> None:
+        self._distributed = import_distributed()
+        self.client = client
+        if isinstance(scene, os.PathLike) or (isinstance(scene, str) and os.path.isfile(scene)):
+            scene = os.path.abspath(scene)  # the workers see the same path (shared storage)
+        self.source = SceneSource.of(scene, defines)
+        values = dict(integrator=integrator, layout=layout, max_depth=max_depth, width=width, height=height,
+                      wave_size=wave_size, precision=precision)
+        self.settings = tuple((k, values[k]) for k in RENDERER_SETTINGS)
+        # a Scene goes to the workers once, not with every task
+        self._shipped = client.scatter(self.source, broadcast=True) if self.source.scene is not None else None
+        self.parts: list[PartialSum] = []  # the last job's partial results (worker, seconds, samples)
+
+    @property
+    def workers(self) -> int:
+        """Workers the cluster has now."""
+        return max(1, len(self.client.nthreads()))
+
+    def _task(self, seed: int, first: int, count: int, **extra: Any) -> RenderTask:
+        source = self.source if self._shipped is None else SceneSource(token=self.source.token)
+        return RenderTask(source=source, settings=self.settings, seed=seed, first_sample=first, count=count, **extra)
+
+    def _run(self, tasks: list[RenderTask], progress: bool | None, desc: str, unit_of=lambda t: t.count,
+             timeout: float | None = None) -> list[PartialSum]:
+        """Run ``tasks`` on the cluster, a bar over their units; the results in the tasks' order. Any
+        failure (or Ctrl-C, or ``timeout`` seconds) cancels the tasks not finished."""
+        d = self._distributed
+        args = () if self._shipped is None else (self._shipped,)
+        futures = [self.client.submit(run_task, t, *args, key=f"pyclpt-{t.key}", pure=False, retries=0)
+                   for t in tasks]
+        index = {f.key: i for i, f in enumerate(futures)}
+        results: list[PartialSum | None] = [None] * len(tasks)
+        try:
+            with tqdm(total=sum(unit_of(t) for t in tasks), desc=desc, unit="spp", disable=not progress,
+                      delay=PROGRESS_DELAY_S, leave=False) as bar:
+                for future, part in d.as_completed(futures, with_results=True, timeout=timeout):
+                    i = index[future.key]
+                    results[i] = part
+                    bar.update(unit_of(tasks[i]))
+        finally:
+            pending = [f for f in futures if not f.done()]
+            if pending:
+                self.client.cancel(pending, force=True)
+        self.parts = results
+        return results
+
+    def render_sum(self, spp: int, seed: int = 0, *, task_spp: int | None = None, first_sample: int = 0,
+                   progress: bool | None = None, timeout: float | None = None) -> np.ndarray:
+        """The sum of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float64."""
+        spp = check_int(spp, "spp", lo=1, hi=2**32)
+        seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
+        task_spp = check_optional_int(task_spp, "task_spp", lo=1, note=" (None: about 4 tasks a worker)")
+        progress = check_optional_bool(progress, "progress")
+        task_spp = task_spp or default_task_spp(spp, self.workers)
+        tasks = [self._task(seed, s, n) for s, n in split_samples(spp, task_spp, first_sample)]
+        parts = self._run(tasks, progress, f"{self.source.name} on {self.workers} workers", timeout=timeout)
+        total, self.dropped_samples = merge(parts, spp, first_sample)
+        return total
+
+    def render(self, spp: int, seed: int = 0, *, task_spp: int | None = None, first_sample: int = 0,
+               progress: bool | None = None, timeout: float | None = None) -> np.ndarray:
+        """The average of samples [first_sample, first_sample + spp), (H, W, 3) float32: the image of
+        ``Renderer(scene).render(spp, seed, first_sample=first_sample)``. ``task_spp``: samples per task
+        (default: about 4 tasks a worker; docs/distributed.md)."""
+        total = self.render_sum(spp, seed, task_spp=task_spp, first_sample=first_sample, progress=progress,
+                                timeout=timeout)
+        return average(total, spp)
+
+    def render_frames(self, cameras: Sequence[Camera], spp: int = 1, seed: int = 0, *, first_sample: int = 0,
+                      progress: bool | None = None, timeout: float | None = None) -> list[np.ndarray]:
+        """Independent frames, one task each: frame k is samples [first_sample, first_sample + spp) seen
+        from ``cameras[k]`` (e.g. ``CameraPath.camera(k)``), (H, W, 3) float32 each."""
+        spp = check_int(spp, "spp", lo=1, hi=2**32)
+        seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
+        if not cameras or not all(isinstance(c, Camera) for c in cameras):
+            raise TypeError("cameras must be a non-empty sequence of pyclpt.Camera")
+        tasks = [self._task(seed, first_sample, spp, camera=c, frame=k) for k, c in enumerate(cameras)]
+        parts = self._run(tasks, progress, f"{self.source.name}: {len(tasks)} frames", timeout=timeout)
+        return [average(p.total, spp) for p in parts]
+
+    def render_progressive(self, spp: int, seed: int = 0, *, task_spp: int | None = None,
+                           progress: bool | None = None, timeout: float | None = None) -> list[np.ndarray]:
+        """The image after each of ``spp`` samples, as a progressive render's accumulation gives them
+        (frame k: the average of samples 0..k), (H, W, 3) float32 each: sample ranges on the workers,
+        every sample's frame sent back and added in order on the client."""
+        spp = check_int(spp, "spp", lo=1, hi=2**32)
+        seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
+        task_spp = check_optional_int(task_spp, "task_spp", lo=1) or default_task_spp(spp, self.workers)
+        tasks = [self._task(seed, s, n, per_sample=True) for s, n in split_samples(spp, task_spp)]
+        parts = self._run(tasks, progress, f"{self.source.name}: {spp} frames", timeout=timeout)
+        return running_averages(parts, spp)
+
+    def close(self) -> None:
+        """Forget the scene sent to the workers (their caches keep a renderer until it ages out)."""
+        if self._shipped is not None:
+            self.client.cancel([self._shipped])
+            self._shipped = None
+
+    def __enter__(self) -> DistributedRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = None, seed: int = 0,
+           integrator: str = "megakernel", width: int | None = None, height: int | None = None,
+           device: Any = None, layout: str = "soa", progress: bool | None = None,
+           wave_size: int | None = None, precision: str = DEFAULT_PRECISION,
+           aovs: Sequence[str] | str | bool | None = None, client: Any = None,
+           task_spp: int | None = None) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
+    """:func:`pyclpt.rendering.renderer.render`, or with ``client`` (a ``dask.distributed.Client``) the
+    same image rendered on that cluster's workers (:class:`DistributedRenderer`; ``task_spp`` samples a
+    task). A distributed render takes no ``device`` (each worker picks its own: ``PYCLPT_DEVICE``) and
+    no ``aovs``."""
+    if client is None:
+        if task_spp is not None:
+            raise ValueError("task_spp splits a distributed render: give client= too")
+        return render_local(scene, spp=spp, max_depth=max_depth, seed=seed, integrator=integrator, width=width,
+                            height=height, device=device, layout=layout, progress=progress, wave_size=wave_size,
+                            precision=precision, aovs=aovs)
+    if device is not None:
+        raise ValueError("a distributed render runs on each worker's own device (PYCLPT_DEVICE in the "
+                         "workers' environment); leave device=None")
+    if aovs:
+        raise ValueError("AOVs are not rendered on a cluster; render them with client=None")
+    if spp is None:
+        from pyclpt.scene.library import load
+
+        spp = (scene if isinstance(scene, Scene) else load(scene)).spp
+    dr = DistributedRenderer(client, scene, integrator=integrator, layout=layout, max_depth=max_depth,
+                             width=width, height=height, wave_size=wave_size, precision=precision)
+    with dr:
+        return dr.render(spp, seed, task_spp=task_spp, progress=progress)

@@ -1,0 +1,204 @@
+"""pyclpt.distributed on a LocalCluster of 2 worker processes (one cluster for the module): the merged
+image equals the local render; a killed worker loses nothing; a scene a worker cannot open fails the
+job with the worker and the file named; a sequence is one task per frame; the CLI's --workers and
+--scheduler. Tiny images and few samples: the cluster's start is most of the time."""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import pyclpt
+from pyclpt.cli import main
+from pyclpt.distributed import DistributedRenderer, PartialSum, WorkerError, local_cluster, merge, split_samples
+from pyclpt.rendering.renderer import Renderer
+from pyclpt.scene.camera_path import CameraPath
+
+distributed = pytest.importorskip("distributed")
+
+W, H = 16, 12
+# The documented bound (docs/distributed.md): the merged mean against one machine's double sum.
+MAX_RELATIVE = 1e-12
+JOB_TIMEOUT = 60  # seconds: a bug fails the test instead of hanging CI
+
+
+@pytest.fixture(scope="module")
+def client():
+    # one core a worker (PoCL), so that two workers and the test process share the machine evenly
+    with local_cluster(2, env={"POCL_MAX_PTHREAD_COUNT": "1"}) as cluster, distributed.Client(cluster) as c:
+        c.wait_for_workers(2, timeout=JOB_TIMEOUT)
+        yield c
+
+
+def _local(scene, spp, seed, **kw):
+    """One machine's render: the float32 image and the double mean (sum / spp as the film keeps it)."""
+    r = Renderer(scene, width=W, height=H, **kw)
+    image = r.render(spp, seed)
+    return image, r.film.accumulator.image(np.float64)
+
+
+def _relative(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b) / np.maximum(np.abs(b), np.finfo(np.float64).tiny)))
+
+
+def test_split_and_merge_order():
+    assert split_samples(10, 4) == [(0, 4), (4, 4), (8, 2)]
+    assert split_samples(3, 8, first_sample=5) == [(5, 3)]
+    parts = [PartialSum(s, n, np.full((1, 1, 3), float(s))) for s, n in split_samples(10, 4)]
+    total, _ = merge(reversed(parts), 10)  # finished in any order, added in sample order
+    assert total[0, 0, 0] == 0 + 4 + 8
+    with pytest.raises(ValueError, match="gap"):
+        merge(parts[::2], 10)
+
+
+def test_equals_local_render(client):
+    scene = pyclpt.load("cornell-box")
+    ref32, ref = _local(scene, 24, seed=7, max_depth=4)
+    dr = DistributedRenderer(client, "cornell-box", width=W, height=H, max_depth=4)
+    total = dr.render_sum(24, seed=7, task_spp=5, timeout=JOB_TIMEOUT)  # 5 tasks: 5+5+5+5+4 samples
+    assert len(dr.parts) == 5
+    assert _relative(total / 24, ref) <= MAX_RELATIVE
+    image = dr.render(24, seed=7, task_spp=5, timeout=JOB_TIMEOUT)
+    assert image.dtype == np.float32 and image.shape == (H, W, 3)
+    np.testing.assert_allclose(image, ref32, rtol=1e-6)
+    # a Scene object (shipped to the workers once), through pyclpt.render(client=...)
+    shipped = pyclpt.render(scene, spp=24, seed=7, width=W, height=H, max_depth=4, client=client, task_spp=3)
+    np.testing.assert_array_equal(shipped, image)
+    # a different seed is a different image (the seed reaches the workers)
+    assert not np.array_equal(dr.render(24, seed=8, task_spp=5, timeout=JOB_TIMEOUT), image)
+
+
+def test_killed_worker_loses_nothing(client):
+    """Kill a worker process while its task runs: Dask reruns the task, the image is unchanged."""
+    spp, task_spp = 96, 2  # 48 tasks of a few tens of ms each
+    scene = pyclpt.load("cornell-box")
+    _, ref = _local(scene, spp, seed=1, max_depth=6)
+    dr = DistributedRenderer(client, "cornell-box", width=W, height=H, max_depth=6)
+    dr.render(2, seed=1, task_spp=1, timeout=JOB_TIMEOUT)  # both workers have loaded the scene
+    pids = client.run(os.getpid)
+    result: dict = {}
+
+    def job():
+        try:
+            result["total"] = dr.render_sum(spp, seed=1, task_spp=task_spp, timeout=JOB_TIMEOUT)
+        except BaseException as exc:  # noqa: BLE001 - handed to the test thread
+            result["error"] = exc
+
+    thread = threading.Thread(target=job)
+    thread.start()
+    victim, deadline = None, time.monotonic() + JOB_TIMEOUT
+    while victim is None and time.monotonic() < deadline:  # a worker busy with one of the render's tasks
+        busy = [w for w, keys in client.processing().items() if any(str(k).startswith("pyclpt-") for k in keys)]
+        victim = next((w for w in busy if w in pids), None)
+        time.sleep(0.005)
+    assert victim is not None, "no task started"
+    os.kill(pids[victim], signal.SIGKILL)
+    thread.join(JOB_TIMEOUT)
+    assert not thread.is_alive(), "the render hung after a worker was killed"
+    assert "error" not in result, result.get("error")
+    assert _relative(result["total"] / spp, ref) <= MAX_RELATIVE
+    client.wait_for_workers(2, timeout=JOB_TIMEOUT)  # the nanny restarted it
+    assert pids[victim] not in client.run(os.getpid).values()
+
+
+def test_missing_scene_file_names_worker_and_file(client, tmp_path):
+    missing = tmp_path / "gone.xml"
+    dr = DistributedRenderer(client, str(missing), width=W, height=H)
+    t0 = time.monotonic()
+    with pytest.raises(WorkerError, match=rf"worker tcp://[\d.:]+: cannot open scene {missing}"):
+        dr.render(8, task_spp=1, timeout=JOB_TIMEOUT)
+    assert time.monotonic() - t0 < JOB_TIMEOUT / 2
+    # the job's other tasks are cancelled, not left to run
+    deadline = time.monotonic() + 10
+    while any(str(k).startswith("pyclpt-") for keys in client.processing().values() for k in keys):
+        assert time.monotonic() < deadline, client.processing()
+        time.sleep(0.05)
+
+
+def test_worker_without_device_names_worker_and_scene():
+    """A worker whose PYCLPT_DEVICE names no device fails the job with a clear error, not a hang."""
+    with local_cluster(1, env={"PYCLPT_DEVICE": "no-such-gpu"}) as cluster, distributed.Client(cluster) as c:
+        dr = DistributedRenderer(c, "cornell-box", width=W, height=H)
+        with pytest.raises(WorkerError, match=r"worker tcp://[\d.:]+: no usable OpenCL device for scene "
+                                              r"cornell-box: .*no-such-gpu"):
+            dr.render(2, timeout=JOB_TIMEOUT)
+
+
+def test_timeout_cancels_the_tasks(client):
+    dr = DistributedRenderer(client, "cornell-box", width=W, height=H)
+    with pytest.raises(TimeoutError):
+        dr.render(4096, task_spp=1, timeout=0.5)
+    deadline = time.monotonic() + 10
+    while any(str(k).startswith("pyclpt-") for keys in client.processing().values() for k in keys):
+        assert time.monotonic() < deadline, "tasks still running after the client gave up"
+        time.sleep(0.05)
+
+
+def test_sequence_one_task_per_frame(client):
+    scene = pyclpt.load("cornell-box")
+    path = CameraPath.orbit(scene, 40, 4)
+    cameras = [path.camera(k) for k in range(4)]
+    dr = DistributedRenderer(client, scene, width=W, height=H, max_depth=3)
+    frames = dr.render_frames(cameras, spp=2, seed=5, timeout=JOB_TIMEOUT)
+    assert len(dr.parts) == 4 and [p.frame for p in dr.parts] == [0, 1, 2, 3]
+    for k, camera in enumerate(cameras):
+        scene.camera = camera
+        _, ref = _local(scene, 2, seed=5, max_depth=3)
+        assert _relative(frames[k].astype(np.float64), ref) <= 1e-7  # float32 image against the double mean
+    assert not np.array_equal(frames[0], frames[3])
+
+
+def test_progressive_sequence_equals_local(client):
+    scene = pyclpt.load("cornell-box")
+    pr = pyclpt.ProgressiveRenderer(scene, width=W, height=H, max_depth=3, seed=2)
+    local = []
+    for _ in range(5):
+        pr.step()
+        local.append(pr.image())
+    dr = DistributedRenderer(client, "cornell-box", width=W, height=H, max_depth=3)
+    frames = dr.render_progressive(5, seed=2, task_spp=2, timeout=JOB_TIMEOUT)
+    for a, b in zip(frames, local):
+        np.testing.assert_array_equal(a, b)  # the same adds in the same order
+
+
+def test_cli_scheduler_equals_local(client, tmp_path, capsys):
+    args = ["render", "cornell-box", "--spp", "6", "--width", str(W), "--height", str(H), "--max-depth", "3",
+            "--quiet"]
+    assert main([*args, "-o", str(tmp_path / "local.exr")]) == 0
+    assert main([*args, "-o", str(tmp_path / "dist.exr"), "--scheduler", client.scheduler.address,
+                 "--task-spp", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "on 2 workers at tcp://" in out and "3 tasks" in out
+    np.testing.assert_allclose(pyclpt.read_image(tmp_path / "dist.exr"), pyclpt.read_image(tmp_path / "local.exr"),
+                               rtol=1e-6)
+
+
+def test_cli_workers_orbit_sequence(tmp_path, capsys):
+    """--workers N starts its own LocalCluster; an orbit --sequence is one task per frame, each frame the
+    local CLI's."""
+    args = ["render", "cornell-box", "--frames", "3", "--orbit", "30", "--sequence", "--width", str(W),
+            "--height", str(H), "--max-depth", "3", "--quiet"]
+    assert main([*args, "-o", str(tmp_path / "l_##.exr")]) == 0
+    assert main([*args, "-o", str(tmp_path / "d_##.exr"), "--workers", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "a local cluster of 2 workers: 3 tasks" in out
+    for k in range(3):
+        np.testing.assert_array_equal(pyclpt.read_image(tmp_path / f"d_{k:02d}.exr"),
+                                      pyclpt.read_image(tmp_path / f"l_{k:02d}.exr"))
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--workers", "2", "--scheduler", "tcp://x:1"], "not both"),
+    (["--workers", "2", "--denoise"], "--denoise does not combine"),
+    (["--workers", "2", "--device", "pocl"], "PYCLPT_DEVICE"),
+    (["--workers", "2", "--orbit", "10"], "needs --sequence"),
+    (["--task-spp", "4"], "give --workers N or --scheduler"),
+])
+def test_cli_refuses_bad_combinations(tmp_path, capsys, args, needle):
+    assert main(["render", "cornell-box", "--spp", "1", "-o", str(tmp_path / "x.exr"), *args]) == 1
+    assert needle in capsys.readouterr().err
+    assert not (tmp_path / "x.exr").exists()
