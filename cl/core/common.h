@@ -44,6 +44,17 @@ static inline vec3 load3(__global const float* p, int i) {
  * vectorizes. Costs nothing on a GPU. */
 static inline vec3 rgb_at(__global const float* p, int unit) { return v3(p[0], p[unit], p[2 * unit]); }
 
+/* A 3x3 row-major matrix in a buffer times v, and its transpose times v. */
+static inline vec3 mat3_mul(__global const float* m, vec3 v) {
+    return v3(m[0] * v.x + m[1] * v.y + m[2] * v.z, m[3] * v.x + m[4] * v.y + m[5] * v.z,
+              m[6] * v.x + m[7] * v.y + m[8] * v.z);
+}
+
+static inline vec3 mat3_tmul(__global const float* m, vec3 v) {
+    return v3(m[0] * v.x + m[3] * v.y + m[6] * v.z, m[1] * v.x + m[4] * v.y + m[7] * v.z,
+              m[2] * v.x + m[5] * v.y + m[8] * v.z);
+}
+
 static inline void store3(__global float* p, int i, vec3 v) {
     p[3 * i + 0] = v.x;
     p[3 * i + 1] = v.y;

@@ -54,10 +54,7 @@ static inline vec3 inst_vector(__global const float* m, vec3 d) {
 }
 
 /* n: a 3x3 row-major matrix. */
-static inline vec3 inst_normal(__global const float* n, vec3 v) {
-    return v3(n[0] * v.x + n[1] * v.y + n[2] * v.z, n[3] * v.x + n[4] * v.y + n[5] * v.z,
-              n[6] * v.x + n[7] * v.y + n[8] * v.z);
-}
+static inline vec3 inst_normal(__global const float* n, vec3 v) { return mat3_mul(n, v); }
 
 /* The opacity test inside instance record r (its random numbers keyed by the packed id). */
 static inline const AlphaTest* inst_alpha(const AlphaTest* alpha, int r, int bits, AlphaTest* out) {

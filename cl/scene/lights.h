@@ -132,15 +132,9 @@ static inline float light_pdf_area(const Scene* sc, int light, float dist, float
 
 /* ---- environment map -------------------------------------------------------- */
 
-static inline vec3 env_to_local(__global const float* e, vec3 d) {
-    return v3(e[0] * d.x + e[3] * d.y + e[6] * d.z, e[1] * d.x + e[4] * d.y + e[7] * d.z,
-              e[2] * d.x + e[5] * d.y + e[8] * d.z);
-}
+static inline vec3 env_to_local(__global const float* e, vec3 d) { return mat3_tmul(e, d); }
 
-static inline vec3 env_to_world(__global const float* e, vec3 v) {
-    return v3(e[0] * v.x + e[1] * v.y + e[2] * v.z, e[3] * v.x + e[4] * v.y + e[5] * v.z,
-              e[6] * v.x + e[7] * v.y + e[8] * v.z);
-}
+static inline vec3 env_to_world(__global const float* e, vec3 v) { return mat3_mul(e, v); }
 
 /* Continuous texel coordinates (x in [0, W), y in [0, H - 1]) of a unit direction in the map's frame. */
 static inline vec2 env_texel_coords(__global const float* e, vec3 d) {
@@ -284,13 +278,10 @@ static inline vec3 light_texture(const Scene* sc, __global const float* l, vec2 
 static inline vec3 spot_texture(const Scene* sc, __global const float* l, __global const float* s, vec3 wi) {
 #ifdef SCENE_HAS_EMITTER_TEXTURES
     if (as_int(l[LIGHT_TEXTURE]) < 0) return v3_splat(1.0f);
-    __global const float* m = s + SPOT_TO_LOCAL;
-    vec3 d = v3_neg(wi);
-    float x = m[0] * d.x + m[1] * d.y + m[2] * d.z, y = m[3] * d.x + m[4] * d.y + m[5] * d.z;
-    float z = m[6] * d.x + m[7] * d.y + m[8] * d.z;
-    float k = 0.5f / (z * s[SPOT_UV_FACTOR]);
+    vec3 d = mat3_mul(s + SPOT_TO_LOCAL, v3_neg(wi));
+    float k = 0.5f / (d.z * s[SPOT_UV_FACTOR]);
     /* Mitsuba's uv (v down) -> pyclpt's (v up) */
-    return light_texture(sc, l, v2(0.5f + x * k, 0.5f - y * k));
+    return light_texture(sc, l, v2(0.5f + d.x * k, 0.5f - d.y * k));
 #else
     return v3_splat(1.0f);
 #endif
