@@ -86,6 +86,22 @@ def _version() -> str:
 
 
 _positive = _int_in(1, None)
+
+
+def _tile(text: str) -> tuple[int, int] | str | None:
+    """An argparse type: a tile size, N or WxH pixels, 0 for no tiles, or auto."""
+    if text == "auto":
+        return text
+    w, _, h = text.lower().partition("x")
+    try:
+        size = (int(w), int(h or w))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected N or WxH pixels (0: no tiles), got {text!r}") from None
+    if size == (0, 0):
+        return None
+    if min(size) < 1:
+        raise argparse.ArgumentTypeError(f"tile sides must be >= 1 pixel (0: no tiles), got {text!r}")
+    return size
 _depth = _int_in(-1, None, " (-1 = unlimited)")
 _seed = _int_in(0, 2**32)
 
@@ -140,6 +156,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "open SCENE at the same path")
     r.add_argument("--task-spp", type=_positive, default=None, metavar="SPP",
                    help="with --workers/--scheduler: samples per task (default: about 4 tasks a worker)")
+    r.add_argument("--tile", type=_tile, default="auto", metavar="N|WxH",
+                   help="with --workers/--scheduler: tasks render tiles of N x N or W x H pixels (0: the whole "
+                        "image; default: 512-pixel tiles for images over 2 Mpixels)")
     r.add_argument("--stats", action="store_true", help="print per-kernel and per-bounce statistics")
     r.add_argument("--quiet", action="store_true", help="no progress bar (shown on renders longer than a "
                                                        "couple of seconds otherwise)")
@@ -171,8 +190,9 @@ def _cmd_render(a: argparse.Namespace) -> int:
         raise ValueError(f"--aov writes its layers into a multi-layer OpenEXR file: give -o NAME.exr, not {a.output}")
     if a.workers is not None or a.scheduler is not None:
         return _render_distributed(a)
-    if a.task_spp is not None:
-        raise ValueError("--task-spp splits a render over a cluster: give --workers N or --scheduler ADDRESS")
+    if a.task_spp is not None or a.tile != "auto":
+        what = "--task-spp" if a.task_spp is not None else "--tile"
+        raise ValueError(f"{what} splits a render over a cluster: give --workers N or --scheduler ADDRESS")
     scene = load(a.scene, **dict(a.define))
     out = a.output or f"{scene.name}.{'exr' if aovs else 'png'}"
     if not a.output:
@@ -237,17 +257,19 @@ def _render_distributed(a: argparse.Namespace) -> int:
 
     if a.workers is not None and a.scheduler is not None:
         raise ValueError("give --workers N (a local cluster) or --scheduler ADDRESS (an existing one), not both")
-    refused = {"--device": a.device is not None, "--aov": a.aov is not None, "--denoise": a.denoise is not None,
+    refused = {"--device": a.device is not None, "--aov": a.aov is not None, "--denoise oidn": a.denoise == "oidn",
                "--max-frames": bool(a.max_frames), "--stats": a.stats}
     bad = [k for k, v in refused.items() if v]
     if bad:
         why = {"--device": "each worker picks its own device (PYCLPT_DEVICE in its environment)",
-               "--denoise": "the denoiser needs the frames in order on one device",
+               "--denoise oidn": "it denoises the running average on one machine (svgf and blend denoise "
+                                 "the frames rendered on the cluster)",
                "--aov": "AOVs are rendered on one machine", "--max-frames": "it limits one accumulation",
                "--stats": "the statistics are per device"}
         raise ValueError(f"{bad[0]} does not combine with --workers/--scheduler: {why[bad[0]]}")
-    if a.orbit is not None and not a.sequence:
-        raise ValueError("--orbit with --workers/--scheduler needs --sequence (every frame is its own view)")
+    if a.orbit is not None and not a.sequence and not a.denoise:
+        raise ValueError("--orbit with --workers/--scheduler needs --sequence (every frame is its own view) "
+                         "or --denoise")
     import_distributed()  # ImportError naming the extra; and Dask sets up its loggers on import
     if not a.verbose:  # Dask's own INFO lines (scheduler, nannies) only with -v
         logging.getLogger("distributed").setLevel(logging.ERROR)
@@ -263,17 +285,28 @@ def _render_distributed(a: argparse.Namespace) -> int:
         workers = len(client.nthreads())
         dr = DistributedRenderer(client, a.scene, defines=dict(a.define), integrator=a.integrator, layout=a.layout,
                                  max_depth=a.max_depth, width=a.width, height=a.height, precision=a.precision)
-        if a.sequence and a.orbit is not None:  # independent views: a frame a task
-            path = CameraPath.orbit(scene, a.orbit, spp)
+        path = CameraPath.orbit(scene, a.orbit, spp) if a.orbit is not None else None
+        if a.denoise:  # a frame a task, denoised here in frame order as they arrive
+            images = []
+
+            def denoised(k: int, image) -> None:
+                if a.sequence:
+                    write_image(sequence_path(out, k), image, exposure=a.exposure)
+                    a.written = sequence_path(out, k)
+                images[:] = [image]
+
+            dr.render_denoised(spp, a.seed, camera_path=path, denoiser=a.denoise, on_frame=denoised,
+                               progress=not a.quiet)
+        elif a.sequence and path is not None:  # independent views: a frame a task
             images = dr.render_frames([path.camera(k) for k in range(spp)], 1, a.seed, progress=not a.quiet)
         elif a.sequence:  # the running average after every sample: sample ranges, added in order here
             images = dr.render_progressive(spp, a.seed, task_spp=a.task_spp, progress=not a.quiet)
         else:
-            images = [dr.render(spp, a.seed, task_spp=a.task_spp, progress=not a.quiet)]
+            images = [dr.render(spp, a.seed, task_spp=a.task_spp, tile=a.tile, progress=not a.quiet)]
         seconds = time.perf_counter() - t1
         dr.close()
     if a.sequence:
-        for k, image in enumerate(images):
+        for k, image in enumerate(images if not a.denoise else []):  # denoised frames are written as they come
             write_image(sequence_path(out, k), image, exposure=a.exposure)
             a.written = sequence_path(out, k)
     else:

@@ -15,6 +15,9 @@ import pytest
 import pyclpt
 from pyclpt.cli import main
 from pyclpt.distributed import DistributedRenderer, PartialSum, WorkerError, local_cluster, merge, split_samples
+from pyclpt.distributed.merge import merge_tiles
+from pyclpt.distributed.tasks import tile_size
+from pyclpt.film.crop import Crop
 from pyclpt.rendering.renderer import Renderer
 from pyclpt.scene.camera_path import CameraPath
 
@@ -32,6 +35,21 @@ def client():
     with local_cluster(2, env={"POCL_MAX_PTHREAD_COUNT": "1"}) as cluster, distributed.Client(cluster) as c:
         c.wait_for_workers(2, timeout=JOB_TIMEOUT)
         yield c
+
+
+SMALL_SCENE = f"""<scene version="3.0.0">
+    <sensor type="perspective"><float name="fov" value="39"/>
+        <transform name="to_world"><lookat origin="0, 1, 3.9" target="0, 1, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="{W}"/><integer name="height" value="{H}"/>
+            <rfilter type="box"/></film>
+    </sensor>
+    <shape type="rectangle"><transform name="to_world"><rotate x="1" angle="-90"/><scale value="2"/></transform>
+        <bsdf type="diffuse"><texture type="checkerboard" name="reflectance"/></bsdf></shape>
+    <shape type="sphere"><point name="center" x="0" y="0.6" z="0"/><float name="radius" value="0.6"/>
+        <bsdf type="roughconductor"/></shape>
+    <shape type="rectangle"><transform name="to_world"><rotate x="1" angle="90"/><translate y="2.5"/></transform>
+        <emitter type="area"><rgb name="radiance" value="6"/></emitter></shape>
+</scene>"""
 
 
 def _local(scene, spp, seed, **kw):
@@ -70,6 +88,43 @@ def test_equals_local_render(client):
     np.testing.assert_array_equal(shipped, image)
     # a different seed is a different image (the seed reaches the workers)
     assert not np.array_equal(dr.render(24, seed=8, task_spp=5, timeout=JOB_TIMEOUT), image)
+
+
+def test_tiles_equal_local_render(client, tmp_path):
+    """Tiles (x sample ranges) put together are the local render: bit for bit when every tile is one
+    task, within the documented bound when its samples are split too. The image size of a scene file
+    comes from a worker."""
+    scene_file = tmp_path / "small.xml"
+    scene_file.write_text(SMALL_SCENE)
+    scene = pyclpt.load(str(scene_file))
+    assert (scene.film.width, scene.film.height) == (W, H)
+    r = Renderer(scene, max_depth=4)
+    ref = r.render_sum(12, seed=4)
+    dr = DistributedRenderer(client, str(scene_file), max_depth=4)
+    assert dr.image_size() == (W, H)
+    total = dr.render_sum(12, seed=4, tile=(7, 5), task_spp=12, timeout=JOB_TIMEOUT)
+    assert len(dr.parts) == 3 * 3 and {p.crop.width for p in dr.parts} == {7, 2}
+    np.testing.assert_array_equal(total, ref)
+    total = dr.render_sum(12, seed=4, tile=6, task_spp=5, timeout=JOB_TIMEOUT)
+    assert len(dr.parts) == 3 * 2 * 3
+    assert _relative(total, ref) <= MAX_RELATIVE
+    assert dr.dropped_samples == 0
+    # "auto" leaves a small image whole
+    dr.render_sum(2, seed=4, timeout=JOB_TIMEOUT)
+    assert all(p.crop is None for p in dr.parts)
+
+
+def test_tile_sizes_and_cover():
+    assert tile_size("auto", 1920, 1080) is None  # 2.07 Mpixels: whole
+    assert tile_size("auto", 3840, 2160) == (512, 512)
+    assert tile_size(64, 10, 10) == (64, 64) and tile_size((32, 8), 10, 10) == (32, 8) and tile_size(None, 9, 9) is None
+    with pytest.raises(ValueError, match="tile height must be an integer >= 1"):
+        tile_size((4, 0), 10, 10)
+    with pytest.raises(ValueError, match="tile must be a size"):
+        tile_size((4, 4, 4), 10, 10)
+    one = np.ones((2, 2, 3))
+    with pytest.raises(ValueError, match=r"cover pixel \(2, 0\) of the 4x2 image 0 times"):
+        merge_tiles([PartialSum(0, 1, one, crop=Crop(0, 0, 2, 2))], 1, 4, 2)
 
 
 def test_killed_worker_loses_nothing(client):
@@ -165,6 +220,41 @@ def test_progressive_sequence_equals_local(client):
         np.testing.assert_array_equal(a, b)  # the same adds in the same order
 
 
+@pytest.mark.parametrize("mode,orbit", [("svgf", 30), ("blend", None)])
+def test_denoised_sequence_equals_local(client, mode, orbit):
+    """A denoised sequence, a frame a task, denoised on the client in frame order: the local progressive
+    renderer's denoised frames bit for bit (the camera path's motion vectors and the denoiser's history
+    included)."""
+    scene = pyclpt.load("cornell-box")
+    path = CameraPath.orbit(scene, orbit, 5) if orbit else None
+    pr = pyclpt.ProgressiveRenderer(scene, width=W, height=H, max_depth=3, seed=2, denoiser=mode, camera_path=path)
+    local = []
+    for _ in range(5):
+        pr.step()
+        local.append(pr.denoised())
+    dr = DistributedRenderer(client, "cornell-box", width=W, height=H, max_depth=3)
+    seen = []
+    assert dr.render_denoised(5, seed=2, camera_path=path, denoiser=mode, timeout=JOB_TIMEOUT,
+                              on_frame=lambda k, image: seen.append((k, image))) == []
+    assert [k for k, _ in seen] == [0, 1, 2, 3, 4] and len(dr.parts) == 5
+    assert all(p.gbuffer is None and p.frames is None for p in dr.parts)  # not kept once denoised
+    for (_, a), b in zip(seen, local):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(seen[0][1], seen[4][1])
+    frames = dr.render_denoised(2, seed=2, camera_path=path, denoiser=mode, timeout=JOB_TIMEOUT)
+    np.testing.assert_array_equal(frames[1], local[1])
+    with pytest.raises(ValueError, match="'oidn' denoises the running average"):
+        dr.render_denoised(2, denoiser="oidn")
+
+
+def test_denoise_gbuffer_checks_shapes(device):
+    dn = pyclpt.Denoiser(device, W, H, mode="svgf")
+    with pytest.raises(ValueError, match=r"color must be \(12, 16, 3\)"):
+        dn.denoise_gbuffer(np.zeros((H, W + 1, 3), np.float32), None)
+    with pytest.raises(ValueError, match=r"gbuffer must be \(\d+, 12, 16\)"):
+        dn.denoise_gbuffer(np.zeros((H, W, 3), np.float32), np.zeros((3, H, W), np.float32))
+
+
 def test_cli_scheduler_equals_local(client, tmp_path, capsys):
     args = ["render", "cornell-box", "--spp", "6", "--width", str(W), "--height", str(H), "--max-depth", "3",
             "--quiet"]
@@ -175,6 +265,22 @@ def test_cli_scheduler_equals_local(client, tmp_path, capsys):
     assert "on 2 workers at tcp://" in out and "3 tasks" in out
     np.testing.assert_allclose(pyclpt.read_image(tmp_path / "dist.exr"), pyclpt.read_image(tmp_path / "local.exr"),
                                rtol=1e-6)
+    # tiles of 8x6: 2 x 2 tiles, each one task (all 6 samples)
+    assert main([*args, "-o", str(tmp_path / "tiles.exr"), "--scheduler", client.scheduler.address,
+                 "--tile", "8x6", "--task-spp", "6"]) == 0
+    assert "4 tasks" in capsys.readouterr().out
+    np.testing.assert_array_equal(pyclpt.read_image(tmp_path / "tiles.exr"), pyclpt.read_image(tmp_path / "local.exr"))
+
+
+def test_cli_denoised_sequence_equals_local(client, tmp_path, capsys):
+    args = ["render", "cornell-box", "--frames", "3", "--orbit", "20", "--denoise", "--sequence", "--width", str(W),
+            "--height", str(H), "--max-depth", "3", "--quiet"]
+    assert main([*args, "-o", str(tmp_path / "l_#.exr")]) == 0
+    assert main([*args, "-o", str(tmp_path / "d_#.exr"), "--scheduler", client.scheduler.address]) == 0
+    assert "3 tasks" in capsys.readouterr().out
+    for k in range(3):
+        np.testing.assert_array_equal(pyclpt.read_image(tmp_path / f"d_{k}.exr"),
+                                      pyclpt.read_image(tmp_path / f"l_{k}.exr"))
 
 
 def test_cli_workers_orbit_sequence(tmp_path, capsys):
@@ -193,12 +299,19 @@ def test_cli_workers_orbit_sequence(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, needle", [
     (["--workers", "2", "--scheduler", "tcp://x:1"], "not both"),
-    (["--workers", "2", "--denoise"], "--denoise does not combine"),
+    (["--workers", "2", "--denoise", "oidn"], "--denoise oidn does not combine"),
     (["--workers", "2", "--device", "pocl"], "PYCLPT_DEVICE"),
     (["--workers", "2", "--orbit", "10"], "needs --sequence"),
-    (["--task-spp", "4"], "give --workers N or --scheduler"),
+    (["--task-spp", "4"], "--task-spp splits a render over a cluster: give --workers N or --scheduler"),
+    (["--tile", "64"], "--tile splits a render over a cluster"),
 ])
 def test_cli_refuses_bad_combinations(tmp_path, capsys, args, needle):
     assert main(["render", "cornell-box", "--spp", "1", "-o", str(tmp_path / "x.exr"), *args]) == 1
     assert needle in capsys.readouterr().err
     assert not (tmp_path / "x.exr").exists()
+
+
+def test_cli_bad_tile_named(capsys):
+    with pytest.raises(SystemExit):
+        main(["render", "cornell-box", "--workers", "2", "--tile", "8y8"])
+    assert "--tile: expected N or WxH pixels (0: no tiles), got '8y8'" in capsys.readouterr().err

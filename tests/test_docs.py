@@ -428,7 +428,8 @@ def test_the_parser_finds_blocks_and_annotations(tmp_path: Path) -> None:
 
 INLINE_CODE = re.compile(r"(?<!`)(`+)(?!`)(.+?)(?<!`)\1(?!`)", re.S)
 DOTTED = re.compile(r"(?<![\w./-])pyclpt(?:\.[A-Za-z_]\w*)+")
-FROM_IMPORT = re.compile(r"^\s*from (pyclpt(?:\.\w+)*) import \(?([\w\s,]+)\)?", re.M)
+# the names of `from pyclpt... import a, b` (one line) or `import (a,\n b)` (parenthesised, several lines)
+FROM_IMPORT = re.compile(r"^[ \t]*from (pyclpt(?:\.\w+)*) import (?:\(([\w\s,]+)\)|([\w \t,]+))", re.M)
 ATTRIBUTE = re.compile(r"^([A-Z]\w*)\.([a-z_]\w*)")
 
 
@@ -457,8 +458,8 @@ def documented_names() -> dict[str, set[str]]:
         texts = inline_code(path) + [b.code for b in parse_blocks(path) if b.kind in ("python", "shell", "console")]
         for text in texts:
             found = DOTTED.findall(text)
-            for module, items in FROM_IMPORT.findall(text):
-                found += [f"{module}.{n.strip()}" for n in items.split(",") if n.strip()]
+            for module, wrapped, items in FROM_IMPORT.findall(text):
+                found += [f"{module}.{n.strip()}" for n in (wrapped or items).split(",") if n.strip()]
             for name in found:
                 names.setdefault(name, set()).add(rel(path))
     return names

@@ -35,6 +35,24 @@ def test_assemble_generated_include_exact_output():
     )
 
 
+def test_assemble_again_after_a_file_changes(tmp_path, monkeypatch):
+    """assemble() keeps its texts, but an edited source (or header) is read again."""
+    import os
+
+    import pyclpt.device.program as program
+
+    monkeypatch.setattr(program, "cl_dir", lambda: tmp_path)
+    (tmp_path / "k.cl").write_text('#include "h.h"\nK\n')
+    (tmp_path / "h.h").write_text("H1\n")
+    first = assemble(["k.cl"])
+    assert "H1" in first and assemble(["k.cl"]) is first  # kept
+    (tmp_path / "h.h").write_text("H2\n")
+    st = (tmp_path / "h.h").stat()
+    os.utime(tmp_path / "h.h", ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    again = assemble(["k.cl"])
+    assert "H2" in again and "H1" not in again
+
+
 def test_assemble_resolves_each_header_once_in_dependency_order():
     text = assemble(["integrators/megakernel.cl"])
     lines = text.splitlines()

@@ -138,7 +138,7 @@ __kernel SCALAR_KERNEL void backward(SCENE_PARAMS, __global const float* image_g
     Grads gr = GRAD_INIT;
     int f = offset + i;
     int pixel = film_pixel(&sc, f);
-    vec3 dL = v3_scale(load3(image_grad, pixel), inv_spp);
+    vec3 dL = v3_scale(load3(image_grad, f % film_pixels(&sc)), inv_spp); /* the film's pixel */
     if (v3_is_zero(dL)) return;
     RngKey key = rng_key(seed, (uint)pixel, film_sample(&sc, first_sample, f));
     uint visible = 0;

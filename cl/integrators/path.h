@@ -51,12 +51,23 @@ typedef struct {
 
 static inline bool depth_allows(int depth, int max_depth) { return max_depth < 0 || depth < max_depth; }
 
-/* A launch renders a batch of frames: samples first_sample, first_sample + 1, ... of every pixel. The
- * path of film slot f = j * pixels + pixel is sample first_sample + j of that pixel, and commits to
- * frame j of the film's frame buffer (frames stacked: film_commit writes frame[3 f], drop_marks[f]). */
-static inline int film_pixel(const Scene* sc, int f) { return f % scene_pixels(sc); }
+/* A launch renders a batch of frames: samples first_sample, first_sample + 1, ... of every pixel of the
+ * film. The path of film slot f = j * pixels + p is sample first_sample + j of the film's pixel p, and
+ * commits to frame j of the film's frame buffer (frames stacked: film_commit writes frame[3 f],
+ * drop_marks[f]). film_pixel is that pixel's index in the image, which keys its random numbers and
+ * places its camera ray: p itself, or with -DFILM_CROP p's place in the crop window, so a cropped film's
+ * pixels are exactly the image's. */
+static inline int film_pixel(const Scene* sc, int f) {
+    int p = f % film_pixels(sc);
+#ifdef FILM_CROP
+    __global const float* c = sc->consts;
+    int w = (int)c[CONST_CROP_WIDTH];
+    p = ((int)c[CONST_CROP_Y] + p / w) * (int)c[CONST_WIDTH] + (int)c[CONST_CROP_X] + p % w;
+#endif
+    return p;
+}
 static inline uint film_sample(const Scene* sc, uint first_sample, int f) {
-    return first_sample + (uint)(f / scene_pixels(sc));
+    return first_sample + (uint)(f / film_pixels(sc));
 }
 
 /* path init: the camera ray of (pixel, sample) through a position drawn from the film's reconstruction

@@ -47,7 +47,13 @@
 #define CONST_FILTER_RADIUS 34  /* the film's reconstruction filter (film/rfilter.h): the tent's radius */
 #define CONST_FILTER_TABLE 35   /* FILTER_TABLE + 1 floats: the gaussian's inverse-CDF table */
 #define FILTER_TABLE 128
-#define CONST_COUNT 164
+/* the crop window, with -DFILM_CROP (pyclpt.film.crop): the film holds the pixels [x, x + width) x
+ * [y, y + height) of the CONST_WIDTH x CONST_HEIGHT image */
+#define CONST_CROP_X 164
+#define CONST_CROP_Y 165
+#define CONST_CROP_WIDTH 166
+#define CONST_CROP_HEIGHT 167
+#define CONST_COUNT 168
 
 /* Reconstruction filters (pyclpt.scene.model.ReconstructionFilter.kind): -DSCENE_FILTER=kind compiles the
  * tent's or the gaussian's sampling of the pixel offset in (pyclpt/buffers/rfilter.py); without it, the
@@ -113,8 +119,13 @@ typedef struct {
 
 static inline Material scene_material(const Scene* sc, int id) { return sc->materials + MAT_STRIDE * id; }
 
-static inline int scene_pixels(const Scene* sc) {
+/* The film's pixels: the image's, or with -DFILM_CROP its crop window's. */
+static inline int film_pixels(const Scene* sc) {
+#ifdef FILM_CROP
+    return (int)sc->consts[CONST_CROP_WIDTH] * (int)sc->consts[CONST_CROP_HEIGHT];
+#else
     return (int)sc->consts[CONST_WIDTH] * (int)sc->consts[CONST_HEIGHT];
+#endif
 }
 
 /* The material of a surface with its textures looked up at the surface's uv. */

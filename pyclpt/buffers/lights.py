@@ -32,7 +32,8 @@ from pyclpt.buffers.rfilter import CONST_FILTER_RADIUS, FILTER_CONSTS, filter_co
 from pyclpt.scene.model import Bitmap, Camera, Checkerboard, DirectionalLight, Envmap, Scene, SpotLight
 
 LIGHT_STRIDE = 12
-CONST_COUNT = 164  # CONST_COUNT of cl/scene/scene.h
+CONST_COUNT = 168  # CONST_COUNT of cl/scene/scene.h
+CONST_CROP = 164  # CONST_CROP_X, _Y, _WIDTH, _HEIGHT
 CAMERA_KINDS = {"perspective": 0, "thinlens": 1, "orthographic": 2}  # CAMERA_* of cl/scene/scene.h
 
 
@@ -285,9 +286,10 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
 
 
 def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int,
-                  previous: Camera | None = None) -> np.ndarray:
-    """The CONST_* block of cl/scene/scene.h for one film resolution; ``previous``: the previous frame's
-    camera, for motion vectors (None: the scene's camera, no motion)."""
+                  previous: Camera | None = None, crop: tuple[int, int, int, int] | None = None) -> np.ndarray:
+    """The CONST_* block of cl/scene/scene.h for an image of width x height; ``previous``: the previous
+    frame's camera, for motion vectors (None: the scene's camera, no motion); ``crop``: the film's window
+    (x, y, width, height) of the image (read with -DFILM_CROP)."""
     c = np.zeros(CONST_COUNT, np.float32)
     origin, forward, right, up = scene.camera.basis(width, height)
     c[0:3], c[3:6], c[6:9], c[9:12] = origin, forward, right, up
@@ -300,4 +302,5 @@ def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int,
     c[18] = lights.lights.shape[0]
     c[19] = 1.0  # CONST_UNIT: the stride of record reads, opaque to the compiler (rgb_at, cl/core/common.h)
     c[CONST_FILTER_RADIUS:CONST_FILTER_RADIUS + FILTER_CONSTS] = filter_consts(scene.film.rfilter)
+    c[CONST_CROP:CONST_CROP + 4] = crop or (0, 0, width, height)
     return c

@@ -217,7 +217,7 @@ class SceneBuffers:
         self.arrays = arrays = pack_scene(scene)
         self.pack_seconds = time.perf_counter() - start
         self._buffers = [upload(device, a, f"scene {scene.name!r} {n}") for n, a in arrays.device_arrays()]
-        self._consts: dict[tuple[int, int], cl.Buffer] = {}
+        self._consts: dict[tuple, cl.Buffer] = {}
         self.previous_camera: Camera | None = None  # the previous frame's, for motion vectors (None: no motion)
 
     @property
@@ -271,11 +271,12 @@ class SceneBuffers:
         self.previous_camera = previous
         self._consts.clear()
 
-    def args(self, width: int, height: int) -> tuple[cl.Buffer, ...]:
-        """The SCENE_PARAMS kernel arguments for a film of width x height."""
-        key = (width, height)
+    def args(self, width: int, height: int, crop: tuple[int, int, int, int] | None = None) -> tuple[cl.Buffer, ...]:
+        """The SCENE_PARAMS kernel arguments for an image of width x height (``crop``: the film's window
+        of it, x, y, width, height; None: all of it)."""
+        key = (width, height, None if crop is None else tuple(crop))
         if key not in self._consts:
-            consts = camera_consts(self.scene, self.arrays.lights, width, height, self.previous_camera)
+            consts = camera_consts(self.scene, self.arrays.lights, width, height, self.previous_camera, key[2])
             self._consts[key] = upload(self.device, consts, "camera constants")
         b = self._buffers
         return (*b[:9], self._consts[key], *b[9:])

@@ -150,6 +150,26 @@ class Denoiser:
         self.denoise_buffers(color_buf, aov_buf)
         return self.image()
 
+    def denoise_gbuffer(self, color: np.ndarray, gbuffer: np.ndarray | None = None) -> np.ndarray:
+        """Denoise one frame given as a renderer records it, on the host: ``color`` (H, W, 3) float32 (its
+        frame buffer) and ``gbuffer`` the per-pixel planar G-buffer, (AOV_COUNT, H, W) float32
+        (``AovFilm.read()``; svgf and oidn need it, blend does not): the frames of another machine
+        (:mod:`pyclpt.distributed`) denoised exactly as :meth:`denoise_buffers` denoises them on the
+        device that rendered them. Returns the output, (H, W, 3) float32."""
+        if self.device is None:
+            raise ValueError("denoise_gbuffer in mode 'oidn' needs a device to stage the frame on: "
+                             "Denoiser(device, width, height, mode='oidn')")
+        shape = (self.height, self.width)
+        if np.shape(color) != (*shape, 3):
+            raise ValueError(f"color must be ({self.height}, {self.width}, 3) for this denoiser, got {np.shape(color)}")
+        if gbuffer is not None and np.shape(gbuffer) != (AOV_COUNT, *shape):
+            raise ValueError(f"gbuffer must be ({AOV_COUNT}, {self.height}, {self.width}) (AovFilm.read()), "
+                             f"got {np.shape(gbuffer)}")
+        color_buf = self._upload("color", np.asarray(color, np.float32))
+        aov_buf = None if gbuffer is None else self._upload("aovs", np.asarray(gbuffer, np.float32))
+        self.denoise_buffers(color_buf, aov_buf)
+        return self.image()
+
     def image(self) -> np.ndarray:
         """The last output, (H, W, 3) float32."""
         if self._impl is None:

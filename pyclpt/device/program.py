@@ -54,12 +54,30 @@ def _display_name(path: Path) -> str:
         return path.as_posix()
 
 
+# assemble()'s texts by their arguments, with the modification times of the files they read: a renderer
+# made again (a tile, a scene change) reads and splices its sources once, not every time
+_assembled: dict[tuple, tuple[str, dict[Path, int]]] = {}
+
+
 def assemble(files: Sequence[str] = (), source: str | None = None, source_name: str = "<source>",
              generated: Mapping[str, str] | None = None) -> str:
     """Concatenate ``files`` (names under cl/) and ``source``, resolving includes, with #line markers.
 
     ``generated`` maps include names to text made by Python (e.g. the path-state accessors);
-    such an include is emitted under the name ``<generated NAME>``."""
+    such an include is emitted under the name ``<generated NAME>``. The text is made again when a
+    file it read has changed since."""
+    key = (str(cl_dir()), tuple(files), source, source_name, tuple(sorted((generated or {}).items())))
+    hit = _assembled.get(key)
+    if hit is not None and all(path.stat().st_mtime_ns == t for path, t in hit[1].items()):
+        return hit[0]
+    text, read = _assemble(files, source, source_name, generated)
+    _assembled[key] = (text, {path: path.stat().st_mtime_ns for path in read})
+    return text
+
+
+def _assemble(files: Sequence[str], source: str | None, source_name: str,
+              generated: Mapping[str, str] | None) -> tuple[str, set[Path]]:
+    """assemble()'s text, and the files it read."""
     root = cl_dir()
     seen: set[Path] = set()
     seen_generated: set[str] = set()
@@ -97,7 +115,7 @@ def assemble(files: Sequence[str] = (), source: str | None = None, source_name: 
             emit(path.read_text(), _display_name(path), path)
     if source is not None:
         emit(source, source_name, None)
-    return "\n".join(out) + "\n"
+    return "\n".join(out) + "\n", seen
 
 
 def define_options(defines: Mapping[str, object] | None) -> list[str]:

@@ -1,5 +1,5 @@
 """Renders spread over a Dask cluster (``dask.distributed``; the ``[distributed]`` extra):
-sample ranges, frames of a sequence, merged exactly (docs/distributed.md).
+sample ranges, tiles of large images, frames of a sequence, merged exactly (docs/distributed.md).
 
     from dask.distributed import Client, LocalCluster
     with LocalCluster(n_workers=2, threads_per_worker=1) as cluster, Client(cluster) as client:

@@ -14,12 +14,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pyclpt.film.crop import Crop
+
 
 @dataclass
 class PartialSum:
     """Samples [first_sample, first_sample + count) of one view, summed per pixel and channel (H, W, 3)
     float64; ``frames``: with a per-sample task, each sample's own (count, H, W, 3) float32 frame
-    instead. ``worker``, ``seconds``: who rendered it and how long the rendering took there."""
+    instead. ``crop``: the tile of the image they cover (None: all of it). ``gbuffer``: a denoised
+    sequence's frame's G-buffer, (AOV_COUNT, H, W) float32 (``AovFilm.read()``). ``worker``, ``seconds``:
+    who rendered it and how long the rendering took there."""
 
     first_sample: int
     count: int
@@ -29,6 +33,8 @@ class PartialSum:
     worker: str = ""
     seconds: float = 0.0
     frames: np.ndarray | None = None
+    crop: Crop | None = None
+    gbuffer: np.ndarray | None = None
 
 
 def _in_order(parts: Iterable[PartialSum], first_sample: int, spp: int) -> list[PartialSum]:
@@ -53,6 +59,27 @@ def merge(parts: Iterable[PartialSum], spp: int, first_sample: int = 0) -> tuple
     for p in ordered[1:]:
         total += p.total
     return total, sum(p.dropped for p in ordered)
+
+
+def merge_tiles(parts: Iterable[PartialSum], spp: int, width: int, height: int,
+                first_sample: int = 0) -> tuple[np.ndarray, int]:
+    r"""The sum over [first_sample, first_sample + spp) of a width x height image whose tiles were rendered
+    apart, (H, W, 3) float64, and its dropped-sample count: each tile's sums :func:`merge`\ d, and put in
+    its place. ValueError unless the tiles cover the image once."""
+    by_tile: dict[Crop, list[PartialSum]] = {}
+    for p in parts:
+        by_tile.setdefault(p.crop or Crop(0, 0, width, height), []).append(p)
+    covered = np.zeros((height, width), np.int32)
+    total, dropped = np.empty((height, width, 3), np.float64), 0
+    for crop, tile_parts in by_tile.items():
+        total[crop.slices()], n = merge(tile_parts, spp, first_sample)
+        covered[crop.slices()] += 1
+        dropped += n
+    if not (covered == 1).all():
+        y, x = np.argwhere(covered != 1)[0]
+        raise ValueError(f"the tiles cover pixel ({x}, {y}) of the {width}x{height} image "
+                         f"{covered[y, x]} times, not once")
+    return total, dropped
 
 
 def average(total: np.ndarray, spp: int) -> np.ndarray:

@@ -18,20 +18,31 @@ cancelled, as they are when the client stops waiting (Ctrl-C, ``timeout``).
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from pyclpt.common.checks import check_int, check_optional_bool, check_optional_int
+from pyclpt.denoise import Denoiser, DenoiserSettings
+from pyclpt.device.context import Device
 from pyclpt.distributed.cluster import import_distributed
-from pyclpt.distributed.merge import PartialSum, average, merge, running_averages
-from pyclpt.distributed.tasks import RENDERER_SETTINGS, RenderTask, SceneSource, default_task_spp, split_samples
-from pyclpt.distributed.worker import run_task
+from pyclpt.distributed.merge import PartialSum, average, merge, merge_tiles, running_averages
+from pyclpt.distributed.tasks import (
+    RENDERER_SETTINGS,
+    RenderTask,
+    SceneSource,
+    default_task_spp,
+    split_samples,
+    tile_size,
+)
+from pyclpt.distributed.worker import image_size, run_task
+from pyclpt.film.crop import tiles
 from pyclpt.film.film import DEFAULT_PRECISION
 from pyclpt.rendering.frame_loop import PROGRESS_DELAY_S
 from pyclpt.rendering.renderer import render as render_local
+from pyclpt.scene.camera_path import CameraPath
 from pyclpt.scene.model import Camera, Scene
 
 
@@ -57,6 +68,7 @@ class DistributedRenderer:
         # a Scene goes to the workers once, not with every task
         self._shipped = client.scatter(self.source, broadcast=True) if self.source.scene is not None else None
         self.parts: list[PartialSum] = []  # the last job's partial results (worker, seconds, samples)
+        self._size: tuple[int, int] | None = None
 
     @property
     def workers(self) -> int:
@@ -65,12 +77,30 @@ class DistributedRenderer:
 
     def _task(self, seed: int, first: int, count: int, **extra: Any) -> RenderTask:
         source = self.source if self._shipped is None else SceneSource(token=self.source.token)
-        return RenderTask(source=source, settings=self.settings, seed=seed, first_sample=first, count=count, **extra)
+        extra.setdefault("settings", self.settings)
+        return RenderTask(source=source, seed=seed, first_sample=first, count=count, **extra)
+
+    def image_size(self) -> tuple[int, int]:
+        """The width and height of the image: the settings', else the scene's film (a scene file's is read
+        by a worker, which keeps the scene for the render)."""
+        settings = dict(self.settings)
+        if settings["width"] is not None and settings["height"] is not None:
+            return settings["width"], settings["height"]
+        if self._size is None:
+            if self.source.scene is not None:
+                film = self.source.scene.film
+                self._size = (settings["width"] or film.width, settings["height"] or film.height)
+            else:
+                future = self.client.submit(image_size, self.source, self.settings, pure=False)
+                self._size = future.result()
+        return self._size
 
     def _run(self, tasks: list[RenderTask], progress: bool | None, desc: str, unit_of=lambda t: t.count,
-             timeout: float | None = None) -> list[PartialSum]:
-        """Run ``tasks`` on the cluster, a bar over their units; the results in the tasks' order. Any
-        failure (or Ctrl-C, or ``timeout`` seconds) cancels the tasks not finished."""
+             timeout: float | None = None,
+             on_result: Callable[[int, PartialSum], None] | None = None) -> list[PartialSum]:
+        """Run ``tasks`` on the cluster, a bar over their units; the results in the tasks' order
+        (``on_result(i, part)``: called with each as it arrives). Any failure (or Ctrl-C, or ``timeout``
+        seconds) cancels the tasks not finished."""
         d = self._distributed
         args = () if self._shipped is None else (self._shipped,)
         futures = [self.client.submit(run_task, t, *args, key=f"pyclpt-{t.key}", pure=False, retries=0)
@@ -83,6 +113,8 @@ class DistributedRenderer:
                 for future, part in d.as_completed(futures, with_results=True, timeout=timeout):
                     i = index[future.key]
                     results[i] = part
+                    if on_result is not None:
+                        on_result(i, part)
                     bar.update(unit_of(tasks[i]))
         finally:
             pending = [f for f in futures if not f.done()]
@@ -92,25 +124,38 @@ class DistributedRenderer:
         return results
 
     def render_sum(self, spp: int, seed: int = 0, *, task_spp: int | None = None, first_sample: int = 0,
-                   progress: bool | None = None, timeout: float | None = None) -> np.ndarray:
+                   tile: int | tuple[int, int] | str | None = "auto", progress: bool | None = None,
+                   timeout: float | None = None) -> np.ndarray:
         """The sum of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float64."""
         spp = check_int(spp, "spp", lo=1, hi=2**32)
         seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
         task_spp = check_optional_int(task_spp, "task_spp", lo=1, note=" (None: about 4 tasks a worker)")
         progress = check_optional_bool(progress, "progress")
-        task_spp = task_spp or default_task_spp(spp, self.workers)
-        tasks = [self._task(seed, s, n) for s, n in split_samples(spp, task_spp, first_sample)]
-        parts = self._run(tasks, progress, f"{self.source.name} on {self.workers} workers", timeout=timeout)
-        total, self.dropped_samples = merge(parts, spp, first_sample)
+        width, height = self.image_size() if tile is not None else (0, 0)
+        size = tile_size(tile, width, height)
+        crops = [None] if size is None else tiles(width, height, *size)
+        task_spp = task_spp or default_task_spp(spp, self.workers, tiles=len(crops))
+        tasks = [self._task(seed, s, n, crop=c) for c in crops for s, n in split_samples(spp, task_spp, first_sample)]
+        what = "" if size is None else f", {len(crops)} tiles"
+        share = {c: 1.0 if c is None else c.width * c.height / (width * height) for c in crops}
+        parts = self._run(tasks, progress, f"{self.source.name} on {self.workers} workers{what}",
+                          unit_of=lambda t: t.count * share[t.crop], timeout=timeout)
+        if size is None:
+            total, self.dropped_samples = merge(parts, spp, first_sample)
+        else:
+            total, self.dropped_samples = merge_tiles(parts, spp, width, height, first_sample)
         return total
 
     def render(self, spp: int, seed: int = 0, *, task_spp: int | None = None, first_sample: int = 0,
-               progress: bool | None = None, timeout: float | None = None) -> np.ndarray:
+               tile: int | tuple[int, int] | str | None = "auto", progress: bool | None = None,
+               timeout: float | None = None) -> np.ndarray:
         """The average of samples [first_sample, first_sample + spp), (H, W, 3) float32: the image of
         ``Renderer(scene).render(spp, seed, first_sample=first_sample)``. ``task_spp``: samples per task
-        (default: about 4 tasks a worker; docs/distributed.md)."""
-        total = self.render_sum(spp, seed, task_spp=task_spp, first_sample=first_sample, progress=progress,
-                                timeout=timeout)
+        (default: about 4 tasks a worker); ``tile``: tasks render tiles of this size (one side, or
+        (width, height)) instead of the whole image; ``"auto"``: tiles of 512 pixels for an image of more
+        than 2 Mpixels (docs/distributed.md)."""
+        total = self.render_sum(spp, seed, task_spp=task_spp, first_sample=first_sample, tile=tile,
+                                progress=progress, timeout=timeout)
         return average(total, spp)
 
     def render_frames(self, cameras: Sequence[Camera], spp: int = 1, seed: int = 0, *, first_sample: int = 0,
@@ -136,6 +181,55 @@ class DistributedRenderer:
         tasks = [self._task(seed, s, n, per_sample=True) for s, n in split_samples(spp, task_spp)]
         parts = self._run(tasks, progress, f"{self.source.name}: {spp} frames", timeout=timeout)
         return running_averages(parts, spp)
+
+    def render_denoised(self, frames: int, seed: int = 0, *, camera_path: CameraPath | None = None,
+                        denoiser: str = "svgf", denoiser_settings: DenoiserSettings | None = None,
+                        device: Device | str | None = None,
+                        on_frame: Callable[[int, np.ndarray], None] | None = None, progress: bool | None = None,
+                        timeout: float | None = None) -> list[np.ndarray]:
+        """A denoised sequence: what ``ProgressiveRenderer(scene, denoiser=denoiser, camera_path=camera_path,
+        seed=seed)`` gives frame after frame (:meth:`~pyclpt.ProgressiveRenderer.denoised`), bit for bit.
+        Each frame (sample index k, the path's camera k, motion vectors back to camera k - 1) is a task
+        that returns the frame and its G-buffer; the client denoises them in frame order on ``device``
+        (default: its default device) as they arrive, the denoiser's history carried from frame to
+        frame. ``on_frame(k, image)``: called with each denoised frame in order, which then is not kept
+        (a long sequence need not fit in memory); else the frames are returned, (H, W, 3) float32 each.
+        ``denoiser``: ``"svgf"`` or ``"blend"`` (``"oidn"`` denoises the running average: render it with
+        one machine)."""
+        frames = check_int(frames, "frames", lo=1, hi=2**32)
+        seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
+        if denoiser not in ("svgf", "blend"):
+            raise ValueError(f"denoiser {denoiser!r}: a cluster renders sequences for the temporal denoisers "
+                             f"'svgf' and 'blend' ('oidn' denoises the running average: render it with "
+                             f"pyclpt.ProgressiveRenderer)")
+        if camera_path is not None and not isinstance(camera_path, CameraPath):
+            raise TypeError(f"camera_path must be a pyclpt.CameraPath, got {type(camera_path).__name__}")
+        width, height = self.image_size()
+        dn = Denoiser(device, width, height, mode=denoiser, settings=denoiser_settings)
+        cameras = [None] * frames if camera_path is None else [camera_path.camera(k) for k in range(frames)]
+        settings = (*self.settings, ("aovs", True))
+        tasks = [self._task(seed, k, 1, camera=c, previous=cameras[k - 1] if k else None, frame=k, gbuffer=True,
+                            settings=settings) for k, c in enumerate(cameras)]
+        out: list[np.ndarray] = []
+        waiting: dict[int, PartialSum] = {}  # frames arrived before the one the denoiser needs next
+        next_frame = 0
+
+        def denoise_in_order(k: int, part: PartialSum) -> None:
+            nonlocal next_frame
+            waiting[k] = part
+            while next_frame in waiting:
+                ready = waiting.pop(next_frame)
+                image = dn.denoise_gbuffer(ready.frames[0], ready.gbuffer)
+                ready.frames = ready.gbuffer = None  # denoised: only the task's record stays
+                if on_frame is not None:
+                    on_frame(next_frame, image)
+                else:
+                    out.append(image)
+                next_frame += 1
+
+        self._run(tasks, progress, f"{self.source.name}: {frames} frames, denoised", timeout=timeout,
+                  on_result=denoise_in_order)
+        return out
 
     def close(self) -> None:
         """Forget the scene sent to the workers (their caches keep a renderer until it ages out)."""

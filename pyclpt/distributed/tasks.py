@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pyclpt.common.checks import check_int
+from pyclpt.film.crop import Crop
 from pyclpt.scene.model import Camera, Scene
 
 # Settings of pyclpt.rendering.renderer.Renderer a distributed render passes on (device: each worker's own).
@@ -55,7 +56,10 @@ class RenderTask:
     """Samples [first_sample, first_sample + count) of every pixel of one view: the worker returns their
     sum (:class:`~pyclpt.distributed.merge.PartialSum`); ``per_sample``: every sample's own frame instead
     (a sequence whose frames accumulate, merged by prefix sums). ``camera``: the view, when not the
-    scene's (a frame of a sequence); ``frame``: that frame's number."""
+    scene's (a frame of a sequence); ``previous``: the camera of the frame before, which the motion vectors
+    point back to (None: no motion); ``frame``: that frame's number; ``crop``: the tile (x, y, width,
+    height) of the image to render, None for all of it (:mod:`pyclpt.film.crop`); ``gbuffer``: one frame
+    of a denoised sequence, returned with its G-buffer (the settings ask for AOVs)."""
 
     source: SceneSource
     settings: tuple[tuple[str, Any], ...]
@@ -63,8 +67,11 @@ class RenderTask:
     first_sample: int
     count: int
     camera: Camera | None = None
+    previous: Camera | None = None
     frame: int = 0
     per_sample: bool = False
+    crop: Crop | None = None
+    gbuffer: bool = False
     key: str = field(default_factory=lambda: uuid.uuid4().hex[:12])
 
     def with_range(self, first_sample: int, count: int) -> RenderTask:
@@ -79,8 +86,30 @@ def split_samples(spp: int, task_spp: int, first_sample: int = 0) -> list[tuple[
     return [(s, min(task_spp, first_sample + spp - s)) for s in range(first_sample, first_sample + spp, task_spp)]
 
 
-def default_task_spp(spp: int, workers: int, tasks_per_worker: int = 4) -> int:
-    """Samples per task when none is given: about ``tasks_per_worker`` tasks a worker, so that a faster
-    worker (a GPU) takes more of them and a lost one costs little, while each task stays long enough
-    for its fixed cost (a film sum sent back) to stay small (docs/distributed.md)."""
-    return max(1, -(-int(spp) // (max(1, int(workers)) * int(tasks_per_worker))))
+def default_task_spp(spp: int, workers: int, tasks_per_worker: int = 4, tiles: int = 1) -> int:
+    """Samples per task when none is given: about ``tasks_per_worker`` tasks a worker over all ``tiles``
+    of the image, so that a faster worker (a GPU) takes more of them and a lost one costs little, while
+    each task stays long enough for its fixed cost (a film sum sent back) to stay small
+    (docs/distributed.md)."""
+    ranges = -(-max(1, int(workers)) * int(tasks_per_worker) // max(1, int(tiles)))  # sample ranges a tile
+    return max(1, -(-int(spp) // ranges))
+
+
+# Images of more pixels than this are split into tiles when no tile size is given: a task's double
+# sum of the whole image (24 bytes a pixel) would pass 48 MiB, and a 4K worker film several times that.
+AUTO_TILE_PIXELS = 1 << 21
+AUTO_TILE = 512  # pixels a side of those tiles
+
+
+def tile_size(tile: int | tuple[int, int] | str | None, width: int, height: int) -> tuple[int, int] | None:
+    """The (width, height) of the tiles of a width x height image: ``tile`` as given (one size for both
+    sides, or two), None for no tiles, or ``"auto"``: AUTO_TILE-pixel tiles for an image of more than
+    AUTO_TILE_PIXELS pixels, else none."""
+    if tile == "auto":
+        return (AUTO_TILE, AUTO_TILE) if width * height > AUTO_TILE_PIXELS else None
+    if tile is None:
+        return None
+    sides = (tile, tile) if not isinstance(tile, (tuple, list)) else tuple(tile)
+    if len(sides) != 2:
+        raise ValueError(f"tile must be a size, (width, height), 'auto' or None, got {tile!r}")
+    return check_int(sides[0], "tile width", lo=1), check_int(sides[1], "tile height", lo=1)

@@ -16,6 +16,7 @@ import os
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,13 +25,16 @@ import numpy as np
 from pyclpt.device.context import DeviceError
 from pyclpt.distributed.merge import PartialSum
 from pyclpt.distributed.tasks import RenderTask, SceneSource
+from pyclpt.film.crop import Crop
 from pyclpt.rendering.renderer import Renderer
 from pyclpt.scene.library import builtin_dir, load
 
 log = logging.getLogger("pyclpt.distributed")
 
-CACHE_SIZE = 2  # renderers a worker keeps (least recently used first out)
+CACHE_SIZE = 2  # scenes a worker keeps renderers of (least recently used first out)
+TILE_CACHE_SIZE = 4  # renderers of tiles a worker keeps (sharing their scene's buffers)
 _cache: OrderedDict[tuple, Renderer] = OrderedDict()
+_tiles: OrderedDict[tuple, Renderer] = OrderedDict()
 _lock = threading.Lock()  # a worker with several threads renders one task at a time on its device
 
 
@@ -59,26 +63,47 @@ def _file_stamp(source: SceneSource) -> int:
     return 0
 
 
-def renderer_for(source: SceneSource, settings: tuple[tuple[str, Any], ...]) -> Renderer:
-    """This worker's renderer of ``source`` with ``settings`` (loaded and built on first use)."""
-    key = (source.path, source.defines, source.token, _file_stamp(source), settings)
-    r = _cache.get(key)
+def _cached(cache: OrderedDict[tuple, Renderer], key: tuple, size: int, make: Callable[[], Renderer]) -> Renderer:
+    r = cache.get(key)
     if r is not None:
-        _cache.move_to_end(key)
+        cache.move_to_end(key)
         return r
+    r = cache[key] = make()
+    while len(cache) > size:
+        cache.popitem(last=False)
+    return r
+
+
+def renderer_for(source: SceneSource, settings: tuple[tuple[str, Any], ...], crop: Crop | None = None) -> Renderer:
+    """This worker's renderer of ``source`` with ``settings`` (loaded and built on first use); ``crop``:
+    of that tile of the image. The first renderer of a scene (of whatever window: a tiled render never
+    makes a film of the whole image) keeps its buffers; the other windows' renderers share them."""
+    key = (source.path, source.defines, source.token, _file_stamp(source), settings)
+    r = _cached(_cache, key, CACHE_SIZE, lambda: _load(source, settings, crop))
+    if r.crop == crop:
+        return r
+    return _cached(_tiles, (key, crop), TILE_CACHE_SIZE, lambda: r.cropped(crop))
+
+
+def _load(source: SceneSource, settings: tuple[tuple[str, Any], ...], crop: Crop | None) -> Renderer:
     try:
         scene = load(source.path, **dict(source.defines)) if source.path is not None else source.scene
     except Exception as exc:
         raise WorkerError(f"worker {worker_name()}: cannot open scene {source.name}: "
                           f"{type(exc).__name__}: {exc}") from None
     try:
-        r = Renderer(scene, **dict(settings))
+        r = Renderer(scene, crop=crop, **dict(settings))
     except DeviceError as exc:
         raise WorkerError(f"worker {worker_name()}: no usable OpenCL device for scene {source.name}: {exc}") from None
-    _cache[key] = r
-    while len(_cache) > CACHE_SIZE:
-        _cache.popitem(last=False)
     return r
+
+
+def image_size(source: SceneSource, settings: tuple[tuple[str, Any], ...]) -> tuple[int, int]:
+    """The width and height of the image ``source`` renders with ``settings`` (its scene is kept for the
+    tiles that follow, in a renderer of one pixel)."""
+    with _lock:
+        r = renderer_for(source, settings, Crop(0, 0, 1, 1))
+        return r.width, r.height
 
 
 def run_task(task: RenderTask, source: SceneSource | None = None) -> PartialSum:
@@ -86,19 +111,22 @@ def run_task(task: RenderTask, source: SceneSource | None = None) -> PartialSum:
     ``source``: the scene, when it was sent to the workers once rather than with every task."""
     source = task.source if source is None else source
     with _lock:
-        r = renderer_for(source, task.settings)
+        r = renderer_for(source, task.settings, task.crop)
         scene_camera = r.scene.camera
         if task.camera is not None:  # a frame of a sequence: its view (refresh_camera checks its kind)
             r.scene.camera = task.camera
-            r.scene_buffers.refresh_camera(previous=None)
+            r.scene_buffers.refresh_camera(previous=task.previous)
         try:
             t0 = time.perf_counter()
-            if task.per_sample:
+            total = frames = gbuffer = None
+            if task.gbuffer:  # a frame of a denoised sequence: its own samples and G-buffer, the denoiser's input
+                r.render(task.count, task.seed, first_sample=task.first_sample)
+                frames, gbuffer = r.film.read_frame(0)[None], r.film.aov.read()
+            elif task.per_sample:
                 frames = np.stack([r.render(1, task.seed, first_sample=task.first_sample + k)
                                    for k in range(task.count)])
-                total = None
             else:
-                total, frames = r.render_sum(task.count, task.seed, first_sample=task.first_sample), None
+                total = r.render_sum(task.count, task.seed, first_sample=task.first_sample)
             seconds = time.perf_counter() - t0
             dropped = r.stats.dropped_samples
         finally:
@@ -106,4 +134,4 @@ def run_task(task: RenderTask, source: SceneSource | None = None) -> PartialSum:
                 r.scene.camera = scene_camera
                 r.scene_buffers.refresh_camera(previous=None)
     return PartialSum(task.first_sample, task.count, total, frame=task.frame, dropped=dropped,
-                      worker=worker_name(), seconds=seconds, frames=frames)
+                      worker=worker_name(), seconds=seconds, frames=frames, crop=task.crop, gbuffer=gbuffer)

@@ -18,6 +18,7 @@ from pyclpt.device.context import Device, alloc
 from pyclpt.device.program import build_program
 from pyclpt.film.accumulator import Accumulator
 from pyclpt.film.aovs import AovFilm
+from pyclpt.film.crop import Crop
 
 # Renderer.render's precision: the sum of the samples in double (emulated double-float on a device
 # without cl_khr_fp64), so a long render's mean is as exact as its float samples allow; the
@@ -36,11 +37,18 @@ def frames_per_batch(pixels: int, paths: int) -> int:
 
 
 class Film:
+    """A film of an image of width x height pixels, or with ``crop`` of that window of it (the film's own
+    ``width``/``height`` are then the window's; :mod:`pyclpt.film.crop`)."""
+
     def __init__(self, device: Device, width: int, height: int, precision: str = DEFAULT_PRECISION,
-                 batch: int = 1, aovs: bool = False, **accumulator_options) -> None:
+                 batch: int = 1, aovs: bool = False, crop: Crop | None = None, **accumulator_options) -> None:
         if not 1 <= batch <= MAX_BATCH:
             raise ValueError(f"a film batch holds 1 to {MAX_BATCH} frames, got {batch}")
         self.device = device
+        self.image_width, self.image_height = width, height
+        self.crop = None if crop is None or crop.covers(width, height) else crop
+        if self.crop is not None:
+            width, height = self.crop.width, self.crop.height
         self.width, self.height = width, height
         self.pixels = width * height
         self.batch = batch
@@ -58,8 +66,15 @@ class Film:
 
     @property
     def defines(self) -> dict:
-        """-D options of the integrators' programs for this film: AOVS when it has a G-buffer."""
-        return {"AOVS": 1} if self.aov is not None else {}
+        """-D options of the integrators' programs for this film: AOVS when it has a G-buffer, FILM_CROP
+        when it holds a crop window."""
+        return {**({"AOVS": 1} if self.aov is not None else {}), **({"FILM_CROP": 1} if self.crop else {})}
+
+    @property
+    def view(self) -> tuple[int, int, Crop | None]:
+        """The image's width and height and the film's crop window (None: all of it): what the scene's
+        constants need (``SceneBuffers.args``)."""
+        return self.image_width, self.image_height, self.crop
 
     def aov_args(self) -> tuple:
         """The integrators' last two kernel arguments (aovs, aov_n): the G-buffer records, or an unused

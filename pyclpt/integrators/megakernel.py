@@ -32,7 +32,7 @@ class Megakernel:
 
     def warm_up(self) -> None:
         """One empty launch, so that the driver's lazy compilation counts as compile time."""
-        args = self.scene.args(self.film.width, self.film.height)
+        args = self.scene.args(*self.film.view)
         self.kernel(self.device.queue, (self.local_size,), (self.local_size,), *args, self.film.frame,
                     self.film.drop_marks, np.uint32(0), np.uint32(0), np.int32(0), np.int32(0),
                     np.int32(self.max_depth), *self.film.aov_args())
@@ -48,7 +48,7 @@ class Megakernel:
         ``wave_size`` paths per launch."""
         if not 1 <= frames <= self.film.batch:
             raise ValueError(f"frames must be 1..{self.film.batch} (the film's batch), got {frames}")
-        args = self.scene.args(self.film.width, self.film.height)
+        args = self.scene.args(*self.film.view)
         total = self.film.pixels * frames
         for offset in range(0, total, self.wave_size):
             count = min(self.wave_size, total - offset)

@@ -178,7 +178,7 @@ class Wavefront:
     def warm_up(self) -> None:
         """Launch every stage once with empty queues, so that the driver's lazy compilation
         (PoCL builds a work-group function on first launch) is counted as compile time."""
-        self._scene_args = self.scene.args(self.film.width, self.film.height)
+        self._scene_args = self.scene.args(*self.film.view)
         q = self.device.queue
         cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
         self.path_init(1, 0, 0, 0)
@@ -201,7 +201,7 @@ class Wavefront:
         and derive each path's own from its film slot."""
         if not 1 <= frames <= self.film.batch:
             raise ValueError(f"frames must be 1..{self.film.batch} (the film's batch), got {frames}")
-        self._scene_args = self.scene.args(self.film.width, self.film.height)
+        self._scene_args = self.scene.args(*self.film.view)
         q = self.device.queue
         total = self.film.pixels * frames
         for offset in range(0, total, self.capacity):

@@ -77,8 +77,10 @@ def batch_frames(pixels: int, wave_size: int | None) -> int:
 
 
 def render_memory(scene: Scene, width: int, height: int, *, precision: str, integrator: str,
-                  wave_size: int | None = None, max_depth: int = 0, aovs: bool = False) -> dict[str, int]:
-    """{what: bytes} of the device buffers of a render (see the module docstring)."""
+                  wave_size: int | None = None, max_depth: int = 0, aovs: bool = False,
+                  scene_buffers: bool = True) -> dict[str, int]:
+    """{what: bytes} of the device buffers of a render of a film of width x height (see the module
+    docstring); ``scene_buffers`` False: the scene's buffers are there already (another renderer's)."""
     pixels = width * height
     batch = batch_frames(pixels, wave_size)
     parts = {
@@ -86,7 +88,7 @@ def render_memory(scene: Scene, width: int, height: int, *, precision: str, inte
         "dropped-sample marks": pixels * batch,
         f"accumulation sum ({precision})": SUM_VALUE_BYTES.get(precision, 8) * 3 * pixels,
         "accumulated image": 12 * pixels,
-        "scene buffers (estimate)": scene_bytes(scene),
+        "scene buffers (estimate)": scene_bytes(scene) if scene_buffers else 0,
     }
     if aovs:  # pyclpt/film/aovs.py: a record per film slot, the per-pixel sums and means
         parts["G-buffer"] = 4 * AOV_COUNT * pixels * (batch + 2)
@@ -102,11 +104,11 @@ def render_memory(scene: Scene, width: int, height: int, *, precision: str, inte
 
 def check_render_memory(device: Device, scene: Scene, width: int, height: int, *, precision: str,
                         integrator: str, wave_size: int | None = None, max_depth: int = 0,
-                        aovs: bool = False) -> dict[str, int]:
+                        aovs: bool = False, scene_buffers: bool = True) -> dict[str, int]:
     """Raise :class:`~pyclpt.device.context.DeviceMemoryError` (a MemoryError) naming what is needed,
     what is available and what to lower, unless the render fits; returns the parts counted."""
     parts = render_memory(scene, width, height, precision=precision, integrator=integrator,
-                          wave_size=wave_size, max_depth=max_depth, aovs=aovs)
+                          wave_size=wave_size, max_depth=max_depth, aovs=aovs, scene_buffers=scene_buffers)
     host = {f"image read back {width}x{height}": 12 * width * height,
             "scene arrays on the host (estimate)": parts["scene buffers (estimate)"]}
     lower = ["lower the resolution (width, height)"]

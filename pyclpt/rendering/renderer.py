@@ -26,6 +26,7 @@ from pyclpt.common.checks import check_choice, check_int, check_optional_bool, c
 from pyclpt.device.context import Device, get_device
 from pyclpt.film.accumulator import check_options
 from pyclpt.film.aovs import check_aovs, unpack
+from pyclpt.film.crop import Crop
 from pyclpt.film.film import DEFAULT_PRECISION, Film
 from pyclpt.integrators.megakernel import Megakernel
 from pyclpt.rendering.frame_loop import FramePacer, progress_bar
@@ -66,14 +67,26 @@ def check_scene(scene: object) -> Scene:
 
 
 class Renderer:
-    """A scene prepared on a device for one integrator and resolution."""
+    """A scene prepared on a device for one integrator and resolution.
+
+    ``crop`` (x, y, width, height): render only that window of the width x height image (its pixels
+    exactly the whole image's; :mod:`pyclpt.film.crop`); :meth:`render` then returns the window.
+    ``scene_buffers``: the scene as another renderer of it on the same device already holds it
+    (:meth:`cropped` passes its own), instead of packing and uploading it again."""
 
     def __init__(self, scene: Scene, *, integrator: str = "megakernel", layout: str = "soa",
                  max_depth: int | None = None, width: int | None = None, height: int | None = None,
                  device: Device | str | None = None, wave_size: int | None = None,
                  local_size: int | None = None, schedule: str | None = None, tail_paths: int | None = None,
-                 precision: str = DEFAULT_PRECISION, aovs: Sequence[str] | str | bool | None = None) -> None:
-        check_scene(scene)
+                 precision: str = DEFAULT_PRECISION, aovs: Sequence[str] | str | bool | None = None,
+                 crop: Sequence[int] | None = None, scene_buffers: SceneBuffers | None = None) -> None:
+        self._options = dict(integrator=integrator, layout=layout, max_depth=max_depth, width=width, height=height,
+                             wave_size=wave_size, local_size=local_size, schedule=schedule, tail_paths=tail_paths,
+                             precision=precision, aovs=aovs)
+        if scene_buffers is None:
+            check_scene(scene)
+        elif scene_buffers.scene is not scene:  # checked when they were made; they render as they were then
+            raise ValueError("scene_buffers must hold this scene on this renderer's device")
         self.aov_names = check_aovs(aovs)
         check_choice(integrator, "integrator", INTEGRATORS)
         check_choice(layout, "layout", LAYOUTS)
@@ -93,19 +106,23 @@ class Renderer:
         self.height = int(scene.film.height if height is None else height)
         if not (0 < self.width <= 65536 and 0 < self.height <= 65536):
             raise ValueError(f"resolution must be 1..65536 pixels a side, got {self.width}x{self.height}")
+        self.crop = None if crop is None else Crop.of(crop, self.width, self.height)
+        film_w, film_h = (self.width, self.height) if self.crop is None else self.crop[2:]
         self.depth_limit = UNLIMITED_DEPTH if self.max_depth == -1 else self.max_depth
         # all the buffers below together, before any is made (alloc() checks each on its own)
-        check_render_memory(self.device, scene, self.width, self.height, precision=precision,
+        check_render_memory(self.device, scene, film_w, film_h, precision=precision,
                             integrator=integrator, wave_size=wave_size, max_depth=self.depth_limit,
-                            aovs=bool(self.aov_names))
+                            aovs=bool(self.aov_names), scene_buffers=scene_buffers is None)
         self.stats = RenderStats()
         t0 = time.perf_counter()
-        self.scene_buffers = SceneBuffers(scene, self.device)
+        if scene_buffers is not None and scene_buffers.device is not self.device:
+            raise ValueError("scene_buffers must hold this scene on this renderer's device")
+        self.scene_buffers = scene_buffers or SceneBuffers(scene, self.device)
         self.device.queue.finish()
         t1 = time.perf_counter()
         # small images: a batch of frames (samples) per wave or launch (rendering/memory.py: batch_frames)
         self.film = Film(self.device, self.width, self.height, precision=precision,
-                         batch=batch_frames(self.width * self.height, wave_size), aovs=bool(self.aov_names))
+                         batch=batch_frames(film_w * film_h, wave_size), aovs=bool(self.aov_names), crop=self.crop)
         options: dict = {"wave_size": wave_size} if wave_size else {}
         if local_size:
             options["local_size"] = int(local_size)
@@ -128,8 +145,15 @@ class Renderer:
         self.stats.compile_seconds = time.perf_counter() - t1
         self.pacer = FramePacer()  # the frame loop waits for the device often enough for Ctrl-C to stop it
 
+    def cropped(self, crop: Sequence[int] | None) -> Renderer:
+        """A renderer of the window ``crop`` (x, y, width, height) of this one's image (None: all of it)
+        with this one's settings, sharing its scene buffers (and, through the device's cache, its
+        compiled programs): a tile of the image."""
+        return Renderer(self.scene, device=self.device, crop=crop, scene_buffers=self.scene_buffers, **self._options)
+
     def render(self, spp: int, seed: int = 0, progress: bool | None = None, first_sample: int = 0) -> np.ndarray:
-        """Average of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float32.
+        """Average of samples [first_sample, first_sample + spp) of every pixel, (H, W, 3) float32 (with
+        a crop: of the window's pixels, (crop height, crop width, 3)).
         ``progress``: True shows a bar once the render has run a couple of seconds; None or False
         show none. Ctrl-C raises KeyboardInterrupt within about a second, and no image is returned."""
         start = self._render_samples(spp, seed, progress, first_sample)
