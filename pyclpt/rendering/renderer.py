@@ -86,7 +86,8 @@ class Renderer:
         if scene_buffers is None:
             check_scene(scene)
         elif scene_buffers.scene is not scene:  # checked when they were made; they render as they were then
-            raise ValueError("scene_buffers must hold this scene on this renderer's device")
+            raise ValueError(f"scene_buffers must hold this scene, {scene.name!r}: they hold "
+                             f"{scene_buffers.scene.name!r}")
         self.aov_names = check_aovs(aovs)
         check_choice(integrator, "integrator", INTEGRATORS)
         check_choice(layout, "layout", LAYOUTS)
@@ -116,7 +117,8 @@ class Renderer:
         self.stats = RenderStats()
         t0 = time.perf_counter()
         if scene_buffers is not None and scene_buffers.device is not self.device:
-            raise ValueError("scene_buffers must hold this scene on this renderer's device")
+            raise ValueError(f"scene_buffers must be on this renderer's device, {self.device.name}: they are on "
+                             f"{scene_buffers.device.name}")
         self.scene_buffers = scene_buffers or SceneBuffers(scene, self.device)
         self.device.queue.finish()
         t1 = time.perf_counter()
