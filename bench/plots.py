@@ -224,7 +224,18 @@ def _line_axes(ax, xlabel: str, ylabel: str, title: str, logx: bool = False, log
     ax.legend(fontsize=8)
 
 
-ALL = (table1, fig6, fig7, kernels, occupancy, rays, triangles)
+def isa_occupancy(res: dict, folder: Path) -> str | None:
+    """The GPU ISA check's occupancy bars (--isa)."""
+    isa = res.get("isa")
+    if not isa or "error" in isa:
+        return None
+    from pyclpt.gpu.check import IsaReport
+    from pyclpt.gpu.report import plot
+
+    return plot(IsaReport.from_json(isa), folder / "isa_occupancy.png").name
+
+
+ALL = (table1, fig6, fig7, kernels, occupancy, rays, triangles, isa_occupancy)
 
 
 def make_all(res: dict, folder: Path) -> dict[str, str]:

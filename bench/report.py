@@ -128,6 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from-json", default=None, metavar="RESULTS",
                    help="regenerate the report from a saved results.json without running anything")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--isa", action="store_true",
+                   help="also compile every kernel of the scenes for NVIDIA sm_90 and AMD gfx1030/gfx90a after the "
+                        "timings: registers, stack, spills, occupancy (pyclpt gpu-isa; docs/gpu.md)")
     p.add_argument("--versus", choices=("mitsuba",), default=None,
                    help="instead: pyclpt against Mitsuba 3 on the same scene files, its own options "
                         "(`pyclpt bench --versus mitsuba --help`)")
@@ -153,6 +156,7 @@ def settings_from(a: argparse.Namespace) -> dict:
     s["device"] = a.device
     s["embree"] = not a.no_embree
     s["embree_threads"] = a.embree_threads
+    s["isa"] = bool(getattr(a, "isa", False))
     s["resolution_label"] = "each scene's film" if s["resolution"] == "scene" else s["resolution"]
     if s["warmup"] < 0:
         raise ValueError(f"--warmup must be >= 0, got {s['warmup']}")
@@ -177,6 +181,7 @@ def run(settings: dict, out_dir: Path, progress: bool = True) -> dict:
            "runs": [], "embree": {}}
     bar = tqdm(total=per_scene * len(entries), desc="pyclpt bench", unit="step", disable=not progress,
                dynamic_ncols=True)
+    isa_programs: dict = {}  # the GPU ISA check's programs, gathered scene by scene (--isa)
     with bar:
         for entry in entries:
             bar.set_postfix_str(f"{entry.label}: loading")
@@ -216,14 +221,39 @@ def run(settings: dict, out_dir: Path, progress: bool = True) -> dict:
                         res["embree"][entry.label] = {"error": scenes.reason(exc)}
                     bar.update(1)
                     done += 1
+                if settings.get("isa") and not entry.skipped:
+                    bar.set_postfix_str(f"{entry.label}: GPU programs")
+                    _gather_isa(isa_programs, scene, settings["device"])
                 entry.scene = None  # free the meshes
             bar.update(per_scene - done)
             res["scenes"].append(entry.record())
             res["meta"]["elapsed_s"] = time.perf_counter() - t_start
             write_json(res, out_dir)
     res["meta"]["load_average_end"] = machine.load_average()
+    if settings.get("isa"):
+        res["isa"] = _isa(isa_programs)
     res["meta"]["elapsed_s"] = time.perf_counter() - t_start
     return res
+
+
+def _gather_isa(programs: dict, scene, device: str | None) -> None:
+    """Add the scene's programs, as a GPU builds them, to ``programs`` (keyed as collect_programs keys)."""
+    from pyclpt.gpu.collect import collect_programs
+
+    for p, names in collect_programs([scene], device=device):
+        entry = programs.setdefault(p.key, (p, []))
+        entry[1].extend(n for n in names if n not in entry[1])
+
+
+def _isa(programs: dict) -> dict:
+    """The GPU ISA check of the gathered programs (IsaReport.to_json), or {"error": why} without the tools."""
+    from pyclpt.gpu.check import check_programs
+    from pyclpt.gpu.isa import ToolchainMissing
+
+    try:
+        return check_programs(list(programs.values())).to_json()
+    except ToolchainMissing as exc:
+        return {"error": str(exc)}
 
 
 COUNTING_RUN = "wavefront-soa counting run of the same seeds (every bounce through the queues)"
@@ -567,6 +597,9 @@ def build_document(res: dict, figures: dict[str, str]) -> Document:
     if "triangles" in figures:
         doc.add(Image(figures["triangles"], "cost against triangles"))
 
+    if res.get("isa"):
+        _isa_section(doc, res["isa"], figures)
+
     # embree
     doc.add(Heading(1, "Embree ceiling"))
     doc.add(Para("Embree (embreex, one `rtcIntersect1`/`rtcOccluded1` call per ray, the rays split over host "
@@ -619,6 +652,27 @@ def build_document(res: dict, figures: dict[str, str]) -> Document:
                  "regenerated from it with `pyclpt bench --from-json results.json`); `results.csv` has one row "
                  "per configuration."))
     return doc
+
+
+def _isa_section(doc: Document, isa: dict, figures: dict[str, str]) -> None:
+    """The GPU ISA check (--isa): per kernel and target, registers, stack, spills and occupancy."""
+    doc.add(Heading(1, "GPU instruction sets"))
+    if "error" in isa:
+        doc.add(Para(f"Not checked: {isa['error']}."))
+        return
+    from pyclpt.gpu.check import IsaReport
+    from pyclpt.gpu.report import budgets, header, rows
+
+    report = IsaReport.from_json(isa)
+    doc.add(Para(f"Every program the renderer builds for these scenes, with the GPU BVH layout, compiled for "
+                 f"NVIDIA sm_90 and AMD gfx1030 and gfx90a without a GPU ({report.toolchain}; docs/gpu.md): per "
+                 "kernel, the variant with the most registers; occupancy is the resident warps (waves) over the "
+                 f"hardware's. {report.programs} distinct programs, {len(report.failures)} failures."))
+    doc.add(Table(header(), rows(report)))
+    doc.add(Bullets(budgets(report) + [f"FAILED: {f.program} for {f.target}: {f.message.splitlines()[0]}"
+                                       for f in report.failures]))
+    if "isa_occupancy" in figures:
+        doc.add(Image(figures["isa_occupancy"], "theoretical occupancy per kernel and GPU target"))
 
 
 def _argv(st: dict) -> list[str]:

@@ -164,6 +164,17 @@ def build_parser() -> argparse.ArgumentParser:
                                                        "couple of seconds otherwise)")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     sub.add_parser("scenes", help="list built-in scenes")
+    g = sub.add_parser("gpu-isa", help="compile every kernel for NVIDIA sm_90 and AMD gfx1030/gfx90a without a GPU: "
+                                       "registers, stack, spills, occupancy (docs/gpu.md)")
+    g.add_argument("scenes", nargs="*", help="scenes whose programs to check (default: the built-ins at hand and "
+                                             "the shared scenes)")
+    g.add_argument("-o", "--output", default="gpu-isa", help="folder for isa.json, isa.md and isa.png "
+                                                             "(default gpu-isa)")
+    g.add_argument("--targets", nargs="+", choices=("sm_90", "gfx1030", "gfx90a"), default=None)
+    g.add_argument("--quick", action="store_true", help="after the first scene, only the variants that hold "
+                                                        "the most code (with the G-buffer, SoA, one precision)")
+    g.add_argument("--device", default=None, help="the CPU OpenCL device that assembles the programs "
+                                                  "(nothing is compiled for it)")
     # Everything after `bench` goes to the report generator's own parser (`pyclpt bench --help`).
     sub.add_parser("bench", add_help=False, help="timing report: megakernel vs wavefront AoS/SoA "
                                                  "(`pyclpt bench --help`)")
@@ -352,6 +363,16 @@ def _cmd_bench(argv: list[str]) -> int:
     return bench_main(argv)
 
 
+def _cmd_gpu_isa(a: argparse.Namespace) -> int:
+    from pyclpt.gpu.report import default_scenes, markdown, run
+
+    report = run(a.scenes or default_scenes(), a.output, targets=a.targets, every_variant=not a.quick,
+                 device=a.device)
+    print(markdown(report), end="")
+    print(f"{a.output}: isa.json, isa.md, isa.png")
+    return 1 if report.failures else 0
+
+
 def _user_errors() -> tuple[type[BaseException], ...]:
     """What bad input (arguments, scene files, output paths, devices, memory) raises: reported in one
     line with exit status 1. Anything else is a bug in pyclpt and keeps its traceback."""
@@ -386,6 +407,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_render(a)
         if a.command == "devices":
             return _cmd_devices()
+        if a.command == "gpu-isa":
+            return _cmd_gpu_isa(a)
         return _cmd_scenes()
     except KeyboardInterrupt:
         done = f"{a.written} was written" if a.written else "nothing written"

@@ -66,7 +66,8 @@ def _wait_released(client) -> None:
     deadline = time.monotonic() + RELEASE_BOUND
     while (held := client.run_on_scheduler(_render_tasks)) or any(
             str(k).startswith("pyclpt-") for keys in client.processing().values() for k in keys):
-        assert time.monotonic() < deadline, f"{len(held)} tasks still to run {RELEASE_BOUND} s after the job ended: {held[:4]}"
+        assert time.monotonic() < deadline, \
+            f"{len(held)} tasks still to run {RELEASE_BOUND} s after the job ended: {held[:4]}"
         time.sleep(0.05)
 
 

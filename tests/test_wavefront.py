@@ -317,8 +317,8 @@ def test_specialisation_changes_no_pixel(cornell_box, monkeypatch, integrator):
     kw = dict(spp=4, max_depth=6, width=24, height=24, seed=2, integrator=integrator)
     specialised, _ = render(cornell_box, **dict(kw))
 
-    def general(scene):
-        arrays = pack_scene(scene)
+    def general(scene, device_class="cpu"):
+        arrays = pack_scene(scene, device_class)
         arrays.defines = {k: v for k, v in arrays.defines.items() if k not in ("SCENE_MATERIALS", "SCENE_LIGHTS")}
         arrays.defines["SCENE_HAS_TEXTURES"] = True
         return arrays

@@ -209,13 +209,48 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     return true;
 }
 
+/* -DPATH_TRACE (never in a normal render; pyclpt/gpu/simt.py builds the megakernel with it): path_continue
+ * records what each path did at each bounce in the Scene's trace record (scene.h): word 0 the
+ * PATH_TRACE_* flags below, with the material kind hit (MAT_* of bsdf.h) in bits 8-15; words 1, 2 the
+ * closest-hit ray's BVH nodes visited and triangles tested; words 3, 4 the shadow ray's (BVH_COUNT,
+ * scene/mask.h). Bounces at or past trace_rows are not recorded. The arithmetic is untouched: the
+ * image is the plain render's bit for bit (tests/test_simt.py). */
+#ifdef PATH_TRACE
+#define PATH_TRACE_ALIVE 1     /* a ray was traced at this bounce */
+#define PATH_TRACE_HIT 2       /* it hit a surface */
+#define PATH_TRACE_SHADOW 4    /* a shadow ray was cast (a valid light sample) */
+#define PATH_TRACE_LIT 8       /* ... and it was unoccluded */
+#define PATH_TRACE_CONTINUED 16 /* the BSDF sample made a next ray (the path goes on) */
+#define PATH_TRACE_NEXT 32     /* the depth limit allowed light and BSDF sampling at this hit */
+#define PATH_TRACE_WORDS 5
+static inline void path_trace_put(const Scene* sc, int bounce, int word, int v) {
+    if (sc->trace != 0 && bounce < sc->trace_rows) sc->trace[(word * sc->trace_rows + bounce) * sc->trace_stride] = v;
+}
+static inline void path_trace_steps(const Scene* sc, int bounce, int word) {
+    if (sc->bvh_steps == 0) return;
+    path_trace_put(sc, bounce, word, sc->bvh_steps[0]);
+    path_trace_put(sc, bounce, word + 1, sc->bvh_steps[1]);
+    sc->bvh_steps[0] = 0;
+    sc->bvh_steps[1] = 0;
+}
+#endif
+
 /* The rest of a path from its current ray, bounce after bounce, until it leaves the scene, reaches the
  * depth limit or ends by roulette: the megakernel's loop, which the wavefront's finish_paths stage also
  * runs for the last paths of a wave. With -DAOVS it records the G-buffer in aov (gbuffer.h). */
 static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int max_depth, AovOut aov) {
     for (;;) {
         Hit hit;
+#ifdef PATH_TRACE
+        int bounce = ps->depth;
+        bool found = scene_closest(sc, key, ps->depth, ps->org, ps->dir, &hit);
+        int tr = PATH_TRACE_ALIVE | (found ? PATH_TRACE_HIT : 0);
+        path_trace_steps(sc, bounce, 1);
+        path_trace_put(sc, bounce, 0, tr);
+        if (!found) {
+#else
         if (!scene_closest(sc, key, ps->depth, ps->org, ps->dir, &hit)) {
+#endif
 #ifdef AOVS
             gbuffer_miss(sc, aov, ps->depth, ps->dir);
 #endif
@@ -226,13 +261,28 @@ static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int
 #ifdef AOVS
         gbuffer_hit(sc, aov, hit.prim, &s, hit.t, ps->depth, ps->dir, ps->beta, &ps->flags);
 #endif
+#ifdef PATH_TRACE
+        tr |= (mat_type(scene_material(sc, s.material)) & 255) << 8;
+        path_trace_put(sc, bounce, 0, tr);
+#endif
         path_hit_emission(sc, &s, hit.t, ps);
         if (!depth_allows(ps->depth + 1, max_depth)) return;
         Bsdf b = bsdf_at(sc, &s); /* the material at the hit, textures looked up once */
         ShadowRay sr;
+#ifdef PATH_TRACE
+        bool shadow = path_sample_light(sc, key, &s, &b, ps, &sr);
+        bool lit = shadow && !scene_occluded(sc, key, ps->depth, sr.org, sr.dir, sr.tmax);
+        if (lit) ps->L = v3_add(ps->L, sr.contrib);
+        path_trace_steps(sc, bounce, 3);
+        tr |= PATH_TRACE_NEXT | (shadow ? PATH_TRACE_SHADOW : 0) | (lit ? PATH_TRACE_LIT : 0);
+        bool more = path_sample_bsdf(key, &s, &b, ps, max_depth);
+        path_trace_put(sc, bounce, 0, tr | (more ? PATH_TRACE_CONTINUED : 0));
+        if (!more) return;
+#else
         if (path_sample_light(sc, key, &s, &b, ps, &sr) && !scene_occluded(sc, key, ps->depth, sr.org, sr.dir, sr.tmax))
             ps->L = v3_add(ps->L, sr.contrib);
         if (!path_sample_bsdf(key, &s, &b, ps, max_depth)) return;
+#endif
     }
 }
 

@@ -45,6 +45,12 @@
 #include "core/common.h"
 #include "scene/mask.h"
 
+/* The traversal loops count their work through BVH_COUNT(alpha, nodes visited, triangles tested):
+ * empty unless -DPATH_TRACE defines it (scene/mask.h; pyclpt/gpu/simt.py). */
+#ifndef BVH_COUNT
+#define BVH_COUNT(alpha, nodes, prims)
+#endif
+
 typedef struct {
     float t;
     float u;
@@ -56,16 +62,30 @@ typedef struct {
 #define BVH_WIDTH 8
 #endif
 
+#if BVH_WIDTH != 2 && BVH_WIDTH != 4 && BVH_WIDTH != 8
+#error "BVH_WIDTH must be 2, 4 or 8"
+#endif
+
 /* Stack entries: a node pushes at most BVH_WIDTH - 1, and the builder limits
- * the depth to fit (pyclpt.accel.bvh.STACK_SIZE mirrors these). */
+ * the depth to fit (pyclpt.accel.bvh.STACK_SIZE mirrors these; -DBVH_STACK_SIZE
+ * overrides, for a shorter stack with a tree built to fit it). */
+#ifndef BVH_STACK_SIZE
 #if BVH_WIDTH == 2
 #define BVH_STACK_SIZE 64
 #elif BVH_WIDTH == 4
 #define BVH_STACK_SIZE 128
-#elif BVH_WIDTH == 8
-#define BVH_STACK_SIZE 192
 #else
-#error "BVH_WIDTH must be 2, 4 or 8"
+#define BVH_STACK_SIZE 192
+#endif
+#endif
+
+/* BVH_STACK_DISTANCES (-D, default 1): the stack holds each subtree's entry distance beside
+ * its node, and closest-hit pops skip subtrees not nearer than the current hit (CPU layout).
+ * 0 (the GPU layout: pyclpt.accel.bvh.STACK_DISTANCES, docs/bvh.md "Layouts per device class"): node indices only
+ * (4 bytes an entry, half the per-thread memory, which GPUs keep in slow local memory), and a
+ * popped subtree is culled by testing its children's boxes against the current nearest hit. */
+#ifndef BVH_STACK_DISTANCES
+#define BVH_STACK_DISTANCES 1
 #endif
 #define BVH_TFAR_SCALE 1.00000048f /* 1 + 2^-21 */
 
@@ -213,7 +233,9 @@ static inline bool bvh_closest_from(__global const float* nodes, __global const 
                                     vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
+#if BVH_STACK_DISTANCES
     float stack_t[BVH_STACK_SIZE];
+#endif
     int sp = 0;
     float best = tmax;
     float bu = 0.0f, bv = 0.0f;
@@ -221,6 +243,7 @@ static inline bool bvh_closest_from(__global const float* nodes, __global const 
     int cur = root;
     for (;;) {
         if (cur >= 0) {
+            BVH_COUNT(alpha, 1, 0);
             float tl, tr;
             int ll, lr;
             bvh_node(nodes, cur, &r, best, &tl, &tr, &ll, &lr);
@@ -230,17 +253,22 @@ static inline bool bvh_closest_from(__global const float* nodes, __global const 
                 bool swap = tr < tl;
                 cur = swap ? lr : ll;
                 stack_node[sp] = swap ? ll : lr;
+#if BVH_STACK_DISTANCES
                 stack_t[sp] = swap ? tl : tr;
+#endif
                 ++sp;
                 continue;
             }
             if (hl) { cur = ll; continue; }
             if (hr) { cur = lr; continue; }
         } else {
+            BVH_COUNT(alpha, 0, cur & 31);
             bvh_leaf_closest(tris, cur, &r, &best, &bu, &bv, &prim, alpha);
         }
+#if BVH_STACK_DISTANCES
         /* Pop the next subtree that may still hold something nearer. */
         while (sp > 0 && !(stack_t[sp - 1] < best)) --sp;
+#endif
         if (sp == 0) break;
         cur = stack_node[--sp];
     }
@@ -257,6 +285,7 @@ static inline bool bvh_any_from(__global const float* nodes, __global const floa
     int cur = root;
     for (;;) {
         if (cur >= 0) {
+            BVH_COUNT(alpha, 1, 0);
             float tl, tr;
             int ll, lr;
             bvh_node(nodes, cur, &r, tmax, &tl, &tr, &ll, &lr);
@@ -270,6 +299,7 @@ static inline bool bvh_any_from(__global const float* nodes, __global const floa
             if (hl) { cur = ll; continue; }
             if (hr) { cur = lr; continue; }
         } else {
+            BVH_COUNT(alpha, 0, cur & 31);
             if (bvh_leaf_any(tris, cur, &r, tmax, alpha)) return true;
         }
         if (sp == 0) return false;
@@ -342,6 +372,43 @@ static inline int bvh_wide_push(BvhVf t, BvhVi l, int* stack_node, float* stack_
     }
     return sp - base;
 }
+
+#if !BVH_STACK_DISTANCES
+/* The node-only stack: the hit children of a node (entry distances t, links l) are sorted far
+ * to near in registers (a sorting network on the W lanes, missed children last) and pushed
+ * without their distances, the nearest on top; returns how many were pushed. */
+#define BVH_CSWAP(i, j)                                       \
+    if (t##i < t##j) {                                        \
+        float tt = t##i; t##i = t##j; t##j = tt;              \
+        int ll = l##i; l##i = l##j; l##j = ll;                \
+    }
+#define BVH_PUSH_NODE(i)                                      \
+    if (t##i != INFINITY) stack_node[sp++] = l##i;
+static inline int bvh_wide_push_nodes(BvhVf t, BvhVi l, int* stack_node, int sp) {
+    int base = sp;
+    /* missed children (INFINITY) sort first, far to near, and are skipped */
+    float t0 = t.s0, t1 = t.s1, t2 = t.s2, t3 = t.s3;
+    int l0 = l.s0, l1 = l.s1, l2 = l.s2, l3 = l.s3;
+#if BVH_WIDTH == 4
+    BVH_CSWAP(0, 1) BVH_CSWAP(2, 3) BVH_CSWAP(0, 2) BVH_CSWAP(1, 3) BVH_CSWAP(1, 2)
+    BVH_PUSH_NODE(0) BVH_PUSH_NODE(1) BVH_PUSH_NODE(2) BVH_PUSH_NODE(3)
+#else
+    float t4 = t.s4, t5 = t.s5, t6 = t.s6, t7 = t.s7;
+    int l4 = l.s4, l5 = l.s5, l6 = l.s6, l7 = l.s7;
+    BVH_CSWAP(0, 2) BVH_CSWAP(1, 3) BVH_CSWAP(4, 6) BVH_CSWAP(5, 7)
+    BVH_CSWAP(0, 4) BVH_CSWAP(1, 5) BVH_CSWAP(2, 6) BVH_CSWAP(3, 7)
+    BVH_CSWAP(0, 1) BVH_CSWAP(2, 3) BVH_CSWAP(4, 5) BVH_CSWAP(6, 7)
+    BVH_CSWAP(2, 4) BVH_CSWAP(3, 5)
+    BVH_CSWAP(1, 4) BVH_CSWAP(3, 6)
+    BVH_CSWAP(1, 2) BVH_CSWAP(3, 4) BVH_CSWAP(5, 6)
+    BVH_PUSH_NODE(0) BVH_PUSH_NODE(1) BVH_PUSH_NODE(2) BVH_PUSH_NODE(3)
+    BVH_PUSH_NODE(4) BVH_PUSH_NODE(5) BVH_PUSH_NODE(6) BVH_PUSH_NODE(7)
+#endif
+    return sp - base;
+}
+#undef BVH_CSWAP
+#undef BVH_PUSH_NODE
+#endif
 
 #ifndef BVH_LEAF_PACKETS
 #define BVH_LEAF_PACKETS 0
@@ -443,7 +510,9 @@ static inline bool bvh_closest_from(__global const float* nodes, __global const 
                                     vec3 dir, float tmax, Hit* hit, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
+#if BVH_STACK_DISTANCES
     float stack_t[BVH_STACK_SIZE];
+#endif
     int sp = 0;
     float best = tmax;
     float bu = 0.0f, bv = 0.0f;
@@ -451,9 +520,14 @@ static inline bool bvh_closest_from(__global const float* nodes, __global const 
     int cur = root;
     for (;;) {
         if (cur >= 0) {
+            BVH_COUNT(alpha, 1, 0);
             BvhVi l;
             BvhVf t = bvh_wide_node(nodes, cur, &r, best, &l);
+#if BVH_STACK_DISTANCES
             int n = bvh_wide_push(t, l, stack_node, stack_t, sp);
+#else
+            int n = bvh_wide_push_nodes(t, l, stack_node, sp);
+#endif
             sp += n;
             /* As in the binary traversal: the nearest hit child next, unconditionally. */
             if (n > 0) {
@@ -461,14 +535,17 @@ static inline bool bvh_closest_from(__global const float* nodes, __global const 
                 continue;
             }
         } else {
+            BVH_COUNT(alpha, 0, cur & 31);
 #if BVH_LEAF_PACKETS
             bvh_packet_leaf_closest(nodes, cur, &r, &best, &bu, &bv, &prim, alpha);
 #else
             bvh_leaf_closest(tris, cur, &r, &best, &bu, &bv, &prim, alpha);
 #endif
         }
+#if BVH_STACK_DISTANCES
         /* Pop the next subtree that may still hold something nearer. */
         while (sp > 0 && !(stack_t[sp - 1] < best)) --sp;
+#endif
         if (sp == 0) break;
         cur = stack_node[--sp];
     }
@@ -481,15 +558,23 @@ static inline bool bvh_any_from(__global const float* nodes, __global const floa
                                 vec3 dir, float tmax, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
+#if BVH_STACK_DISTANCES
     float stack_t[BVH_STACK_SIZE];
+#endif
     int sp = 0;
     int cur = root;
     for (;;) {
         if (cur >= 0) {
+            BVH_COUNT(alpha, 1, 0);
             BvhVi l;
             BvhVf t = bvh_wide_node(nodes, cur, &r, tmax, &l);
+#if BVH_STACK_DISTANCES
             sp += bvh_wide_push(t, l, stack_node, stack_t, sp);
+#else
+            sp += bvh_wide_push_nodes(t, l, stack_node, sp);
+#endif
         } else {
+            BVH_COUNT(alpha, 0, cur & 31);
 #if BVH_LEAF_PACKETS
             if (bvh_packet_leaf_any(nodes, cur, &r, tmax, alpha)) return true;
 #else

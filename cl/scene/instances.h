@@ -64,7 +64,13 @@ static inline const AlphaTest* inst_alpha(const AlphaTest* alpha, int r, int bit
     return out;
 }
 
-/* Push the top-level children of node `cur` the ray enters before tmax, nearest on top; returns how many. */
+/* Push the top-level children of node `cur` the ray enters before tmax, nearest on top; returns how many.
+ * With -DBVH_STACK_DISTANCES=0 (bvh.h) the stack holds nodes only (stack_t unused). */
+#if BVH_STACK_DISTANCES
+#define INST_SET_T(i, v) stack_t[i] = (v)
+#else
+#define INST_SET_T(i, v)
+#endif
 static inline int inst_push(__global const float* nodes, int cur, const BvhRay* r, float tmax, int* stack_node,
                             float* stack_t, int sp) {
 #if BVH_WIDTH == 2
@@ -75,27 +81,39 @@ static inline int inst_push(__global const float* nodes, int cur, const BvhRay* 
     if (hl && hr) {
         bool swap = tr < tl;
         stack_node[sp] = swap ? ll : lr;
-        stack_t[sp] = swap ? tl : tr;
+        INST_SET_T(sp, swap ? tl : tr);
         stack_node[sp + 1] = swap ? lr : ll;
-        stack_t[sp + 1] = swap ? tr : tl;
+        INST_SET_T(sp + 1, swap ? tr : tl);
         return 2;
     }
     stack_node[sp] = hl ? ll : lr;
-    stack_t[sp] = hl ? tl : tr;
+    INST_SET_T(sp, hl ? tl : tr);
     return (hl || hr) ? 1 : 0;
 #else
     BvhVi l;
     BvhVf t = bvh_wide_node(nodes, cur, r, tmax, &l);
+#if BVH_STACK_DISTANCES
     return bvh_wide_push(t, l, stack_node, stack_t, sp);
+#else
+    return bvh_wide_push_nodes(t, l, stack_node, sp);
+#endif
 #endif
 }
+#undef INST_SET_T
+
+/* The top level's stack of distances: one entry with the node-only stack (never read). */
+#if BVH_STACK_DISTANCES
+#define INST_STACK_T BVH_STACK_SIZE
+#else
+#define INST_STACK_T 1
+#endif
 
 /* Closest hit with 0 < t < tmax over every instance; hit->prim is the packed id (-1 on a miss). */
 static inline bool inst_closest(__global const float* nodes, __global const float* tris, vec3 org, vec3 dir,
                                 float tmax, Hit* hit, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
-    float stack_t[BVH_STACK_SIZE];
+    float stack_t[INST_STACK_T];
     int sp = 0;
     float best = tmax, bu = 0.0f, bv = 0.0f;
     int id = -1;
@@ -124,7 +142,9 @@ static inline bool inst_closest(__global const float* nodes, __global const floa
                 }
             }
         }
+#if BVH_STACK_DISTANCES
         while (sp > 0 && !(stack_t[sp - 1] < best)) --sp;
+#endif
         if (sp == 0) break;
         cur = stack_node[--sp];
     }
@@ -136,7 +156,7 @@ static inline bool inst_any(__global const float* nodes, __global const float* t
                             float tmax, const AlphaTest* alpha) {
     BvhRay r = bvh_make_ray(org, dir);
     int stack_node[BVH_STACK_SIZE];
-    float stack_t[BVH_STACK_SIZE];
+    float stack_t[INST_STACK_T];
     int sp = 0;
     int bits = inst_tri_bits(nodes);
     int cur = as_int(nodes[INST_HEADER_ROOT]);

@@ -34,7 +34,24 @@ typedef struct {
 #ifdef SCENE_HAS_INSTANCES
     uint inst_id; /* the instance's bits of a hit's packed id (instances.h): instances draw apart */
 #endif
+#ifdef PATH_TRACE
+    int* steps; /* the traversal's counters (BVH_COUNT below): nodes visited, triangles tested; or 0 */
+#endif
 } AlphaTest;
+
+/* -DPATH_TRACE (the megakernel's instrumented render, integrators/path.h; pyclpt/gpu/simt.py): the
+ * traversal loops of bvh.h count their work through BVH_COUNT, which every query reaches through
+ * its opacity test record (scene_alpha in scene.h points it at the path's counters). Without the
+ * define BVH_COUNT is empty (bvh.h) and nothing here exists. */
+#ifdef PATH_TRACE
+#define BVH_COUNT(alpha, nodes, prims)                                  \
+    do {                                                                \
+        if ((alpha) != 0 && (alpha)->steps != 0) {                      \
+            (alpha)->steps[0] += (nodes);                               \
+            (alpha)->steps[1] += (prims);                               \
+        }                                                               \
+    } while (0)
+#endif
 
 /* Texture coordinates of barycentrics (u, v) on leaf-order triangle prim
  * (the barycentrics themselves where the mesh has none). */

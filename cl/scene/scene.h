@@ -90,6 +90,11 @@ typedef struct {
     __global const float* consts;
     Textures tex;
     int unit; /* 1, read from consts[CONST_UNIT] (rgb_at, core/common.h) */
+#ifdef PATH_TRACE /* the megakernel's instrumented render (integrators/path.h); 0 in SCENE_INIT */
+    int* bvh_steps;       /* the path's traversal counters (BVH_COUNT, scene/mask.h) */
+    __global int* trace;  /* its trace record: word w of bounce b at trace[(w * trace_rows + b) * trace_stride] */
+    int trace_stride, trace_rows;
+#endif
 } Scene;
 
 #define SCENE_PARAMS                                                                       \
@@ -286,6 +291,9 @@ static inline Surface surface_hit(const Scene* sc, int prim, float u, float v, v
 /* The opacity test of a path's query: dim is DIM_MASK_CLOSEST or DIM_MASK_SHADOW. */
 static inline AlphaTest scene_alpha(const Scene* sc, RngKey key, int bounce, uint dim) {
     AlphaTest a = {sc->tri_info, sc->tri_vidx, sc->vuvs, sc->materials, sc->tex, key, (uint)bounce, dim};
+#ifdef PATH_TRACE
+    a.steps = sc->bvh_steps;
+#endif
     return a;
 }
 

@@ -115,8 +115,8 @@ from pyclpt.common.cache import cache_path, content_key, save_npz
 
 log = logging.getLogger("pyclpt.accel.bvh")
 
-__all__ = ["FlatBVH", "BuildSettings", "DEFAULT_SETTINGS", "build_bvh", "build_box_bvh", "leaf_packet_buffer",
-           "LAYOUT_VERSION"]
+__all__ = ["FlatBVH", "BuildSettings", "DEFAULT_SETTINGS", "GPU_SETTINGS", "DEVICE_CLASSES", "STACK_DISTANCES",
+           "layout_settings", "build_bvh", "build_box_bvh", "leaf_packet_buffer", "LAYOUT_VERSION"]
 
 #: Bumped whenever the flattened layout or the build changes meaning.
 LAYOUT_VERSION = "bvh-layout-1"
@@ -171,6 +171,28 @@ class BuildSettings:
 
 
 DEFAULT_SETTINGS = BuildSettings()
+
+# The BVH layout per device class (pyclpt.device.context.Device.device_class; docs/bvh.md, "Layouts per
+# device class"). CPUs: DEFAULT_SETTINGS (8 wide), leaf packets, a stack of (node, entry distance) pairs.
+# GPUs: a binary BVH whose traversal stack holds node indices only (64 ints, 256 bytes a work-item;
+# cl/scene/bvh.h -DBVH_STACK_DISTANCES=0), no leaf packets: 46 registers and 256 bytes of stack for the
+# intersect stage on sm_90 where the CPU layout takes 125 and 1536 (measured: docs/bvh.md). The settings
+# are part of the cache key (repr), so a CPU and a GPU BVH of one mesh are different cache entries.
+DEVICE_CLASSES = ("cpu", "gpu")
+#: The GPU layout's build settings (binary; leaves of 1..16, as any binary build).
+GPU_SETTINGS = BuildSettings(width=2)
+#: Whether the traversal stack holds entry distances (cl/scene/bvh.h BVH_STACK_DISTANCES), per device class.
+STACK_DISTANCES = {"cpu": True, "gpu": False}
+
+
+def layout_settings(device_class: str = "cpu") -> BuildSettings:
+    """The build settings of ``device_class``'s BVH layout: :data:`DEFAULT_SETTINGS` for ``"cpu"`` (read at
+    call time, so that benchmarks may swap it), :data:`GPU_SETTINGS` for ``"gpu"``."""
+    if device_class == "cpu":
+        return DEFAULT_SETTINGS
+    if device_class == "gpu":
+        return GPU_SETTINGS
+    raise ValueError(f"device_class must be one of {', '.join(DEVICE_CLASSES)}, got {device_class!r}")
 
 
 @dataclass(frozen=True)

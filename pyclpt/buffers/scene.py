@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.accel.bvh import FlatBVH, build_bvh, leaf_packet_buffer
+from pyclpt.accel.bvh import STACK_DISTANCES, BuildSettings, FlatBVH, build_bvh, layout_settings, leaf_packet_buffer
 from pyclpt.accel.instances import build_instanced, instanced_node_buffer
 from pyclpt.buffers.lights import LightArrays, camera_consts, camera_kind, pack_lights
 from pyclpt.buffers.materials import (  # noqa: F401
@@ -55,11 +55,13 @@ class SceneArrays:
     bounds: np.ndarray  # (2, 3) scene bounding box
     defines: dict  # -D specialisations: SCENE_HAS_MASKS, SCENE_HAS_BUMPMAPS, SCENE_HAS_TEXTURES, SCENE_MATERIALS,
     # SCENE_HAS_ANISOTROPY, SCENE_HAS_BACK_MATERIALS, SCENE_LIGHTS, BVH_WIDTH, BVH_LEAF_PACKETS, SCENE_CAMERA,
-    # SCENE_FILTER, SCENE_HAS_EMITTER_TEXTURES, SCENE_HAS_INSTANCES
+    # SCENE_FILTER, SCENE_HAS_EMITTER_TEXTURES, SCENE_HAS_INSTANCES, BVH_STACK_DISTANCES (0 in the GPU layout),
+    # DEVICE_CLASS_GPU (the GPU class's code shapes: cl/integrators/wavefront/sample_bsdf.cl)
     node_buffer: np.ndarray  # bvh.nodes, or with BVH_LEAF_PACKETS the nodes and leaf packets (leaf_packet_buffer);
     # instanced scenes: then the top level and the instance records (pyclpt.accel.instances)
     geometry_defines: dict | None = None  # the instancing -D (SCENE_HAS_INSTANCES), None without instances
     instance_tri_bits: int | None = None  # instanced scenes: the packed hit id's triangle bits (AOV ids)
+    device_class: str = "cpu"  # the BVH layout's device class (pyclpt.accel.bvh.layout_settings)
 
     @property
     def triangle_count(self) -> int:
@@ -115,11 +117,14 @@ def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[Mat
 
 
 def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, scene: Scene,
-                  geometry: dict | None = None) -> dict:
+                  geometry: dict | None = None, device_class: str = "cpu") -> dict:
+    # BVH_STACK_DISTANCES, DEVICE_CLASS_GPU: passed for the GPU class only, so CPU programs keep their options
     return {**(geometry or {}), "SCENE_HAS_MASKS": bool(mats.masked.any()), "SCENE_HAS_BUMPMAPS": mats.has_bumpmaps,
             "SCENE_HAS_TEXTURES": mats.has_textures, "SCENE_MATERIALS": mats.kinds,
             "SCENE_HAS_ANISOTROPY": mats.has_anisotropy, "SCENE_HAS_BACK_MATERIALS": mats.has_back_materials,
             "SCENE_LIGHTS": lights.kinds, "BVH_WIDTH": bvh.width, "BVH_LEAF_PACKETS": packets,
+            "BVH_STACK_DISTANCES": None if STACK_DISTANCES[device_class] else 0,
+            "DEVICE_CLASS_GPU": device_class == "gpu" or None,
             "SCENE_CAMERA": camera_kind(scene.camera) or None, "SCENE_FILTER": filter_kind(scene.film.rfilter) or None,
             "SCENE_HAS_EMITTER_TEXTURES": lights.has_textures}
 
@@ -151,7 +156,8 @@ def concat_meshes(meshes: list[Mesh]) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return np.concatenate(positions), np.concatenate(indices), np.concatenate(normals), np.concatenate(uvs)
 
 
-def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool, int]:
+def _instanced_bvh(scene: Scene, settings: BuildSettings,
+                   device_class: str) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool, int]:
     """Instanced scenes: one bottom-level BVH per instanced shapegroup (built once, cached) and one for the
     plain meshes (an instance with the identity transform), the top level over the instances
     (pyclpt.accel.instances). Returns the merged bottom levels, the bounds, the node buffer (with its
@@ -167,25 +173,34 @@ def _instanced_bvh(scene: Scene) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool,
     bvhs = []
     for meshes in blocks:
         P, tris, _, _ = concat_meshes(meshes)
-        bvhs.append(build_bvh(P, tris))
+        bvhs.append(build_bvh(P, tris, settings=settings))
     inst = build_instanced(bvhs, np.array(which), np.array(to_world))
     # The merged tri_order indexes the blocks' triangles concatenated, which is scene_meshes' order.
-    packets = LEAF_PACKETS and inst.width == 8
+    packets = _leaf_packets(inst.width, device_class)
     buf, _, _ = instanced_node_buffer(inst, packets)
     bounds = inst.bounds
     return inst.blas, bounds, buf, packets, inst.tri_bits
 
 
-def pack_scene(scene: Scene) -> SceneArrays:
+def _leaf_packets(width: int, device_class: str) -> bool:
+    """Whether the node buffer gets leaf packets: 8-wide CPU layouts only (on GPUs the packet loop's
+    floatW registers alone would exceed the intersect stage's register budget: docs/bvh.md)."""
+    return LEAF_PACKETS and width == 8 and device_class == "cpu"
+
+
+def pack_scene(scene: Scene, device_class: str = "cpu") -> SceneArrays:
+    """The scene's arrays with the BVH layout of ``device_class`` (``"cpu"`` or ``"gpu"``: a device's
+    :attr:`~pyclpt.device.context.Device.device_class`; pyclpt.accel.bvh.layout_settings)."""
+    settings = layout_settings(device_class)  # also checks device_class
     scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
     P, tris, vnormals, vuvs = concat_meshes(scene_meshes(scene))
     geometry, tri_bits = None, None
     if scene.instances:
-        bvh, bounds, node_buffer, packets, tri_bits = _instanced_bvh(scene)
+        bvh, bounds, node_buffer, packets, tri_bits = _instanced_bvh(scene, settings, device_class)
         geometry = {"SCENE_HAS_INSTANCES": True}
     else:
-        bvh = build_bvh(P, tris)
-        packets = LEAF_PACKETS and bvh.width == 8
+        bvh = build_bvh(P, tris, settings=settings)
+        packets = _leaf_packets(bvh.width, device_class)
         bounds = np.stack([P.min(0), P.max(0)])
         node_buffer = leaf_packet_buffer(bvh) if packets else bvh.nodes
     order = bvh.tri_order
@@ -200,10 +215,11 @@ def pack_scene(scene: Scene) -> SceneArrays:
         lights=lights,
         textures=mats.textures,
         bounds=bounds,
-        defines=scene_defines(mats, lights, bvh, packets, scene, geometry),
+        defines=scene_defines(mats, lights, bvh, packets, scene, geometry, device_class),
         node_buffer=node_buffer,
         geometry_defines=geometry,
         instance_tri_bits=tri_bits,
+        device_class=device_class,
     )
 
 
@@ -214,7 +230,8 @@ class SceneBuffers:
         start = time.perf_counter()
         self.scene = scene
         self.device = device
-        self.arrays = arrays = pack_scene(scene)
+        # the BVH layout of the device's class (PYCLPT_DEVICE_CLASS overrides it)
+        self.arrays = arrays = pack_scene(scene, device.device_class)
         self.pack_seconds = time.perf_counter() - start
         self._buffers = [upload(device, a, f"scene {scene.name!r} {n}") for n, a in arrays.device_arrays()]
         self._consts: dict[tuple, cl.Buffer] = {}
@@ -234,7 +251,7 @@ class SceneBuffers:
         old = self.arrays
         mats, lights = pack_appearance(self.scene, old.bvh, old.bounds)
         packets = old.defines["BVH_LEAF_PACKETS"]
-        defines = scene_defines(mats, lights, old.bvh, packets, self.scene, old.geometry_defines)
+        defines = scene_defines(mats, lights, old.bvh, packets, self.scene, old.geometry_defines, old.device_class)
         changed = {k: (old.defines[k], v) for k, v in defines.items() if old.defines[k] != v}
         if changed:
             what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items())
@@ -244,7 +261,7 @@ class SceneBuffers:
                           tri_vidx=old.tri_vidx, vnormals=old.vnormals, vuvs=old.vuvs, materials=mats.materials,
                           lights=lights, textures=mats.textures, bounds=old.bounds, defines=defines,
                           node_buffer=old.node_buffer, geometry_defines=old.geometry_defines,
-                          instance_tri_bits=old.instance_tri_bits)
+                          instance_tri_bits=old.instance_tri_bits, device_class=old.device_class)
         uploaded = []
         for k, ((name, before), (_, after)) in enumerate(zip(old.device_arrays(), new.device_arrays())):
             if before is not after and (before.dtype != after.dtype or before.tobytes() != after.tobytes()):

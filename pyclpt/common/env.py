@@ -2,6 +2,7 @@
 
 ===========================  ==================================================================
 ``PYCLPT_DEVICE``            the default OpenCL device (a selector: ``pocl``, ``intel``, ``gpu``, ``1:0``, a name)
+``PYCLPT_DEVICE_CLASS``      ``cpu`` or ``gpu``: overrides the device class that picks the BVH layout (docs/bvh.md)
 ``PYCLPT_SCENES``            the shared scene folder (real scenes and meshes outside the package)
 ``PYCLPT_CACHE_DIR``         the cache folder for parsed meshes and BVHs (default ``~/.cache/pyclpt``)
 ``PYCLPT_DUMP_KERNELS``      a folder where every OpenCL program built is written, for inspection
@@ -11,6 +12,7 @@
 ``PYCLPT_BVH_PY_BOUNDS``     a flag: the BVH builder's bounds callback is a Python function
 ``PYCLPT_MITSUBA_PYTHON``    the python of a Mitsuba 3 environment (``pyclpt bench --versus mitsuba``)
 ``PYCLPT_REQUIRE_INTEL``     a flag: the tests fail, instead of skipping, where Intel's CPU OpenCL runtime is missing
+``PYCLPT_REQUIRE_GPU_ISA``   a flag: the tests fail, instead of skipping, where the GPU ISA check's tools are missing
 ===========================  ==================================================================
 
 Variables of other programs that pyclpt reads or sets for itself (:data:`FOREIGN`):
@@ -34,6 +36,8 @@ from pathlib import Path
 
 VARIABLES: dict[str, str] = {
     "PYCLPT_DEVICE": "the default OpenCL device (pocl, intel, gpu, cpu, P:D or a platform/device name substring)",
+    "PYCLPT_DEVICE_CLASS": "the device class that picks the BVH layout: cpu or gpu; unset, gpu for a non-CPU "
+                           "device and cpu otherwise",
     "PYCLPT_SCENES": "the shared scene folder (holding meshes/ and the real scenes)",
     "PYCLPT_CACHE_DIR": "the cache folder for parsed meshes and BVHs (default ~/.cache/pyclpt)",
     "PYCLPT_DUMP_KERNELS": "a folder that receives the source of every OpenCL program built",
@@ -44,6 +48,8 @@ VARIABLES: dict[str, str] = {
     "PYCLPT_MITSUBA_PYTHON": "the python of a virtual environment with mitsuba 3 (pyclpt bench --versus mitsuba)",
     "PYCLPT_REQUIRE_INTEL": "1 makes the tests fail, instead of skipping, where Intel's CPU OpenCL runtime is missing "
                             "(CI sets it)",
+    "PYCLPT_REQUIRE_GPU_ISA": "1 makes the tests fail, instead of skipping, where the GPU ISA check's compilers "
+                              "(clang, libclc, ptxas) are missing (CI sets it)",
 }
 
 # Variables that belong to other programs: pyclpt reads them, and sets them for its own process only
@@ -110,6 +116,17 @@ def flag(name: str) -> bool:
         return False
     raise EnvironmentVariableError(f"{describe(name)}: expected one of {', '.join(TRUE_WORDS + FALSE_WORDS)} "
                                    f"({VARIABLES[name]})")
+
+
+def choice(name: str, choices: tuple[str, ...]) -> str | None:
+    """A variable that names one of ``choices`` (any case, returned lower case); None when unset."""
+    value = get(name)
+    if value is None:
+        return None
+    if value.lower() in choices:
+        return value.lower()
+    raise EnvironmentVariableError(f"{describe(name)}: expected one of {', '.join(choices)} ({VARIABLES[name]}), "
+                                   f"or unset it")
 
 
 def path(name: str) -> Path | None:

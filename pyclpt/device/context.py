@@ -33,6 +33,9 @@ except ImportError:  # Windows: no RLIMIT_AS
     resource = None  # type: ignore[assignment]
 
 DEVICE_ENV = "PYCLPT_DEVICE"
+#: Overrides :attr:`Device.device_class` (cpu | gpu), which picks the BVH layout (docs/bvh.md).
+DEVICE_CLASS_ENV = "PYCLPT_DEVICE_CLASS"
+DEVICE_CLASSES = ("cpu", "gpu")
 
 # Before anything enumerates platforms: the ICD loader reads OCL_ICD_VENDORS once per process.
 vendors.register()
@@ -58,6 +61,9 @@ class Device:
     queue: cl.CommandQueue
     # Compiled programs of this device, keyed by (assembled source, options).
     programs: dict[Any, cl.Program] = field(default_factory=dict, repr=False)
+    # The device class this device's kernels are shaped for, when set: before PYCLPT_DEVICE_CLASS and the
+    # device's type (pyclpt.gpu compiles GPU-shaped programs on a CPU device through it).
+    class_override: str | None = field(default=None, repr=False)
 
     @property
     def platform(self) -> cl.Platform:
@@ -89,6 +95,22 @@ class Device:
     def is_cpu(self) -> bool:
         """A CPU device: its buffers live in this process's memory (RLIMIT_AS and RAM apply)."""
         return bool(self.device.type & cl.device_type.CPU)
+
+    @property
+    def device_class(self) -> str:
+        """``"cpu"`` or ``"gpu"``: what the kernels' data layouts are shaped for (the BVH's width, leaf
+        packets and traversal stack: pyclpt.accel.bvh.LAYOUTS, docs/bvh.md). ``"gpu"`` for any non-CPU
+        device, ``"cpu"`` otherwise; the ``PYCLPT_DEVICE_CLASS`` setting overrides it (read each time, so
+        a renderer made after it changes follows it)."""
+        if self.class_override is not None:
+            if self.class_override not in DEVICE_CLASSES:
+                raise ValueError(f"class_override must be one of {', '.join(DEVICE_CLASSES)}, "
+                                 f"got {self.class_override!r}")
+            return self.class_override
+        forced = env.choice(DEVICE_CLASS_ENV, DEVICE_CLASSES)
+        if forced is not None:
+            return forced
+        return "cpu" if self.is_cpu else "gpu"
 
     @property
     def has_fp64(self) -> bool:

@@ -18,7 +18,9 @@ import hashlib
 import logging
 import re
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import pyopencl as cl
@@ -148,6 +150,77 @@ def device_options(device: Device) -> list[str]:
     return []
 
 
+@dataclass(frozen=True)
+class ProgramSource:
+    """One program as :func:`build_program` assembled it: its label (the .cl file's stem), the text and
+    the build options. What :func:`record_programs` collects, and what pyclpt.gpu compiles for GPUs."""
+
+    label: str
+    text: str
+    options: tuple[str, ...]
+
+    @property
+    def key(self) -> tuple[str, tuple[str, ...]]:
+        return self.text, self.options
+
+
+# the lists of the open record_programs() blocks, innermost last; and whether the innermost is dry
+_recorders: list[tuple[list[ProgramSource], set, bool]] = []
+
+
+@contextmanager
+def record_programs(*, dry: bool = False) -> Iterator[list[ProgramSource]]:
+    """Collect every program :func:`build_program` is asked for inside the block, once each, in order,
+    whether it was compiled or served from the device's cache.
+
+    ``dry``: the programs are not compiled as written. Each is built with its kernels' bodies emptied
+    (:func:`empty_kernels`: the same kernels with the same parameters), so that renderers, films and
+    denoisers can be made, and their kernels created and launched, in a fraction of the compile time,
+    computing nothing. Such programs are kept apart from the device's cache, but objects made in a dry
+    block must not be used after it: pyclpt.gpu makes them on a device of their own."""
+    found: list[ProgramSource] = []
+    _recorders.append((found, set(), dry))
+    try:
+        yield found
+    finally:
+        _recorders.pop()
+
+
+_KERNEL_HEAD = re.compile(r"__kernel\b[^;{]*?\bvoid\s+\w+\s*\(")
+
+
+def empty_kernels(text: str) -> str:
+    """``text`` with the body of every ``__kernel`` function replaced by ``{}`` (the parameters kept),
+    for :func:`record_programs`' dry builds. Braces inside comments are not expected in kernel bodies."""
+    out, pos = [], 0
+    for m in _KERNEL_HEAD.finditer(text):
+        if m.start() < pos:
+            continue
+        open_brace = text.find("{", m.end())
+        if open_brace < 0:
+            break
+        depth, i = 0, open_brace
+        while i < len(text):
+            depth += {"{": 1, "}": -1}.get(text[i], 0)
+            if depth == 0:
+                break
+            i += 1
+        out.append(text[pos:open_brace] + "{}")
+        pos = i + 1
+    out.append(text[pos:])
+    return "".join(out)
+
+
+def _record(label: str, text: str, opts: list[str]) -> bool:
+    """Note a requested program in the open record_programs() blocks; whether the innermost is dry."""
+    for found, seen, _ in _recorders:
+        key = (text, tuple(opts))
+        if key not in seen:
+            seen.add(key)
+            found.append(ProgramSource(Path(label).stem, text, tuple(opts)))
+    return bool(_recorders) and _recorders[-1][2]
+
+
 _compile_seconds = 0.0
 
 
@@ -173,12 +246,15 @@ def build_program(
     global _compile_seconds
     text = assemble(files, source, source_name=name or "<source>", generated=generated)
     opts = ["-cl-std=CL1.2", *device_options(device), *define_options(defines), *options]
-    key = (text, tuple(opts))
+    label = name or (files[0] if files else "<source>")
+    dry = _record(label, text, opts)
+    if dry:
+        text = empty_kernels(text)
+    key = ("dry", text, tuple(opts)) if dry else (text, tuple(opts))
     prog = device.programs.get(key)
     if prog is not None:
         return prog
-    label = name or (files[0] if files else "<source>")
-    out = env.writable_folder(DUMP_ENV)
+    out = None if dry else env.writable_folder(DUMP_ENV)
     if out is not None:
         digest = hashlib.sha1(repr(key).encode()).hexdigest()[:10]
         stem = re.sub(r"[^A-Za-z0-9_.-]", "_", Path(label).stem)

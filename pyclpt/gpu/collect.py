@@ -1,0 +1,79 @@
+"""Every OpenCL program the renderer builds for a scene, collected without compiling it for the CPU.
+
+For each scene, the objects a user can make are made on a device of their own inside
+:func:`pyclpt.device.program.record_programs` (``dry``): the megakernel and the wavefront in both
+path-state layouts, with and without the G-buffer, the film in each accumulation precision, the
+progressive renderer with each denoiser (SVGF's passes, the blend), and the gradient kernels (reverse
+and forward mode, every parameter kind at once). Their programs are recorded as they would be built,
+with the defines of the device class the check is for (``device_class="gpu"``: the BVH layout a
+GPU gets), and deduplicated by text and options across scenes.
+"""
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+
+from pyclpt.device.context import Device, open_device
+from pyclpt.device.program import ProgramSource, record_programs
+from pyclpt.film.accumulator import PRECISIONS
+from pyclpt.gradients.replay import GRAD_DEFINES, PathReplay
+from pyclpt.rendering.progressive import ProgressiveRenderer
+from pyclpt.rendering.renderer import Renderer
+from pyclpt.scene.library import load
+from pyclpt.scene.model import Scene
+
+log = logging.getLogger("pyclpt.gpu.collect")
+
+#: The image the objects are made for: small, since nothing is rendered.
+SIZE = 8
+
+
+def _scene(item: Scene | str) -> Scene:
+    return item if isinstance(item, Scene) else load(item)
+
+
+def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wavefront: bool = True) -> None:
+    """Make every kind of object that builds programs for ``scene`` on ``device`` (inside a dry
+    record_programs block: nothing is rendered). ``every_variant`` False leaves out the variants whose
+    code another one holds (the integrators without the G-buffer: -DAOVS only adds code) and those whose
+    code does not depend on the scene (the AoS path state, the other accumulation precisions, the
+    progressive renderer's denoisers). ``wavefront`` False leaves out the wavefront's stages (their shading
+    and traversal code is the megakernel's, with the same defines)."""
+    kw = dict(width=SIZE, height=SIZE, device=device, max_depth=4)
+    layouts = ("soa", "aos") if every_variant else ("soa",)  # the path-state accessors: no scene defines
+    for integrator, layout in (("megakernel", "soa"), *(("wavefront", lay) for lay in layouts if wavefront)):
+        for aovs in (None, True) if every_variant else (True,):
+            Renderer(scene, integrator=integrator, layout=layout, aovs=aovs, **kw)
+    for precision in PRECISIONS if every_variant else ():
+        Renderer(scene, precision=precision, **kw)
+    for denoiser in ("svgf", "blend") if every_variant else ():
+        ProgressiveRenderer(scene, denoiser=denoiser, **kw)
+    r = Renderer(scene, **kw)
+    replay = PathReplay(device, r.scene_buffers, SIZE, SIZE, 4)
+    for name in ("backward", "forward"):
+        replay.kernel(name, GRAD_DEFINES)
+
+
+def collect_programs(scenes: Iterable[Scene | str], *, device_class: str | None = "gpu",
+                     device: str | None = None, every_variant: bool = True, first_every: bool = True,
+                     wavefront: bool = True) -> list[tuple[ProgramSource, list[str]]]:
+    """The distinct programs the renderer builds for ``scenes`` (Scenes, built-in names or files), each
+    with the names of the scenes that build it, in the order first met. ``device_class``: the class the
+    programs are shaped for (None: the device's own). ``every_variant`` False: after the first scene, only
+    the variants that hold the most code (with the G-buffer; one precision; see scene_programs), and from
+    the first scene on with ``first_every`` False;
+    ``wavefront`` False: without the wavefront's stages."""
+    found: dict[tuple, tuple[ProgramSource, list[str]]] = {}
+    dev = open_device(device)  # its own device: the dry programs never meet a renderer's
+    dev.class_override = device_class
+    for k, item in enumerate(scenes):
+        scene = _scene(item)
+        with record_programs(dry=True) as programs:
+            scene_programs(scene, dev, every_variant=every_variant or (first_every and k == 0),
+                           wavefront=wavefront)
+        for p in programs:
+            entry = found.setdefault(p.key, (p, []))
+            if scene.name not in entry[1]:
+                entry[1].append(scene.name)
+        log.info("%s: %d programs, %d distinct so far", scene.name, len(programs), len(found))
+    return list(found.values())

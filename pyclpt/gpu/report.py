@@ -1,0 +1,146 @@
+"""The GPU ISA check's table and plot: per kernel and target, the worst variant's registers, stack or
+scratch, spills and theoretical occupancy (docs/gpu.md; ``pyclpt gpu-isa``, ``pyclpt bench --isa``)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from pyclpt.gpu.check import IsaReport
+from pyclpt.gpu.targets import TARGETS
+
+#: The kernels in the order of a path's life, then the film, the denoiser and the gradients.
+ORDER = ("megakernel", "path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution",
+         "sample_bsdf", "compact_count", "compact_scatter", "finish_paths", "accumulate_frame", "accumulate_batch",
+         "resolve", "aov_accumulate", "count_dropped", "demodulate", "reproject", "clip_history", "variance",
+         "atrous", "modulate", "blend", "backward", "forward")
+#: Budgets of issue 24 on sm_90: registers of the shading stages, and the traversal's stack.
+SHADING_STAGES = ("path_init", "miss", "process_hit", "light_contribution", "sample_bsdf")
+TRAVERSAL_STAGES = ("intersect", "shadow_test")
+SHADING_REGISTERS = 64
+TRAVERSAL_REGISTERS = 96
+TRAVERSAL_STACK = 256
+
+
+def _order(kernel: str) -> tuple[int, str]:
+    return (ORDER.index(kernel) if kernel in ORDER else len(ORDER), kernel)
+
+
+def rows(report: IsaReport) -> list[list[str]]:
+    """One row a kernel: per target, registers / stack (B) / spills / resident warps or waves, of the
+    variant with the most registers over every scene and option set."""
+    worst = report.worst()
+    kernels = sorted({k for k, _ in worst}, key=_order)
+    out = []
+    for k in kernels:
+        row = [k]
+        for t in TARGETS:
+            c = worst.get((k, t))
+            if c is None:
+                row.append("-")
+                continue
+            spill = f", spills {c.spill_stores}" if c.spills else ""
+            row.append(f"{c.registers} r, {c.stack} B{spill}, {c.slots} ({c.occupancy:.0%})")
+        out.append(row)
+    return out
+
+
+def header() -> list[str]:
+    return ["kernel", *(f"{t.name}: regs, stack, {t.slot_word} (occupancy)" for t in TARGETS.values())]
+
+
+def budgets(report: IsaReport) -> list[str]:
+    """The issue's budgets on sm_90 and the spill rule on gfx1030, each met or not, in words."""
+    worst = report.worst()
+    lines = []
+    for k in SHADING_STAGES:
+        c = worst.get((k, "sm_90"))
+        if c:
+            ok = "met" if c.registers <= SHADING_REGISTERS else "missed"
+            lines.append(f"{k}: {c.registers} registers on sm_90 (budget {SHADING_REGISTERS}: {ok}; worst variant "
+                         f"from {c.program})")
+    for k in TRAVERSAL_STAGES:
+        c = worst.get((k, "sm_90"))
+        if c:
+            ok = "met" if c.registers <= TRAVERSAL_REGISTERS and c.stack <= TRAVERSAL_STACK else "missed"
+            lines.append(f"{k}: {c.registers} registers, {c.stack} B stack on sm_90 (budget {TRAVERSAL_REGISTERS}, "
+                         f"{TRAVERSAL_STACK} B: {ok})")
+    spilling = sorted({c.kernel for c in report.costs if c.target == "gfx1030" and c.spills}, key=_order)
+    lines.append("gfx1030 spills: " + (", ".join(spilling) if spilling else "none"))
+    return lines
+
+
+def markdown(report: IsaReport) -> str:
+    """The table, the budgets and the failures, as Markdown."""
+    head = header()
+    lines = [f"Toolchain: {report.toolchain}. Scenes: {', '.join(report.scenes)}. {report.programs} distinct "
+             f"programs; compiled after deduplication: "
+             + ", ".join(f"{n} for {t}" for t, n in report.compiled.items()) + ".", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows(report)]
+    lines += ["", *(f"- {b}" for b in budgets(report))]
+    if report.failures:
+        lines += ["", f"**{len(report.failures)} failures:**"]
+        lines += [f"- {f.program} for {f.target} (scenes {', '.join(f.scenes)}): {f.message.splitlines()[0]}"
+                  for f in report.failures]
+    return "\n".join(lines) + "\n"
+
+
+def plot(report: IsaReport, path: str | Path) -> Path:
+    """Bars of each kernel's theoretical occupancy per target (the worst variant), saved to ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    worst = report.worst()
+    kernels = sorted({k for k, _ in worst}, key=_order)
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.45 * len(kernels)), 3.6))
+    width = 0.8 / len(TARGETS)
+    for j, t in enumerate(TARGETS):
+        ys = [worst[(k, t)].occupancy if (k, t) in worst else 0.0 for k in kernels]
+        ax.bar([i + j * width for i in range(len(kernels))], ys, width, label=t)
+    ax.set_xticks([i + 0.4 - width / 2 for i in range(len(kernels))], kernels, rotation=60, ha="right", fontsize=7)
+    ax.set_ylabel("theoretical occupancy")
+    ax.set_ylim(0, 1.05)
+    ax.legend(fontsize=7)
+    ax.set_title("pyclpt kernels on GPU instruction sets (worst variant)", fontsize=9)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def default_scenes() -> list[str]:
+    """The built-in scenes whose files are at hand and the shared scenes (``PYCLPT_SCENES``): what
+    ``pyclpt gpu-isa`` checks without arguments."""
+    from pyclpt.scene.library import builtin_scenes, scenes_root
+
+    names = []
+    for name in builtin_scenes():
+        try:
+            from pyclpt.scene.library import load
+
+            load(name)
+            names.append(name)
+        except (OSError, ValueError):  # a built-in whose mesh lives in the shared folder, absent here
+            continue
+    root = scenes_root()
+    if root is not None:
+        names += [str(p) for p in sorted(root.glob("*/scene.xml"))]
+    return names
+
+
+def run(scenes: list[str], out_dir: str | Path, *, targets: list[str] | None = None, every_variant: bool = True,
+        device: str | None = None) -> IsaReport:
+    """Collect, compile and write ``isa.json``, ``isa.md`` and ``isa.png`` into ``out_dir``."""
+    from pyclpt.gpu.check import check_programs
+    from pyclpt.gpu.collect import collect_programs
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report = check_programs(collect_programs(scenes, device=device, every_variant=every_variant),
+                            targets or list(TARGETS))
+    report.save(out / "isa.json")
+    (out / "isa.md").write_text(markdown(report))
+    plot(report, out / "isa.png")
+    return report

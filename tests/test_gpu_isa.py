@@ -1,0 +1,199 @@
+"""The GPU ISA check (pyclpt.gpu, docs/gpu.md): every program the renderer builds, over scenes that
+switch on every material, light, texture, camera and instancing specialisation, compiles for NVIDIA
+sm_90 and AMD gfx1030 and gfx90a; the reports are read right; the occupancy rule matches LLVM's; the
+collection sees every program a real render builds. Needs clang, llvm and libclc (Debian's clang-15,
+llvm-15, libclc-15) and ptxas (the gpu extra): skipped without them, failed under PYCLPT_REQUIRE_GPU_ISA=1."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pyclpt
+from pyclpt.common import env
+from pyclpt.device.context import open_device
+from pyclpt.device.program import empty_kernels, record_programs
+from pyclpt.gpu.check import check_programs
+from pyclpt.gpu.collect import collect_programs
+from pyclpt.gpu.isa import ToolchainMissing, compile_program, find_toolchain, parse_amdgcn, parse_ptxas
+from pyclpt.gpu.report import budgets, markdown
+from pyclpt.gpu.targets import TARGETS, occupancy, resident_slots
+from pyclpt.rendering.renderer import Renderer
+from scenes import material_zoo  # tests/ is on sys.path (conftest.py)
+
+DATA = __import__("pathlib").Path(__file__).parent / "data"
+# One scene a specialisation beyond the material zoo's (every material kind, textures, bump map, mask,
+# point light, environment, area light): spot and directional lights, textured emitters, instances,
+# the orthographic and thin-lens cameras, the sun and sky, anisotropic microfacets.
+EXTRA_SCENES = ("delta-emitters", "emitter-textures", "instances", "orthographic", "thinlens", "sunsky", "anisotropy")
+# Every kernel the renderer has (a new one must be added here and so to the check).
+KERNELS = {"megakernel", "path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution",
+           "sample_bsdf", "compact_count", "compact_scatter", "finish_paths", "accumulate_frame", "accumulate_batch",
+           "resolve", "aov_accumulate", "count_dropped", "demodulate", "reproject", "clip_history", "variance",
+           "atrous", "modulate", "blend", "backward", "forward"}
+
+
+@pytest.fixture(scope="module")
+def toolchain():
+    try:
+        tc = find_toolchain()
+        if tc.ptxas is None:
+            raise ToolchainMissing("ptxas is missing: pip install 'pyclpt[gpu]'")
+    except ToolchainMissing as exc:
+        if env.flag("PYCLPT_REQUIRE_GPU_ISA"):
+            pytest.fail(f"PYCLPT_REQUIRE_GPU_ISA=1 but {exc}", pytrace=False)
+        pytest.skip(str(exc))
+    return tc
+
+
+@pytest.fixture(scope="module")
+def report(toolchain):
+    """Every variant of the box's programs; the zoo's that hold the most code; the other scenes' megakernel and
+    gradient kernels, whose shading and traversal code is the stages' with the same defines."""
+    programs = collect_programs(["cornell-box", material_zoo(8)], device="pocl", every_variant=False)
+    extra = collect_programs([str(DATA / f"{n}.xml") for n in EXTRA_SCENES], device="pocl", every_variant=False,
+                             first_every=False, wavefront=False)
+    return check_programs(programs + extra, toolchain=toolchain)
+
+
+def test_every_kernel_compiles_for_every_gpu_target(report):
+    assert not report.failures, markdown(report)
+    assert len(report.scenes) == 2 + len(EXTRA_SCENES)
+    for t in TARGETS:
+        assert {c.kernel for c in report.costs if c.target == t} == KERNELS, t
+        assert report.compiled[t] > 0
+
+
+def test_gpu_layout_meets_the_budgets_on_the_box(report):
+    """The GPU layout's traversal (binary BVH, a 64-entry node stack) on sm_90 for the Cornell box: at most 96
+    registers and 256 bytes of stack, shading stages at most 64 registers without the G-buffer; no wavefront
+    stage spills on gfx1030 in any scene (docs/gpu.md)."""
+    box = {c.kernel: c for c in report.costs if c.target == "sm_90" and "cornell-box" in c.scenes
+           and "-DAOVS=1" not in c.options}
+    for k in ("intersect", "shadow_test"):
+        assert box[k].registers <= 96 and box[k].stack <= 256, box[k]
+    for k in ("path_init", "miss", "light_contribution", "sample_bsdf", "process_hit"):
+        assert box[k].registers <= 64 and box[k].stack == 0, box[k]
+    stages = {"path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf",
+              "compact_count", "compact_scatter"}
+    assert not [c for c in report.costs if c.target == "gfx1030" and c.kernel in stages and c.spills]
+    assert any(line.startswith("gfx1030 spills:") for line in budgets(report))
+
+
+def test_occupancy_agrees_with_llvm(report):
+    amd = [c for c in report.costs if c.llvm_occupancy is not None]
+    assert amd
+    assert [(c.kernel, c.target, c.registers, c.slots) for c in amd if c.slots != c.llvm_occupancy] == []
+
+
+def test_occupancy_rule():
+    sm90, rdna2, cdna2 = TARGETS["sm_90"], TARGETS["gfx1030"], TARGETS["gfx90a"]
+    # CUDA's occupancy calculator: 8-register granules per thread, the file split over 4 schedulers
+    assert [resident_slots(sm90, r) for r in (32, 64, 96, 128, 170, 255)] == [64, 32, 20, 16, 8, 8]
+    assert occupancy("sm_90", 64) == 0.5
+    # RDNA2 wave32: 1024 VGPRs, granules of 16, at most 16 waves
+    assert [resident_slots(rdna2, r) for r in (44, 62, 66, 241, 256)] == [16, 16, 12, 4, 4]
+    # CDNA2 wave64: 512 VGPRs+AGPRs, granules of 8, at most 8 waves
+    assert [resident_slots(cdna2, r) for r in (64, 72, 284)] == [8, 7, 1]
+    with pytest.raises(ValueError, match="unknown GPU target 'sm_75'"):
+        occupancy("sm_75", 32)
+
+
+PTXAS = """ptxas info    : 0 bytes gmem
+ptxas info    : Compiling entry function 'intersect' for 'sm_90'
+ptxas info    : Function properties for intersect
+    256 bytes stack frame, 8 bytes spill stores, 12 bytes spill loads
+ptxas info    : Used 47 registers, used 0 barriers, 256 bytes cumulative stack size
+ptxas info    : Compiling entry function 'miss' for 'sm_90'
+ptxas info    : Function properties for miss
+    0 bytes stack frame, 0 bytes spill stores, 0 bytes spill loads
+ptxas info    : Used 17 registers, used 0 barriers
+"""
+
+AMDGCN = """\t.protected\tmiss ; -- Begin function miss
+miss:
+\ts_endpgm
+\t.amdhsa_kernel miss
+\t.end_amdhsa_kernel
+; -- End function
+; NumSgprs: 14
+; NumVgprs: 11
+; ScratchSize: 0
+; Occupancy: 16
+\t.protected\tintersect ; -- Begin function intersect
+intersect:
+\t.amdhsa_kernel intersect
+; -- End function
+; NumSgprs: 71
+; NumVgprs: 241
+; ScratchSize: 1540
+; Occupancy: 4
+amdhsa.kernels:
+  - .args:
+    .name:           miss
+    .sgpr_spill_count: 0
+    .vgpr_spill_count: 0
+  - .args:
+    .name:           intersect
+    .sgpr_spill_count: 2
+    .vgpr_spill_count: 5
+"""
+
+
+def test_reports_are_read_right():
+    nv = {c.kernel: c for c in parse_ptxas(PTXAS, "p", TARGETS["sm_90"])}
+    assert (nv["intersect"].registers, nv["intersect"].stack, nv["intersect"].spill_stores,
+            nv["intersect"].spill_loads) == (47, 256, 8, 12)
+    assert (nv["miss"].registers, nv["miss"].stack, nv["miss"].spills) == (17, 0, False)
+    amd = {c.kernel: c for c in parse_amdgcn(AMDGCN, "p", TARGETS["gfx1030"])}
+    assert (amd["intersect"].registers, amd["intersect"].sgprs, amd["intersect"].stack, amd["intersect"].spill_stores,
+            amd["intersect"].llvm_occupancy, amd["intersect"].slots) == (241, 71, 1540, 7, 4, 4)
+    assert (amd["miss"].registers, amd["miss"].spills, amd["miss"].slots) == (11, False, 16)
+
+
+BROKEN = """static inline float twice(float x) { return 2.0f * x; }
+__kernel void fine(__global float* a) { a[get_global_id(0)] = twice(a[0]); }
+__kernel void broken(__global float* a) { a[0] = __builtin_ia32_rsqrtps((float4)(1.0f)).x; }
+"""
+
+
+@pytest.mark.parametrize("target", list(TARGETS))
+def test_a_cpu_only_construct_fails_naming_program_and_target(toolchain, target):
+    """An x86 builtin outside a -D guard (what the GPU rule forbids) fails the check for every target,
+    with the program, the target and the compiler's message; the guarded program compiles."""
+    from pyclpt.gpu.isa import IsaCompileError
+
+    with pytest.raises(IsaCompileError, match=rf"(?s)zoo for {target}: clang-\d+ failed .*__builtin_ia32_rsqrtps"):
+        compile_program(BROKEN, ["-cl-std=CL1.2"], target, program="zoo", toolchain=toolchain)
+    fixed = BROKEN.replace("__builtin_ia32_rsqrtps((float4)(1.0f)).x", "1.0f")
+    costs = compile_program(fixed, ["-cl-std=CL1.2"], target, program="zoo", toolchain=toolchain)
+    assert {c.kernel for c in costs} == {"fine", "broken"}
+
+
+def test_collection_sees_what_a_render_builds():
+    """A real render's programs (megakernel, wavefront, G-buffer, accumulation) are among the collected ones
+    for the device's own class: the dry collection does not miss a kernel a user builds."""
+    scene = pyclpt.load("cornell-box")
+    device = open_device("pocl")
+    with record_programs() as built:
+        for integrator in ("megakernel", "wavefront"):
+            Renderer(scene, integrator=integrator, width=8, height=8, device=device, aovs=True).render(1)
+    collected = {p.key for p, _ in collect_programs([scene], device="pocl", device_class=None)}
+    assert built and {p.key for p in built} <= collected
+
+
+def test_dry_builds_compute_nothing_and_stay_apart():
+    """A dry record keeps the real programs out of the device's cache, and its kernels keep their
+    parameters (their bodies emptied)."""
+    text = "static inline int f(int x) { return x + 1; }\n__kernel void k(__global int* a, int n) { a[0] = f(n); }\n"
+    assert empty_kernels(text).endswith("__kernel void k(__global int* a, int n) {}\n")
+    scene = pyclpt.load("cornell-box")
+    device = open_device("pocl")
+    with record_programs(dry=True) as programs:
+        r = Renderer(scene, width=4, height=4, device=device)
+    assert {p.label for p in programs} >= {"megakernel", "accumulate", "count_dropped"}
+    assert all(key[0] == "dry" for key in device.programs) and r.device is device
+    # a renderer made after it on the same device compiles the real programs: the fresh device's image
+    image = Renderer(scene, width=4, height=4, device=device).render(1, seed=3)
+    fresh = Renderer(scene, width=4, height=4, device=open_device("pocl")).render(1, seed=3)
+    np.testing.assert_array_equal(image, fresh)
+    assert image.max() > 0

@@ -1,0 +1,161 @@
+"""The SIMT model of the streaming paper's claim (pyclpt/gpu/simt.py): the instrumented megakernel renders
+the plain image bit for bit and its trace gives the wavefront's queues; the warp-level accounting
+(utilisation, 128-byte lines in SoA and AoS) against hand-computed values."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pyclpt
+from pyclpt.gpu.simt import (
+    ALIVE,
+    COMPONENTS,
+    HIT,
+    RECORD_WORDS,
+    STAGE_ACCESS,
+    PathTrace,
+    hand_utilisation,
+    line_ids,
+    simulate,
+    state_traffic,
+    trace_paths,
+    warp_cost,
+)
+from pyclpt.integrators.path_state import record_words
+
+SIZE = 16
+
+
+@pytest.fixture(scope="module")
+def box():
+    return pyclpt.load("cornell-box")
+
+
+@pytest.fixture(scope="module")
+def traced(box):
+    return trace_paths(box, spp=2, max_depth=8, width=SIZE, height=SIZE, seed=5)
+
+
+def test_instrumented_render_is_bit_identical(box, traced):
+    plain = pyclpt.Renderer(box, integrator="megakernel", max_depth=8, width=SIZE, height=SIZE).render(2, seed=5)
+    assert traced.image.dtype == plain.dtype
+    assert np.array_equal(traced.image, plain)
+
+
+def test_trace_alive_counts_are_the_wavefronts_queues(box, traced):
+    r = pyclpt.Renderer(box, integrator="wavefront", max_depth=8, width=SIZE, height=SIZE, tail_paths=0)
+    r.render(2, seed=5)
+    stats = r.stats.bounces
+    assert [b["rays"] for b in stats] == [int(n) for n in traced.alive_counts() if n]
+    for mine, theirs in zip(traced.counts(), stats):
+        for key in ("rays", "hits", "misses", "shadow_rays", "unoccluded"):
+            assert mine[key] == theirs[key], (mine, theirs)
+
+
+def test_trace_is_consistent(traced):
+    f = traced.flags
+    assert traced.slots == SIZE * SIZE * 2
+    assert (traced.alive[0]).all()
+    hit = (f & HIT) != 0
+    assert not (hit & ~traced.alive).any()
+    # a path is alive at b + 1 exactly when it continued at b
+    assert np.array_equal(traced.alive[1:], traced.has(16)[:-1][: traced.bounces - 1])
+    assert ((traced.material >= 0) == hit).all()
+    assert (traced.closest_nodes[traced.alive] >= 1).all()  # the root at least
+    assert not traced.shadow_nodes[~traced.has(4)].any()
+
+
+def test_truncated_trace_is_a_shallower_render(box, traced):
+    shallow = trace_paths(box, spp=2, max_depth=3, width=SIZE, height=SIZE, seed=5)
+    cut = traced.truncated(3)
+    for name in ("flags", "material", "closest_nodes", "closest_prims", "shadow_nodes", "shadow_prims"):
+        assert np.array_equal(getattr(cut, name), getattr(shallow, name)), name
+
+
+def test_utilisation_is_one_for_equal_work():
+    steps = np.full(128, 7)
+    assert hand_utilisation(steps, np.ones(128, bool)) == 1.0
+
+
+def test_utilisation_of_a_divergent_warp():
+    # one warp of 32: lane 0 takes 10 steps, the others 2; a second warp: 16 lanes alive with 4 steps
+    steps = np.concatenate([[10], np.full(31, 2), np.full(32, 4)])
+    alive = np.ones(64, bool)
+    alive[48:] = False
+    expected = (10 + 31 * 2 + 16 * 4) / (32 * 10 + 32 * 4)
+    assert hand_utilisation(steps, alive) == pytest.approx(expected)
+    # wave64: one wavefront holding both: its longest lane is 10
+    assert hand_utilisation(steps, alive, width=64) == pytest.approx((10 + 31 * 2 + 16 * 4) / (64 * 10))
+
+
+def test_warp_cost_terms():
+    valid = np.ones((1, 4), bool)
+    mask = np.array([[True, False, True, False]])
+    kinds = np.array([[3, 0, 5, 0]])
+    w, lane = warp_cost([("any", mask, 10.0), ("kinds", mask, (kinds, 7.0)), ("max", valid, np.array([[1., 2, 3, 4]]))],
+                        valid)
+    assert w[0] == 10 + 2 * 7 + 4
+    assert lane[0] == 2 * 10 + 2 * 7 + 10
+
+
+def test_record_words_match_the_declaration():
+    assert RECORD_WORDS == record_words() == 31
+    for accesses in STAGE_ACCESS.values():
+        for _, mode, names in accesses:
+            assert mode in "rw"
+            for n in names:
+                assert n in COMPONENTS or f"{n}_x" in COMPONENTS
+
+
+def test_line_counts_of_a_hand_made_queue():
+    # a warp of 32 queue entries: slots 0..15 and 100..115 (two runs), reading org (words 3..5)
+    slots = np.concatenate([np.arange(16), np.arange(100, 116)]).reshape(1, 32)
+    masks = {"all": np.ones((1, 32), bool)}
+    access = [("all", "r", ("org",))]
+    # SoA: each component is its own array; 16 consecutive ints fill half a 128-byte line: slots 0..15 are in
+    # line 0, 100..115 in lines 3 (96..127): one line each, per component: 2 x 3
+    lines, requests = state_traffic(slots, masks, access, "soa")
+    assert lines[0] == 6 and requests[0] == 6
+    # AoS: 124-byte records; org_x of slot s at byte 124 s + 12; hand-computed set of lines
+    expected = set()
+    per_instr = 0
+    for k in (3, 4, 5):
+        ls = {(124 * s + 4 * k) // 128 for s in slots[0]}
+        per_instr += len(ls)
+        expected |= ls
+    lines, requests = state_traffic(slots, masks, access, "aos")
+    assert lines[0] == len(expected) and requests[0] == per_instr
+    # and a dense warp: 32 consecutive slots, one component: SoA 1 line, AoS ~31
+    dense = np.arange(32).reshape(1, 32)
+    assert state_traffic(dense, masks, [("all", "r", ("depth",))], "soa")[0][0] == 1
+    assert state_traffic(dense, masks, [("all", "r", ("depth",))], "aos")[0][0] == len(
+        {(124 * s + 4) // 128 for s in range(32)})
+    assert line_ids(np.array([32]), 0, "soa") - line_ids(np.array([0]), 0, "soa") == 1
+
+
+def test_simulate_gives_finite_ratios(traced):
+    p = simulate(traced, target_slots=4 * traced.slots,
+                 wavefronts={"soa": {"layout": "soa"}, "aos": {"layout": "aos"},
+                             "scan": {"layout": "soa", "compaction": "scan", "indexing": "queue"},
+                             "tail": {"layout": "soa", "tail": 0.25}})
+    for k, v in p.times_ms.items():
+        assert np.isfinite(v) and v > 0, k
+    assert 0 < p.utilisation["megakernel"]["megakernel"] <= 1
+    for stage, u in p.utilisation["soa"].items():
+        assert 0 < u <= 1, stage
+    # the same paths in both layouts: same compute, different traffic
+    assert p.utilisation["soa"] == p.utilisation["aos"]
+    assert [b["rays"] for b in p.per_bounce["soa"]] == [int(n) for n in traced.alive_counts() if n]
+
+
+def test_synthetic_trace_with_equal_work_has_full_lanes():
+    n, b = 64, 2
+    flags = np.full((b, n), ALIVE, np.int32)  # every path traces one ray, 3 nodes, and misses
+    flags[1] = 0
+    zeros = np.zeros((b, n), np.int32)
+    steps = np.full((b, n), 3, np.int32)
+    tr = PathTrace(flags, np.full((b, n), -1, np.int16), steps, zeros, zeros, zeros, max_depth=2)
+    p = simulate(tr)
+    assert p.utilisation["megakernel"]["megakernel"] == pytest.approx(1.0)
+    assert p.utilisation["wavefront_soa"]["intersect"] == pytest.approx(1.0)
+    assert p.utilisation["wavefront_soa"]["miss"] == pytest.approx(1.0)
