@@ -63,20 +63,21 @@ def test_every_kernel_compiles_for_every_gpu_target(report):
         assert report.compiled[t] > 0
 
 
-def test_gpu_layout_meets_the_budgets_on_the_box(report):
-    """The GPU layout's traversal (binary BVH, a 64-entry node stack) on sm_90 for the Cornell box: at most 96
-    registers and 256 bytes of stack, shading stages at most 64 registers without the G-buffer; no wavefront
-    stage spills on gfx1030 in any scene (docs/gpu.md)."""
+def test_gpu_layout_meets_the_budgets(report):
+    """The GPU layout's traversal (binary BVH, a 64-entry node stack, the texture lookup of masks inlined) on
+    sm_90: at most 96 registers and 256 bytes of stack in every scene; the Cornell box's shading stages at most
+    64 registers without the G-buffer; no wavefront stage spills on gfx1030 in any scene (docs/gpu.md)."""
+    traversal = [c for c in report.costs if c.target == "sm_90" and c.kernel in ("intersect", "shadow_test")]
+    assert {s for c in traversal for s in c.scenes} >= {"cornell-box", "material-zoo"}
+    assert [c for c in traversal if c.registers > 96 or c.stack > 256] == []
     box = {c.kernel: c for c in report.costs if c.target == "sm_90" and "cornell-box" in c.scenes
            and "-DAOVS=1" not in c.options}
-    for k in ("intersect", "shadow_test"):
-        assert box[k].registers <= 96 and box[k].stack <= 256, box[k]
     for k in ("path_init", "miss", "light_contribution", "sample_bsdf", "process_hit"):
         assert box[k].registers <= 64 and box[k].stack == 0, box[k]
     stages = {"path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf",
               "compact_count", "compact_scatter"}
     assert not [c for c in report.costs if c.target == "gfx1030" and c.kernel in stages and c.spills]
-    assert any(line.startswith("gfx1030 spills:") for line in budgets(report))
+    assert "gfx1030 spills: none" in budgets(report)
 
 
 def test_occupancy_agrees_with_llvm(report):

@@ -28,6 +28,16 @@
 #define SCALAR_KERNEL
 #endif
 
+/* GPU_INLINE: functions a GPU compiler must inline (-DDEVICE_CLASS_GPU, the GPU layout: docs/gpu.md).
+ * A call that passes the address of a private struct keeps the struct on the per-thread stack, which
+ * GPUs place in slow local memory (the texture lookup put 88 bytes there in the traversal kernels).
+ * CPU builds are unchanged. */
+#ifdef DEVICE_CLASS_GPU
+#define GPU_INLINE __attribute__((always_inline))
+#else
+#define GPU_INLINE
+#endif
+
 /* Ray offset from a surface, scaled by the hit point's magnitude. */
 #define RAY_EPS 1e-4f
 

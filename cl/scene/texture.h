@@ -170,7 +170,7 @@ static inline bool tex_checker_color0(vec2 st) {
 }
 
 /* Texture `id` at uv: linear RGBA with the texture's scale applied to rgb. */
-static inline vec4 tex_eval4(const Textures* tx, int id, vec2 uv) {
+static inline GPU_INLINE vec4 tex_eval4(const Textures* tx, int id, vec2 uv) {
     __global const float* t = tx->info + TEX_STRIDE * id;
     vec2 st = tex_st(t, uv);
     vec3 scale = rgb_at(t + TEX_SCALE, tx->unit);
