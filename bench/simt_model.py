@@ -83,16 +83,18 @@ def speedups(p) -> dict[str, float]:
 
 
 def isa_registers(isa: dict | None, scene: str) -> dict[str, int]:
-    """sm_90 registers per kernel for ``scene`` from a gpu-isa report (the variant without the G-buffer
-    that the scene builds, else the most registers over the report), over :data:`REGISTERS`."""
+    """sm_90 registers per kernel for ``scene`` from a gpu-isa report: the scene's own variant where the report
+    names the scene (without the G-buffer if it has one; a variant shared by several scenes is named after the
+    first), else the most registers over the report; :data:`REGISTERS` without a report."""
     regs = dict(REGISTERS)
     if isa is None:
         return regs
-    costs = [c for c in isa["costs"] if c["target"] == "sm_90" and "-DAOVS=1" not in c.get("options", ())]
-    own = [c for c in costs if scene in c.get("scenes", ())]
-    for c in sorted(costs, key=lambda c: c["registers"]) + own:  # the scene's own variant last: it wins
-        if c["kernel"] in regs:
-            regs[c["kernel"]] = c["registers"]
+    costs = [c for c in isa["costs"] if c["target"] == "sm_90" and c["kernel"] in regs]
+    for c in sorted(costs, key=lambda c: c["registers"]):  # the worst last
+        regs[c["kernel"]] = c["registers"]
+    own = sorted((c for c in costs if scene in c.get("scenes", ())), key=lambda c: "-DAOVS=1" not in c["options"])
+    for c in own:  # the scene's variant without the G-buffer last: it wins
+        regs[c["kernel"]] = c["registers"]
     return regs
 
 

@@ -304,3 +304,35 @@ def test_embree_ceiling_on_the_cornell_box(cornell_box):
     for kind in ("primary", "secondary", "shadow"):
         assert e[kind]["mrays_per_s"] > 0 and np.isfinite(e[kind]["best_s"])
     assert A.ceiling_mrays(e) > 0
+
+
+def test_isa_section_of_the_report(tmp_path):
+    """`pyclpt bench --isa`: the GPU ISA check's table, budgets and plot in the report; without the tools, the
+    reason in their place."""
+    from pyclpt.gpu.check import IsaReport
+    from pyclpt.gpu.isa import KernelCost
+
+    costs = [KernelCost("intersect", "intersect", t, r, 0, 256, 0, 0, s, s / m, None, ("cornell-box",))
+             for t, r, s, m in (("sm_90", 47, 40, 64), ("gfx1030", 44, 16, 16), ("gfx90a", 60, 8, 8))]
+    isa = IsaReport("LLVM 15", ["cornell-box"], 1, {"sm_90": 1, "gfx1030": 1, "gfx90a": 1}, costs).to_json()
+    assert IsaReport.from_json(json.loads(json.dumps(isa))).costs == costs
+    doc = document.Document("report")
+    figure = plots_module().isa_occupancy({"isa": isa}, tmp_path)
+    assert figure == "isa_occupancy.png" and (tmp_path / figure).stat().st_size > 0
+    report._isa_section(doc, isa, {"isa_occupancy": figure})
+    text = document.to_markdown(doc)
+    assert "# GPU instruction sets" in text and "| intersect | 47 r, 256 B, 40 (62%) |" in text
+    assert "intersect: 47 registers, 256 B stack on sm_90 (budget 96, 256 B: met)" in text
+    assert "isa_occupancy.png" in text
+    doc = document.Document("report")
+    report._isa_section(doc, {"error": "the GPU ISA check needs libclc"}, {})
+    assert "Not checked: the GPU ISA check needs libclc." in document.to_markdown(doc)
+    assert "--isa" in report.build_parser().format_help()
+
+
+def plots_module():
+    try:
+        from pyclpt.bench import plots
+    except ModuleNotFoundError:
+        from bench import plots
+    return plots

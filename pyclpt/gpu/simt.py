@@ -199,12 +199,19 @@ def trace_paths(scene, *, spp: int = 1, max_depth: int | None = None, width: int
 
 
 # -- the machine and the cost model ---------------------------------------------------------------------
-#: Registers per thread of each kernel on sm_90 (ptxas -v of pyclpt's kernels; docs/gpu.md): the
-#: occupancy input. The compaction and the small stages are all about 24.
+#: Registers per thread of each kernel on sm_90, the occupancy input: the GPU layout's kernels of the Cornell
+#: box without the G-buffer (`pyclpt gpu-isa`, docs/benchmarks/gpu-isa.json; docs/gpu.md). Scenes with more
+#: material kinds need more (bench/simt_model.py --isa takes each scene's from a gpu-isa report).
 REGISTERS: dict[str, int] = {
+    "megakernel": 113, "finish_paths": 114, "intersect": 47, "shadow_test": 40, "sample_bsdf": 58,
+    "process_hit": 60, "path_init": 27, "miss": 17, "light_contribution": 20, "compact_count": 19,
+    "compact_scatter": 30, "compact": 24,  # compact: the scan compaction of the what-if (_scan_compaction)
+}
+#: The same before the GPU layout (the CPU's 8-wide BVH with a 1.5 KB stack), for comparison.
+REGISTERS_CPU_LAYOUT: dict[str, int] = {
     "megakernel": 170, "finish_paths": 170, "intersect": 125, "shadow_test": 116, "sample_bsdf": 73,
     "process_hit": 60, "path_init": 24, "miss": 24, "light_contribution": 24, "compact_count": 24,
-    "compact_scatter": 24, "compact": 24,  # compact: the scan compaction of the what-if (_scan_compaction)
+    "compact_scatter": 24, "compact": 24,
 }
 WAVEFRONT_STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution",
                     "sample_bsdf", "compact_count", "compact_scatter")
