@@ -175,3 +175,29 @@ def test_node_only_stack_finds_the_closest_hits(device):
                 close = (t == ref_t) | (np.abs(t - ref_t) <= 2 * np.spacing(np.abs(ref_t)))
             assert np.mean(close & ((tri >= 0) == (ref_tri >= 0))) >= 0.999, defines
             assert np.mean((t == ref_t) & (tri == ref_tri)) >= 0.98, defines
+
+
+def test_gpu_compaction_gives_the_same_queues(device, monkeypatch):
+    """The GPU class compacts with a work-group per block (-DCOMPACT_GROUP): over several blocks of 1024 entries
+    (a 96x64 image: 6 blocks) and every bounce, its queues are the one-work-item compaction's, so the
+    wavefront's per-bounce counts equal the megakernel-checked CPU compaction's and the image is the
+    megakernel's bit for bit."""
+    from pyclpt.integrators.wavefront import COMPACT_BLOCK, COMPACT_GROUP
+    from pyclpt.rendering.renderer import Renderer
+
+    scene = material_zoo(8)
+    size = dict(width=96, height=64, max_depth=6, device=device)
+    assert 96 * 64 > 4 * COMPACT_BLOCK and COMPACT_BLOCK % COMPACT_GROUP == 0
+    monkeypatch.setenv(CLASS_ENV, "gpu")
+    wave = Renderer(scene, integrator="wavefront", tail_paths=0, **size)
+    assert wave.integrator.compact_group == COMPACT_GROUP
+    image = wave.render(1, seed=4)
+    mega = Renderer(scene, integrator="megakernel", **size).render(1, seed=4)
+    np.testing.assert_array_equal(image, mega)
+    from pyclpt.integrators import wavefront as wavefront_mod
+
+    monkeypatch.setattr(wavefront_mod, "COMPACT_GROUP", 0)  # the GPU layout with the CPU's compaction
+    single = Renderer(scene, integrator="wavefront", tail_paths=0, **size)
+    assert single.integrator.compact_group == 0
+    np.testing.assert_array_equal(single.render(1, seed=4), image)
+    assert wave.stats.bounces == single.stats.bounces  # the same queues, bounce by bounce

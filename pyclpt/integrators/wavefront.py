@@ -39,6 +39,9 @@ QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")
 Q_COUNT = len(QUEUES)
 Q_RAY, Q_HIT, Q_MISS, Q_SHADOW, Q_LIGHT = range(Q_COUNT)
 COMPACT_BLOCK = 1024  # queue entries per work-item of the compaction (-DCOMPACT_BLOCK for the stages)
+#: GPU class: lanes of the work-group that compacts one block (-DCOMPACT_GROUP; cl/integrators/wavefront/
+#: wavefront.h), instead of one work-item looping over its COMPACT_BLOCK entries as CPUs prefer.
+COMPACT_GROUP = 256
 # six int queues and one flag byte per path
 QUEUE_BYTES_PER_PATH = 6 * 4 + 1
 SCHEDULES = ("readback", "capacity")
@@ -78,7 +81,10 @@ class Wavefront:
         self.block_counts = alloc(device, 4 * -(-self.capacity // COMPACT_BLOCK), "compaction block counts")
         self.counters = alloc(device, 4 * Q_COUNT * (max_depth + 2), "queue counters")
         generated = {"path_state.h": opencl_header(layout)}
-        defines = {**scene.defines, **film.defines, "COMPACT_BLOCK": COMPACT_BLOCK}
+        # GPU class (the scene's layout): a work-group per compaction block (COMPACT_GROUP)
+        self.compact_group = COMPACT_GROUP if scene.defines.get("DEVICE_CLASS_GPU") else 0
+        defines = {**scene.defines, **film.defines, "COMPACT_BLOCK": COMPACT_BLOCK,
+                   "COMPACT_GROUP": self.compact_group or None}
         self.kernels = {s: cl.Kernel(build_program(device, [f"integrators/wavefront/{s}.cl"], generated=generated,
                                                    defines=defines), s) for s in STAGES}
         self.profile = KernelProfile()
@@ -141,17 +147,28 @@ class Wavefront:
                      self.film.frame, self.film.drop_marks, np.uint32(seed), np.uint32(first_sample),
                      np.int32(self.max_depth), *self.film.aov_args())
 
+    def _launch_blocks(self, stage: str, n: int, *args) -> None:
+        """A compaction stage over the blocks of ``n`` queue entries: a work-item a block, or on the GPU
+        class a work-group of COMPACT_GROUP lanes a block."""
+        blocks = -(-n // COMPACT_BLOCK)
+        if not self.compact_group or blocks <= 0:
+            self._launch(stage, blocks, *args)
+            return
+        g = self.compact_group
+        ev = self.kernels[stage](self.device.queue, (blocks * g,), (g,), *args)
+        self.profile.record(stage, ev)
+
     def compact_count(self, n: int, bounce: int, src_q: int) -> None:
         """Count the flagged entries per block of the queue ``src_q`` (at most ``n`` entries)."""
-        self._launch("compact_count", -(-n // COMPACT_BLOCK), self.counters, np.int32(bounce), np.int32(src_q),
-                     self.flags, self.block_counts)
+        self._launch_blocks("compact_count", n, self.counters, np.int32(bounce), np.int32(src_q),
+                            self.flags, self.block_counts)
 
     def compact_scatter(self, n: int, bounce: int, src_q: int, src: cl.Buffer, out: cl.Buffer,
                         out_q: int, out_bounce: int, rest: cl.Buffer | None = None, rest_q: int = -1) -> None:
         """Copy the flagged entries of ``src`` to ``out`` (the others to ``rest``), in order."""
-        self._launch("compact_scatter", -(-n // COMPACT_BLOCK), self.counters, np.int32(bounce), np.int32(src_q),
-                     self.flags, self.block_counts, src, out, np.int32(out_bounce), np.int32(out_q),
-                     out if rest is None else rest, np.int32(rest_q))
+        self._launch_blocks("compact_scatter", n, self.counters, np.int32(bounce), np.int32(src_q),
+                            self.flags, self.block_counts, src, out, np.int32(out_bounce), np.int32(out_q),
+                            out if rest is None else rest, np.int32(rest_q))
 
     def compact(self, n: int, bounce: int, src_q: int, src: cl.Buffer, out: cl.Buffer, out_q: int,
                 out_bounce: int | None = None, rest: cl.Buffer | None = None, rest_q: int = -1) -> None:
