@@ -198,3 +198,35 @@ def test_dry_builds_compute_nothing_and_stay_apart():
     fresh = Renderer(scene, width=4, height=4, device=open_device("pocl")).render(1, seed=3)
     np.testing.assert_array_equal(image, fresh)
     assert image.max() > 0
+
+
+def test_the_command_writes_the_report(toolchain, tmp_path, monkeypatch, capsys):
+    """`pyclpt gpu-isa`: the table on stdout, isa.json, isa.md and isa.png in the folder; exit 1 on a failure."""
+    import pyclpt.gpu.collect as collect
+    from pyclpt.cli import main
+    from pyclpt.device.program import ProgramSource
+
+    def programs(text):
+        return lambda scenes, **kw: [(ProgramSource("zoo", text, ("-cl-std=CL1.2",)), ["tiny"])]
+
+    monkeypatch.setattr(collect, "collect_programs", programs(BROKEN.replace("__builtin_ia32_rsqrtps((float4)(1.0f)).x",
+                                                                             "1.0f")))
+    assert main(["gpu-isa", "tiny", "--targets", "gfx1030", "-o", str(tmp_path)]) == 0
+    assert "| fine | - |" in capsys.readouterr().out  # gfx1030 only: sm_90's column empty
+    assert {p.name for p in tmp_path.iterdir()} == {"isa.json", "isa.md", "isa.png"}
+    assert "| fine |" in (tmp_path / "isa.md").read_text()
+    monkeypatch.setattr(collect, "collect_programs", programs(BROKEN))
+    assert main(["gpu-isa", "tiny", "--targets", "sm_90", "-o", str(tmp_path)]) == 1
+    assert "1 failures" in capsys.readouterr().out
+
+
+def test_missing_tools_are_named(monkeypatch, capsys):
+    import pyclpt.gpu.isa as isa
+    from pyclpt.cli import main
+
+    monkeypatch.setattr(isa.shutil, "which", lambda *a, **k: None)
+    monkeypatch.setattr(isa, "LIBCLC_DIRS", ("/nonexistent",))
+    with pytest.raises(ToolchainMissing, match="apt-get install clang-15 llvm-15 libclc-15"):
+        find_toolchain()
+    assert main(["gpu-isa", "cornell-box", "-o", "/tmp/never"]) == 1
+    assert "pyclpt: error: the GPU ISA check needs libclc" in capsys.readouterr().err

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from pyclpt.gpu.check import IsaReport
 from pyclpt.gpu.targets import TARGETS
+from pyclpt.scene.model import Scene
 
 #: The kernels in the order of a path's life, then the film, the denoiser and the gradients.
 ORDER = ("megakernel", "path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution",
@@ -55,8 +56,8 @@ def budgets(report: IsaReport) -> list[str]:
         c = worst.get((k, "sm_90"))
         if c:
             ok = "met" if c.registers <= SHADING_REGISTERS else "missed"
-            lines.append(f"{k}: {c.registers} registers on sm_90 (budget {SHADING_REGISTERS}: {ok}; worst variant "
-                         f"from {c.program})")
+            where = f"; worst in {', '.join(c.scenes)}" if c.scenes else ""
+            lines.append(f"{k}: {c.registers} registers on sm_90 (budget {SHADING_REGISTERS}: {ok}{where})")
     for k in TRAVERSAL_STAGES:
         c = worst.get((k, "sm_90"))
         if c:
@@ -110,36 +111,35 @@ def plot(report: IsaReport, path: str | Path) -> Path:
     return out
 
 
-def default_scenes() -> list[str]:
-    """The built-in scenes whose files are at hand and the shared scenes (``PYCLPT_SCENES``): what
-    ``pyclpt gpu-isa`` checks without arguments."""
-    from pyclpt.scene.library import builtin_scenes, scenes_root
+def default_scenes() -> list[Scene | str]:
+    """The built-in scenes whose files are at hand (loaded) and the shared scenes (``PYCLPT_SCENES``; their
+    paths): what ``pyclpt gpu-isa`` checks without arguments."""
+    from pyclpt.scene.library import builtin_scenes, load, scenes_root
 
-    names = []
+    scenes: list[Scene | str] = []
     for name in builtin_scenes():
         try:
-            from pyclpt.scene.library import load
-
-            load(name)
-            names.append(name)
+            scenes.append(load(name))
         except (OSError, ValueError):  # a built-in whose mesh lives in the shared folder, absent here
             continue
     root = scenes_root()
     if root is not None:
-        names += [str(p) for p in sorted(root.glob("*/scene.xml"))]
-    return names
+        scenes += [str(p) for p in sorted(root.glob("*/scene.xml"))]
+    return scenes
 
 
-def run(scenes: list[str], out_dir: str | Path, *, targets: list[str] | None = None, every_variant: bool = True,
+def run(scenes: list[Scene | str], out_dir: str | Path, *, targets: list[str] | None = None, every_variant: bool = True,
         device: str | None = None) -> IsaReport:
     """Collect, compile and write ``isa.json``, ``isa.md`` and ``isa.png`` into ``out_dir``."""
     from pyclpt.gpu.check import check_programs
     from pyclpt.gpu.collect import collect_programs
+    from pyclpt.gpu.isa import find_toolchain
 
+    toolchain = find_toolchain()  # before the collection: missing tools are named at once
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = check_programs(collect_programs(scenes, device=device, every_variant=every_variant),
-                            targets or list(TARGETS))
+                            targets or list(TARGETS), toolchain=toolchain)
     report.save(out / "isa.json")
     (out / "isa.md").write_text(markdown(report))
     plot(report, out / "isa.png")
