@@ -6,7 +6,9 @@ import json
 import logging
 import math
 import re
+import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -17,6 +19,28 @@ log = logging.getLogger("pyclpt.cli")
 
 # Exit status of a command stopped by Ctrl-C (128 + SIGINT), as shells report it.
 EXIT_INTERRUPTED = 130
+# Exit status of a command stopped by SIGTERM (128 + SIGTERM).
+EXIT_TERMINATED = 143
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C's KeyboardInterrupt, so that what Ctrl-C cleans
+    up (an image write in progress removes its temporary file) is cleaned up on SIGTERM too."""
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated()
+
+
+def _catch_sigterm():
+    """Turn SIGTERM into :class:`Terminated` for this command; returns the handler to restore (None
+    where signals cannot be handled here: not the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    try:
+        return signal.signal(signal.SIGTERM, _raise_terminated)
+    except (ValueError, OSError, AttributeError):  # no SIGTERM, or not settable here
+        return None
 
 
 def _int_in(lo: int, hi: int | None, note: str = ""):
@@ -79,6 +103,19 @@ def sequence_path(pattern: str, frame: int) -> str:
     return f"{pattern[:m.start()]}{frame:0{len(m.group())}d}{pattern[m.end():]}"
 
 
+# The most samples (frames) one render takes: the 32-bit sample counter (pyclpt.render's limit).
+MAX_SPP = 2**32
+
+
+def _check_spp(a: argparse.Namespace, spp: int) -> int:
+    """The render's sample count, refused up front (before any rendering) above MAX_SPP, naming where it
+    came from: --frames, --spp or the scene's own (a Mitsuba ``sample_count``)."""
+    from pyclpt.common.checks import check_int
+
+    name = "--frames" if a.frames else "--spp" if a.spp else f"spp (the scene's sample count, {a.scene})"
+    return check_int(spp, name, lo=1, hi=MAX_SPP)
+
+
 def _version() -> str:
     from pyclpt import __version__
 
@@ -92,8 +129,10 @@ def _tile(text: str) -> tuple[int, int] | str | None:
     """An argparse type: a tile size, N or WxH pixels, 0 for no tiles, or auto."""
     if text == "auto":
         return text
-    w, _, h = text.lower().partition("x")
+    w, x, h = text.lower().partition("x")
     try:
+        if x and not h:  # "3x": a side is missing, not a square
+            raise ValueError(text)
         size = (int(w), int(h or w))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected N or WxH pixels (0: no tiles), got {text!r}") from None
@@ -210,7 +249,7 @@ def _cmd_render(a: argparse.Namespace) -> int:
         check_output_path(out)
     t0 = time.perf_counter()
     size = {"width": a.width or scene.film.width, "height": a.height or scene.film.height}
-    frames = a.frames or a.spp or scene.spp
+    frames = _check_spp(a, a.frames or a.spp or scene.spp)
     path = CameraPath.orbit(scene, a.orbit, frames) if a.orbit is not None else None
     pr = ProgressiveRenderer(scene, seed=a.seed, integrator=a.integrator, layout=a.layout, max_depth=a.max_depth,
                              device=a.device, precision=a.precision, max_frame_count=a.max_frames,
@@ -224,8 +263,11 @@ def _cmd_render(a: argparse.Namespace) -> int:
             write_image(target, image, exposure=a.exposure)
         a.written = target
 
+    written: list[int] = []  # the frames of a --sequence really written (--max-frames may stop it early)
+
     def write_frame(k: int) -> None:
         write(sequence_path(out, k), pr.denoised() if pr.denoiser is not None else pr.image())
+        written.append(k)
 
     log.info("rendering %d frame(s) of %dx%d into %s", frames, pr.width, pr.height, out)
     image = pr.run(frames, progress=not a.quiet, on_frame=write_frame if a.sequence else None)
@@ -246,7 +288,10 @@ def _cmd_render(a: argparse.Namespace) -> int:
     if acc.get("overflowed_samples"):
         print(f"{acc['overflowed_samples']} pixel samples not added: the {a.precision} sum would overflow float")
     if a.sequence:
-        print(f"wrote {frames} frames: {sequence_path(out, 0)} .. {sequence_path(out, frames - 1)}")
+        n = len(written)
+        stopped = f" of {frames} (--max-frames {a.max_frames} stopped the accumulation)" if n < frames else ""
+        print(f"wrote {n} frame{'s' if n != 1 else ''}{stopped}" +
+              (f": {sequence_path(out, written[0])} .. {sequence_path(out, written[-1])}" if written else ""))
     if pr.denoiser is not None:
         print(f"denoised ({a.denoise}): {sum(row['total_ms'] for row in st.denoise) / 1000:.3f} s on the device"
               + (f", {pr.reprojections} camera moves reprojected" if pr.reprojections else ""))
@@ -289,7 +334,7 @@ def _render_distributed(a: argparse.Namespace) -> int:
     name = scene.name if scene is not None else Path(a.scene).stem
     out = a.output or f"{name}.png"
     check_output_path(sequence_path(out, 0) if a.sequence else out)
-    spp = a.frames or a.spp or scene.spp
+    spp = _check_spp(a, a.frames or a.spp or scene.spp)
     t0 = time.perf_counter()
     with connect(a.scheduler, a.workers) as client:
         t1 = time.perf_counter()
@@ -400,6 +445,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING, format="%(name)s: %(message)s")
     a.written = None
+    previous = _catch_sigterm()
     try:
         if a.command == "bench":
             return _cmd_bench(rest)
@@ -410,13 +456,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         if a.command == "gpu-isa":
             return _cmd_gpu_isa(a)
         return _cmd_scenes()
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated)
+        what = "terminated" if isinstance(exc, Terminated) else "interrupted"
         done = f"{a.written} was written" if a.written else "nothing written"
-        print(f"pyclpt: interrupted; {done}" if a.command == "render" else "pyclpt: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        print(f"pyclpt: {what}; {done}" if a.command == "render" else f"pyclpt: {what}", file=sys.stderr)
+        return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     except _user_errors() as exc:
         print(f"pyclpt: error: {_message(exc)}", file=sys.stderr)
         return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

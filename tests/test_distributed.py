@@ -207,7 +207,7 @@ def test_worker_without_device_names_worker_and_scene():
 def test_timeout_cancels_the_tasks(client):
     dr = DistributedRenderer(client, "cornell-box", width=W, height=H)
     with distributed.get_task_stream(client) as stream:
-        with pytest.raises(TimeoutError):
+        with pytest.raises(TimeoutError, match=r"not finished within timeout=0.5 s: \d+ of 4096 tasks left"):
             dr.render(4096, task_spp=1, timeout=0.5)
         _wait_released(client)
     # Cancelled, not run to the end: uncancelled, the 4096 tasks would all have run before their release.
@@ -336,3 +336,48 @@ def test_cli_bad_tile_named(capsys):
     with pytest.raises(SystemExit):
         main(["render", "cornell-box", "--workers", "2", "--tile", "8y8"])
     assert "--tile: expected N or WxH pixels (0: no tiles), got '8y8'" in capsys.readouterr().err
+
+
+def test_merge_refuses_a_cancelled_task_s_exception():
+    """A cancelled future's exception (what as_completed yields for it) is not a partial sum: a clear
+    TypeError, never AttributeError 'no attribute first_sample'."""
+    cancelled = distributed.client.FutureCancelledError("pyclpt-x", "scheduler-connection-lost")
+    good = PartialSum(0, 1, np.ones((1, 1, 3)))
+    for parts in ([good, cancelled], [cancelled]):
+        with pytest.raises(TypeError, match="FutureCancelledError .*cancelled or failed task's exception"):
+            merge(parts, 2)
+        with pytest.raises(TypeError, match="cancelled or failed task's exception"):
+            merge_tiles(parts, 2, 1, 1)
+
+
+def test_lost_scheduler_is_a_clear_error_at_once():
+    """The scheduler closes mid-render: ConnectionError naming its address and the lost connection,
+    within seconds (the tasks are cancelled then), not an AttributeError after the whole job."""
+    with local_cluster(1, env={"POCL_MAX_PTHREAD_COUNT": "1"}) as cluster, \
+            distributed.Client(cluster, timeout="5s") as c:  # 5 s: its reconnect attempts at the end
+        c.wait_for_workers(1, timeout=JOB_TIMEOUT)
+        address = c.scheduler.address
+        dr = DistributedRenderer(c, "cornell-box", width=8, height=8)
+        dr.render(1, task_spp=1, timeout=JOB_TIMEOUT)  # the worker has loaded the scene
+        result: dict = {}
+
+        def job():
+            try:
+                dr.render(4096, task_spp=1, timeout=JOB_TIMEOUT)
+            except BaseException as exc:  # noqa: BLE001 - handed to the test thread
+                result["error"] = exc
+
+        thread = threading.Thread(target=job)
+        thread.start()
+        deadline = time.monotonic() + JOB_TIMEOUT
+        while not any(str(k).startswith("pyclpt-") for keys in c.processing().values() for k in keys):
+            assert time.monotonic() < deadline, "no task started"
+            time.sleep(0.005)
+        cluster.sync(cluster.scheduler.close)
+        lost = time.monotonic()
+        thread.join(JOB_TIMEOUT)
+        assert not thread.is_alive(), "the render hung after the scheduler was lost"
+        assert time.monotonic() - lost < JOB_TIMEOUT / 2
+        error = result.get("error")
+        assert isinstance(error, ConnectionError), repr(error)
+        assert f"lost the connection to the Dask scheduler at {address}" in str(error)

@@ -4,13 +4,21 @@ EXR/HDR/PFM keep linear float radiance; PNG, JPEG, TIFF and the like get the
 sRGB transfer curve after ``exposure`` (stops) and are quantised to 8 bits.
 
 Writing never loses an image: the output is checked first (:func:`check_output_path`: a format
-OpenImageIO can write, an existing writable folder), the pixels are checked (NaN is always an
+OpenImageIO can write, an existing writable folder, no read-only file), the pixels are checked (NaN is always an
 error, infinity for formats that cannot hold it), and the file is written to a temporary file in
 the same folder, then renamed over the target, so a failed or interrupted write leaves neither a
 half-written file nor a damaged earlier image.
+
+OpenImageIO encodes into memory (an anonymous in-memory file), where the encoders cannot meet a
+full disk: some report no failed write (PNG) and libjpeg ends the whole process on one (JPEG). The
+encoded bytes are read back and checked, then written with Python's own file I/O, which raises
+OSError (ENOSPC, EIO ...) for every failed write, flush or close; the temporary file's size is
+checked after fsync before the rename. A read-only output file is refused, as a read-only folder
+is; an output that is a symbolic link is written through: its target is replaced, atomically.
 """
 from __future__ import annotations
 
+import errno
 import math
 import os
 import secrets
@@ -26,6 +34,8 @@ import OpenImageIO as oiio
 LINEAR_EXTENSIONS = {".exr", ".hdr", ".pfm"}
 # Formats whose float pixels can hold +-infinity (RGBE .hdr cannot, 8-bit formats cannot).
 INFINITY_EXTENSIONS = {".exr", ".pfm"}
+# Formats that store the pixels exactly: the encoded image is read back and compared before writing.
+LOSSLESS_EXTENSIONS = {".exr", ".pfm", ".png", ".tif", ".tiff"}
 # Exposure in stops: beyond this the scale 2**exposure under- or overflows float32.
 MAX_EXPOSURE = 64.0
 FORMATS_HINT = ".exr (linear float), .png or .jpg (sRGB, 8 bits)"
@@ -59,8 +69,10 @@ def check_exposure(exposure: object) -> float:
 def check_output_path(path: str | os.PathLike) -> Path:
     """Check that an image can be written to ``path`` before anything expensive happens: it has an
     extension OpenImageIO has a writer for, it is not a folder, and its folder exists and accepts
-    new files (tried with a nameless temporary file). Returns ``path`` as a Path; raises ValueError
-    (format) or OSError (folder), each naming the path."""
+    new files (tried with a nameless temporary file), and an existing file there is not read-only
+    (no write permission bits, or not writable by this user: refused, as for a read-only folder).
+    A symbolic link is followed: its target is checked (and written). Returns ``path`` as a Path;
+    raises ValueError (format) or OSError (folder, read-only file), each naming the path."""
     path = Path(path)
     if path.is_dir():
         raise IsADirectoryError(f"{path}: is a folder; give an image file name, e.g. {path / 'image.exr'}")
@@ -81,6 +93,11 @@ def check_output_path(path: str | os.PathLike) -> Path:
     except OSError as exc:
         raise PermissionError(f"{path}: cannot write in the output folder {folder}: "
                               f"{exc.strerror or exc}") from None
+    if path.is_file():
+        mode = path.stat().st_mode
+        if not mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH) or not os.access(path, os.W_OK):
+            raise PermissionError(f"{path}: the file is read-only; not overwritten (make it writable, "
+                                  f"e.g. chmod u+w, or remove it, or write another file)")
     return path
 
 
@@ -102,19 +119,109 @@ def _temporary_path(path: Path) -> Path:
     return path.with_name(f".{path.stem}.tmp-{secrets.token_hex(4)}{path.suffix}")
 
 
-def _write(out: oiio.ImageOutput, path: Path, target: Path, spec: oiio.ImageSpec, pixels: np.ndarray) -> None:
-    """Write ``pixels`` to ``path`` (errors name ``target``, the file the user asked for)."""
-    if not out.open(str(path), spec):
-        raise OSError(f"{target}: cannot open for writing: {out.geterror()}")
+def _memory_file() -> tuple[int, str] | None:
+    """An anonymous in-memory file (Linux memfd) and a name OpenImageIO can open it by, or None."""
+    if not hasattr(os, "memfd_create"):
+        return None
     try:
-        ok = out.write_image(pixels)
-        error = "" if ok else out.geterror()
+        fd = os.memfd_create("pyclpt-image", getattr(os, "MFD_CLOEXEC", 0))
+    except OSError:
+        return None
+    name = f"/proc/self/fd/{fd}"
+    if not os.path.exists(name):  # no /proc: the memory file cannot be named
+        os.close(fd)
+        return None
+    return fd, name
+
+
+def _encode(out: oiio.ImageOutput, target: Path, spec: oiio.ImageSpec, pixels: np.ndarray) -> bytes:
+    """The file ``out`` encodes from ``pixels``, as bytes: written into memory (where no encoder meets a
+    full disk), or, without in-memory files (not Linux), into the system temporary folder (there a
+    full disk is still the encoder's to report); then read back with OpenImageIO and checked (size,
+    and the pixels of lossless formats)."""
+    memory = _memory_file()
+    if memory is not None:
+        fd, name = memory
+    else:
+        fd, name = tempfile.mkstemp(prefix="pyclpt-image-", suffix=target.suffix)
+    try:
+        if not out.open(name, spec):
+            raise OSError(f"{target}: cannot encode the image: {out.geterror()}")
+        try:
+            ok = out.write_image(pixels)
+            error = "" if ok else out.geterror()
+        finally:
+            closed = out.close()
+        if not ok:
+            raise OSError(f"{target}: write failed: {error}")
+        if not closed:
+            raise OSError(f"{target}: write failed on close: {out.geterror()}")
+        _verify(name, target, spec, pixels)
+        os.lseek(fd, 0, os.SEEK_SET)
+        with open(fd, "rb", closefd=False) as f:
+            data = f.read()
     finally:
-        closed = out.close()
-    if not ok:
-        raise OSError(f"{target}: write failed: {error}")
-    if not closed:
-        raise OSError(f"{target}: write failed on close: {out.geterror()}")
+        os.close(fd)
+        if memory is None:
+            os.unlink(name)
+    if not data:
+        raise OSError(f"{target}: write failed: the encoder produced no bytes")
+    return data
+
+
+def _verify(name: str, target: Path, spec: oiio.ImageSpec, pixels: np.ndarray) -> None:
+    """The encoded file ``name`` is a readable image of ``spec``'s size, and, in lossless formats, holds
+    ``pixels`` exactly (8-bit RGBA is not compared: the alpha (un)association rounds the colours)."""
+    inp = oiio.ImageInput.open(name)
+    if inp is None:
+        raise OSError(f"{target}: write failed: the encoded image cannot be read back: {oiio.geterror()}")
+    try:
+        got = inp.spec()
+        if (got.width, got.height) != (spec.width, spec.height):  # (JPEG drops an alpha channel)
+            raise OSError(f"{target}: write failed: the encoded image is {got.width}x{got.height}, "
+                          f"not {spec.width}x{spec.height}")
+        back = inp.read_image(pixels.dtype.name if pixels.dtype == np.uint8 else "float")
+        if back is None:
+            raise OSError(f"{target}: write failed: the encoded image cannot be read back: {inp.geterror()}")
+        names = list(got.channelnames)
+    finally:
+        inp.close()
+    if (target.suffix.lower() not in LOSSLESS_EXTENSIONS or got.nchannels != spec.nchannels
+            or (pixels.dtype == np.uint8 and spec.nchannels == 4)):
+        return
+    back = np.asarray(back).reshape(pixels.shape[:2] + (-1,))
+    if sorted(names) == sorted(spec.channelnames):  # OpenEXR stores the channels sorted by name
+        back = back[..., [names.index(n) for n in spec.channelnames]]
+    if not np.array_equal(back.reshape(pixels.shape), pixels):
+        raise OSError(f"{target}: write failed: the encoded image does not hold the pixels written")
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    """os.write until every byte is written (a short write is not an error; a failed one raises)."""
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+def _write(out: oiio.ImageOutput, path: Path, target: Path, spec: oiio.ImageSpec, pixels: np.ndarray) -> None:
+    """Write ``pixels`` to the new file ``path`` (errors name ``target``, the file the user asked for):
+    encoded in memory by ``out``, then written with Python's file I/O, flushed to the disk (fsync)
+    and its size checked, so a full disk or an I/O error raises OSError (errno kept) here."""
+    data = _encode(out, target, spec, pixels)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+        try:
+            _write_all(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        size = os.stat(path).st_size
+        if size != len(data):
+            raise OSError(errno.EIO, f"{size} of {len(data)} bytes on the disk")
+    except OSError as exc:
+        error = OSError(f"{target}: write failed: {exc.strerror or exc}; nothing replaced")
+        error.errno = exc.errno  # (a filename too would change the message)
+        raise error from exc
 
 
 def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0) -> Path:
@@ -143,12 +250,13 @@ def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.
     spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], fmt)
     if ext not in LINEAR_EXTENSIONS:
         spec.attribute("oiio:ColorSpace", "sRGB")
-    tmp = _temporary_path(path)
+    real = Path(os.path.realpath(path))  # a symbolic link is written through: its target is replaced
+    tmp = _temporary_path(real)
     try:
         _write(out, tmp, path, spec, pixels)
-        if path.is_file():  # keep the permissions of the image it replaces
-            os.chmod(tmp, stat.S_IMODE(path.stat().st_mode))
-        os.replace(tmp, path)
+        if real.is_file():  # keep the permissions of the image it replaces
+            os.chmod(tmp, stat.S_IMODE(real.stat().st_mode))
+        os.replace(tmp, real)
     except BaseException:  # failed or interrupted (KeyboardInterrupt): leave no half file behind
         tmp.unlink(missing_ok=True)
         raise
@@ -187,10 +295,13 @@ def write_layers(path: str | os.PathLike, image: np.ndarray,
         raise OSError(f"{path}: no image writer for .exr: {oiio.geterror()}")
     spec = oiio.ImageSpec(img.shape[1], img.shape[0], len(names), "float")
     spec.channelnames = tuple(names)
-    tmp = _temporary_path(path)
+    real = Path(os.path.realpath(path))  # a symbolic link is written through: its target is replaced
+    tmp = _temporary_path(real)
     try:
         _write(out, tmp, path, spec, pixels)
-        os.replace(tmp, path)
+        if real.is_file():  # keep the permissions of the image it replaces
+            os.chmod(tmp, stat.S_IMODE(real.stat().st_mode))
+        os.replace(tmp, real)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -37,8 +37,20 @@ class PartialSum:
     gbuffer: np.ndarray | None = None
 
 
+def _checked(parts: Iterable[PartialSum]) -> list[PartialSum]:
+    """``parts`` as a list, TypeError naming the first that is not a PartialSum (a cancelled or failed
+    task's exception is not a result: a lost scheduler cancels every task)."""
+    parts = list(parts)
+    for p in parts:
+        if not isinstance(p, PartialSum):
+            what = "a cancelled or failed task's exception" if isinstance(p, BaseException) else "not a result"
+            raise TypeError(f"cannot merge {type(p).__name__} {str(p)[:120]!r} ({what}): every part must be a "
+                            f"PartialSum")
+    return parts
+
+
 def _in_order(parts: Iterable[PartialSum], first_sample: int, spp: int) -> list[PartialSum]:
-    ordered = sorted(parts, key=lambda p: p.first_sample)
+    ordered = sorted(_checked(parts), key=lambda p: p.first_sample)
     s = first_sample
     for p in ordered:
         if p.first_sample != s:
@@ -67,7 +79,7 @@ def merge_tiles(parts: Iterable[PartialSum], spp: int, width: int, height: int,
     apart, (H, W, 3) float64, and its dropped-sample count: each tile's sums :func:`merge`\ d, and put in
     its place. ValueError unless the tiles cover the image once."""
     by_tile: dict[Crop, list[PartialSum]] = {}
-    for p in parts:
+    for p in _checked(parts):
         by_tile.setdefault(p.crop or Crop(0, 0, width, height), []).append(p)
     covered = np.zeros((height, width), np.int32)
     total, dropped = np.empty((height, width, 3), np.float64), 0

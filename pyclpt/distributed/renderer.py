@@ -59,6 +59,8 @@ class DistributedRenderer:
                  precision: str = DEFAULT_PRECISION) -> None:
         self._distributed = import_distributed()
         self.client = client
+        # how errors name the cluster once its scheduler is gone (the client then forgets it)
+        self.scheduler_address = str(getattr(getattr(client, "scheduler", None), "address", None) or "?")
         if isinstance(scene, os.PathLike) or (isinstance(scene, str) and os.path.isfile(scene)):
             scene = os.path.abspath(scene)  # the workers see the same path (shared storage)
         self.source = SceneSource.of(scene, defines)
@@ -112,16 +114,45 @@ class DistributedRenderer:
                       delay=PROGRESS_DELAY_S, leave=False) as bar:
                 for future, part in d.as_completed(futures, with_results=True, timeout=timeout):
                     i = index[future.key]
+                    if not isinstance(part, PartialSum):  # cancelled or failed: its exception, not a result
+                        self._failed(future, part, desc, sum(r is not None for r in results), len(tasks))
                     results[i] = part
                     if on_result is not None:
                         on_result(i, part)
                     bar.update(unit_of(tasks[i]))
+        except TimeoutError:
+            left = sum(r is None for r in results)
+            raise TimeoutError(f"{desc}: not finished within timeout={timeout} s: {left} of {len(tasks)} tasks "
+                               f"left (cancelled)") from None
         finally:
             pending = [f for f in futures if not f.done()]
             if pending:
                 self.client.cancel(pending, force=True)
         self.parts = results
         return results
+
+    def _failed(self, future: Any, outcome: object, desc: str, done: int, total: int) -> None:
+        """Raise the error of a task that did not return its part: ConnectionError when the client lost
+        the scheduler (every task is cancelled then), else the task's own exception or a RuntimeError."""
+        reason = str(getattr(outcome, "reason", "") or "")
+        status = str(getattr(self.client, "status", "running"))
+        if reason == "scheduler-connection-lost" or status not in ("running", "newly-created"):
+            raise ConnectionError(f"{desc}: lost the connection to the Dask scheduler at {self.scheduler_address} "
+                                  f"during the render ({done} of {total} tasks finished; nothing merged, no image)")
+        if isinstance(outcome, tuple) and len(outcome) == 3 and isinstance(outcome[1], BaseException):
+            raise outcome[1].with_traceback(outcome[2])  # an error's (type, exception, traceback)
+        if isinstance(outcome, Exception) and not isinstance(outcome, self._cancelled_errors()):
+            raise outcome
+        raise RuntimeError(f"{desc}: task {future.key} on the Dask scheduler at {self.scheduler_address} "
+                           f"returned no result ({type(outcome).__name__}: {outcome}); "
+                           f"{done} of {total} tasks finished")
+
+    @staticmethod
+    def _cancelled_errors() -> tuple[type[BaseException], ...]:
+        import asyncio
+        import concurrent.futures
+
+        return (asyncio.CancelledError, concurrent.futures.CancelledError)
 
     def render_sum(self, spp: int, seed: int = 0, *, task_spp: int | None = None, first_sample: int = 0,
                    tile: int | tuple[int, int] | str | None = "auto", progress: bool | None = None,

@@ -109,7 +109,7 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     """Reverse mode: the gradient of a loss with respect to scene parameters, given the loss's gradient
     with respect to the image, ``image_grad`` (H, W, 3) (dLoss/dI of ``pyclpt.render(scene, ...)``).
 
-    ``params``: the names to differentiate (default: every differentiable one; see
+    ``params``: the names to differentiate, or one name (default: every differentiable one; see
     :func:`pyclpt.traverse`). Returns ``{name: gradient}``, each shaped as the parameter's value.
     ``seed`` must differ from the seed of the image the loss was computed on (``loss_seed``, when
     given, is checked): the same random numbers in both make the gradient biased (the error of the
@@ -121,6 +121,14 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
                          f"use another seed for the gradient (the same random numbers make it biased: "
                          f"the image's noise and the paths that carry its gradient are correlated)")
     spp = check_int(scene.spp if spp is None else spp, "spp", lo=1, hi=2**32 - 1)
+    if isinstance(params, str):  # one name, not its letters
+        params = [params]
+    elif params is not None and not isinstance(params, SceneParameters):
+        names = list(params) if isinstance(params, Iterable) else None
+        if names is None or not all(isinstance(n, str) for n in names):
+            raise TypeError(f"params must be a parameter name, a sequence of names, a SceneParameters or "
+                            f"None, got {type(params).__name__} {params!r:.60}")
+        params = names
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
     grad = np.asarray(image_grad, np.float32)
     expected = (replay.height, replay.width, 3)

@@ -341,8 +341,12 @@ class SceneParameters(Mapping[str, np.ndarray]):
         scene (each checked by the scene model: a bad value raises ValueError naming the parameter,
         nothing is written and the staged values are dropped), then upload what changed to the device
         copies kept for gradients. Returns the names updated."""
-        for k, v in (values or {}).items():
-            self[k] = v
+        try:
+            for k, v in (values or {}).items():
+                self[k] = v
+        except Exception:  # all or nothing: a bad value drops every staged one, none is written later
+            self._staged.clear()
+            raise
         names = list(self._staged)
         olds = {k: self._params[k].get() for k in names}
         done: list[str] = []
