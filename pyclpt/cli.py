@@ -13,7 +13,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from pyclpt.common.image_io import MAX_EXPOSURE
+from pyclpt.common.image_io import LINEAR_EXTENSIONS, MAX_EXPOSURE
 
 log = logging.getLogger("pyclpt.cli")
 
@@ -66,6 +66,16 @@ def _define(text: str) -> tuple[str, str]:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE (NAME a letter or _ then letters, digits, _), "
                                          f"got {text!r}")
     return name, value
+
+
+def _drop_linear_exposure(a: argparse.Namespace, out: str, aovs: object) -> None:
+    """--exposure scales PNG/JPEG output only: for a linear output (EXR, --aov layers) warn once and
+    drop it, rather than scale the radiance or warn for every frame."""
+    ext = Path(out).suffix.lower()
+    if a.exposure != 0.0 and (aovs or ext in LINEAR_EXTENSIONS):
+        what = "--aov layers" if aovs else f"a linear {ext} file"
+        log.warning("--exposure %g applies to PNG/JPEG output only; ignored for %s (%s)", a.exposure, what, out)
+        a.exposure = 0.0
 
 
 def _exposure(text: str) -> float:
@@ -174,7 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--layout", choices=("soa", "aos"), default="soa", help="wavefront path-state layout")
     r.add_argument("--device", default=None, help="OpenCL device: pocl, gpu, cpu, P:D or a name substring")
     r.add_argument("--exposure", type=_exposure, default=0.0,
-                   help=f"exposure in stops for PNG/JPEG output, within +-{MAX_EXPOSURE:g} (default 0)")
+                   help=f"exposure in stops for PNG/JPEG output, within +-{MAX_EXPOSURE:g} (default 0); "
+                        f"ignored, with a warning, for EXR and --aov output")
     r.add_argument("--aov", default=None, metavar="NAMES",
                    help="comma-separated AOVs written beside R,G,B into one multi-layer .exr (albedo.R, normal.X, "
                         "depth.Z, motion.X, ...): albedo, normal, roughness, depth, hitdist, motion, emission, "
@@ -245,6 +256,7 @@ def _cmd_render(a: argparse.Namespace) -> int:
         raise ValueError(f"{what} splits a render over a cluster: give --workers N or --scheduler ADDRESS")
     scene = load(a.scene, **dict(a.define))
     out = a.output or f"{scene.name}.{'exr' if aovs else 'png'}"
+    _drop_linear_exposure(a, out, aovs)
     if not a.output:
         check_output_path(out)
     t0 = time.perf_counter()
@@ -334,6 +346,7 @@ def _render_distributed(a: argparse.Namespace) -> int:
     name = scene.name if scene is not None else Path(a.scene).stem
     out = a.output or f"{name}.png"
     check_output_path(sequence_path(out, 0) if a.sequence else out)
+    _drop_linear_exposure(a, out, None)
     spp = _check_spp(a, a.frames or a.spp or scene.spp)
     t0 = time.perf_counter()
     with connect(a.scheduler, a.workers) as client:

@@ -381,3 +381,45 @@ def test_lost_scheduler_is_a_clear_error_at_once():
         error = result.get("error")
         assert isinstance(error, ConnectionError), repr(error)
         assert f"lost the connection to the Dask scheduler at {address}" in str(error)
+
+
+def _quad_obj(path, x0: float) -> None:
+    """A square (two triangles) facing the camera, its left edge at x = x0."""
+    path.write_text(f"v {x0} 0.2 0.5\nv {x0 + 0.8} 0.2 0.5\nv {x0 + 0.8} 1.4 0.5\nv {x0} 1.4 0.5\n"
+                    "f 1 2 3\nf 1 3 4\n")
+
+
+def test_worker_cache_sees_an_edited_mesh_file(client, tmp_path):
+    """A persistent cluster keys its renderers on every file the scene reads, not the XML's mtime
+    alone: an edited OBJ renders the new geometry (the same image as a fresh local render)."""
+    obj = tmp_path / "quad.obj"
+    _quad_obj(obj, -0.9)
+    xml = tmp_path / "scene.xml"
+    xml.write_text(SMALL_SCENE.replace(
+        '<shape type="sphere"><point name="center" x="0" y="0.6" z="0"/><float name="radius" value="0.6"/>',
+        '<shape type="obj"><string name="filename" value="quad.obj"/>'))
+    assert str(obj) in map(str, pyclpt.load(str(xml)).files)
+    dr = DistributedRenderer(client, str(xml), width=W, height=H, max_depth=3)
+    before = dr.render(4, seed=2, task_spp=2, timeout=JOB_TIMEOUT)
+    _quad_obj(obj, 0.05)  # moved (and a file of another size): the XML is untouched
+    after = dr.render(4, seed=2, task_spp=2, timeout=JOB_TIMEOUT)
+    assert not np.array_equal(after, before)
+    ref32, _ = _local(pyclpt.load(str(xml)), 4, seed=2, max_depth=3)
+    np.testing.assert_allclose(after, ref32, rtol=1e-6, atol=1e-7)
+
+
+def test_shipped_scene_is_sent_again_after_an_edit(client):
+    """DistributedRenderer(client, scene): a Scene changed after it was sent (vertices moved in place,
+    a field assigned) is sent again before the next render, never the first copy rendered."""
+    scene = pyclpt.load("cornell-box")
+    dr = DistributedRenderer(client, scene, width=W, height=H, max_depth=3)
+    before = dr.render(4, seed=5, task_spp=2, timeout=JOB_TIMEOUT)
+    token = dr.source.token
+    again = dr.render(4, seed=5, task_spp=2, timeout=JOB_TIMEOUT)
+    assert dr.source.token == token  # unchanged: not sent again
+    np.testing.assert_array_equal(again, before)
+    next(m for m in scene.meshes if m.name == "small-box").positions[:, 0] += 0.3  # in place
+    after = dr.render(4, seed=5, task_spp=2, timeout=JOB_TIMEOUT)
+    assert dr.source.token != token and not np.array_equal(after, before)
+    np.testing.assert_allclose(after, _local(scene, 4, seed=5, max_depth=3)[0], rtol=1e-6, atol=1e-7)
+    dr.close()

@@ -672,6 +672,49 @@ def _build_prims(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return prims
 
 
+def _cache_entry_problem(nodes: np.ndarray, tris: np.ndarray, order: np.ndarray, pos32: np.ndarray,
+                         idx: np.ndarray, width: int) -> str | None:
+    """None when a loaded cache entry is a BVH of this mesh the renderer can use, else what is wrong:
+    shapes and dtypes, ``tri_order`` a permutation of the triangles, ``tris`` the mesh's triangles
+    in that order, node boxes free of NaN (infinite only for empty children), links in range (an
+    internal link after its parent: no cycles, leaves within ``tris``)."""
+    T = idx.shape[0]
+    if not (nodes.dtype == np.float32 and nodes.ndim == 2 and nodes.shape[0] >= 1 and nodes.shape[1] == 8 * width):
+        return f"nodes: expected (N >= 1, {8 * width}) float32, got {nodes.shape} {nodes.dtype}"
+    if not (tris.dtype == np.float32 and tris.shape == (T, 9)):
+        return f"tris: expected ({T}, 9) float32, got {tris.shape} {tris.dtype}"
+    if not (order.dtype == np.int32 and order.shape == (T,)):
+        return f"tri_order: expected ({T},) int32, got {order.shape} {order.dtype}"
+    if order.min() < 0 or order.max() >= T or np.any(np.bincount(order, minlength=T) != 1):
+        return f"tri_order is not a permutation of the {T} triangles (values {int(order.min())}..{int(order.max())})"
+    i = idx[order]
+    v0 = pos32[i[:, 0]]
+    with np.errstate(over="ignore", invalid="ignore"):
+        expected = np.concatenate([v0, pos32[i[:, 1]] - v0, pos32[i[:, 2]] - v0], axis=1)
+    if not np.array_equal(tris, expected):
+        return "tris do not match the mesh's triangles in tri_order"
+    bvh = FlatBVH(nodes=nodes, tris=tris, tri_order=order, build_seconds=0.0)
+    lo, hi, links = bvh.children()
+    if np.isnan(lo).any() or np.isnan(hi).any():
+        bad = np.isnan(lo).any(axis=(1, 2)) | np.isnan(hi).any(axis=(1, 2))
+        return f"node {int(np.flatnonzero(bad)[0])} has NaN bounds"
+    N = bvh.node_count
+    links64 = links.astype(np.int64)
+    leaf = links64 < 0
+    empty = links64 == np.iinfo(np.int32).min
+    full = ~empty
+    if not (np.isfinite(lo[full]).all() and np.isfinite(hi[full]).all()):
+        return "a non-empty child has infinite bounds"
+    parent = np.broadcast_to(np.arange(N)[:, None], links64.shape)
+    inner = ~leaf
+    if np.any(links64[inner] <= parent[inner]) or np.any(links64[inner] >= N):
+        return f"an internal link is outside nodes 1..{N - 1} or not after its parent"
+    bits = links64[leaf & full] & 0x7FFFFFFF
+    if np.any((bits >> 5) + (bits & 31) > T):
+        return f"a leaf reaches past the {T} triangles"
+    return None
+
+
 def build_bvh(positions: np.ndarray, indices: np.ndarray, *, use_cache: bool = True,
               settings: BuildSettings | None = None) -> FlatBVH:
     """Build (or load from the disk cache) the flattened BVH of a triangle mesh.
@@ -693,12 +736,10 @@ def build_bvh(positions: np.ndarray, indices: np.ndarray, *, use_cache: bool = T
         try:
             with np.load(path, allow_pickle=False) as z:
                 nodes, tris, order = z["nodes"], z["tris"], z["tri_order"]
-            T = idx.shape[0]
-            if (nodes.dtype == np.float32 and nodes.ndim == 2 and nodes.shape[1] == 8 * settings.width
-                    and tris.dtype == np.float32 and tris.shape == (T, 9)
-                    and order.dtype == np.int32 and order.shape == (T,)):
+            problem = _cache_entry_problem(nodes, tris, order, pos32, idx, settings.width)
+            if problem is None:
                 return FlatBVH(nodes=nodes, tris=tris, tri_order=order, build_seconds=0.0)
-            log.warning("ignoring malformed BVH cache entry %s", path)
+            log.warning("ignoring malformed BVH cache entry %s (%s); rebuilding", path, problem)
         except Exception as exc:  # corrupt or truncated file: rebuild
             log.warning("ignoring unreadable BVH cache entry %s (%s)", path, exc)
     bvh = _build(pos32, idx, settings)

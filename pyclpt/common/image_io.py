@@ -19,6 +19,7 @@ is; an output that is a symbolic link is written through: its target is replaced
 from __future__ import annotations
 
 import errno
+import logging
 import math
 import os
 import secrets
@@ -30,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
+
+log = logging.getLogger("pyclpt.common.image_io")
 
 LINEAR_EXTENSIONS = {".exr", ".hdr", ".pfm"}
 # Formats whose float pixels can hold +-infinity (RGBE .hdr cannot, 8-bit formats cannot).
@@ -226,7 +229,9 @@ def _write(out: oiio.ImageOutput, path: Path, target: Path, spec: oiio.ImageSpec
 
 def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0) -> Path:
     """Write an (H, W, 3) linear image; the format follows the extension; ``exposure`` in stops
-    (finite, within +-64). Atomic: written to a temporary file beside ``path``, then renamed over it.
+    (finite, within +-64) scales 8-bit output only: a linear file (.exr, .hdr, .pfm) keeps the
+    radiance as rendered, and a non-zero exposure there is ignored with a warning. Atomic: written
+    to a temporary file beside ``path``, then renamed over it.
     Raises ValueError for a bad image (NaN pixels; infinite ones in a format that cannot hold
     them), extension or exposure, OSError when the file cannot be written; nothing is written then."""
     path = Path(path)
@@ -237,6 +242,10 @@ def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.
     check_output_path(path)
     _check_pixels(path, img)
     ext = path.suffix.lower()
+    if ext in LINEAR_EXTENSIONS and exposure != 0.0:  # a linear file keeps the radiance as rendered
+        log.warning("%s: exposure %g applies to 8-bit output (PNG, JPEG, ...) only; ignored for a linear %s file",
+                    path, exposure, ext)
+        exposure = 0.0
     with np.errstate(over="ignore"):  # a huge finite value times 2**exposure: inf, clipped to 1 in 8 bits
         scaled = img * np.float32(2.0 ** exposure)
     if ext in LINEAR_EXTENSIONS:

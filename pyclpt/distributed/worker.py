@@ -1,10 +1,11 @@
 """What runs on a worker: a task's sample range rendered with a renderer the worker keeps.
 
 Each worker process loads a scene once and keeps its :class:`~pyclpt.rendering.renderer.Renderer`
-(scene buffers, BVH, compiled programs) in a small cache keyed by the scene (file path and
-modification time, ``-D`` parameters, or a shipped scene's token) and the renderer settings, so the
-many tasks of one render pay for the scene once. The device is the worker's own choice, as pyclpt
-makes it on one machine (``PYCLPT_DEVICE`` in the worker's environment, else the default device).
+(scene buffers, BVH, compiled programs) in a small cache keyed by the scene (file path, the
+modification times and sizes of every file it reads: Scene.files, ``-D`` parameters, or a shipped
+scene's token) and the renderer settings, so the many tasks of one render pay for the scene once.
+The device is the worker's own choice, as pyclpt makes it on one machine (``PYCLPT_DEVICE`` in the
+worker's environment, else the default device).
 
 A scene a worker cannot open, or a worker without an OpenCL device, fails the task with a
 :class:`WorkerError` naming the worker and the file; the client re-raises it and cancels the job.
@@ -53,14 +54,28 @@ def worker_name() -> str:
         return f"{os.uname().nodename} pid {os.getpid()}"
 
 
-def _file_stamp(source: SceneSource) -> int:
-    """The scene file's modification time (ns), so an edited file is loaded again; 0 for a shipped scene."""
+# the files the last load of a scene file read (Scene.files: includes, meshes, textures), by (path, defines)
+_read_files: dict[tuple, tuple[str, ...]] = {}
+
+
+def _stat(path: str | os.PathLike) -> tuple[int, int]:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return (-1, -1)  # gone: a load will say so
+    return st.st_mtime_ns, st.st_size
+
+
+def _file_stamp(source: SceneSource) -> tuple:
+    """The modification times (ns) and sizes of the scene file and of every file its last load read
+    (includes, meshes, textures: Scene.files), so a scene is loaded again when any of them changed;
+    () for a shipped scene. A changed file list comes with a changed scene file or include."""
     if source.path is None:
-        return 0
-    for path in (Path(source.path), builtin_dir() / f"{source.path}.json"):
-        if path.is_file():
-            return path.stat().st_mtime_ns
-    return 0
+        return ()
+    files = _read_files.get((source.path, source.defines))
+    if files is None:
+        files = tuple(str(p) for p in (Path(source.path), builtin_dir() / f"{source.path}.json") if p.is_file())[:1]
+    return tuple((f, *_stat(f)) for f in files)
 
 
 def _cached(cache: OrderedDict[tuple, Renderer], key: tuple, size: int, make: Callable[[], Renderer]) -> Renderer:
@@ -79,6 +94,11 @@ def renderer_for(source: SceneSource, settings: tuple[tuple[str, Any], ...], cro
     of that tile of the image. The first renderer of a scene (of whatever window: a tiled render never
     makes a film of the whole image) keeps its buffers; the other windows' renderers share them."""
     key = (source.path, source.defines, source.token, _file_stamp(source), settings)
+    if key not in _cache:  # kept under the stamp of every file the load read (known once it is loaded)
+        r = _load(source, settings, crop)
+        key = (source.path, source.defines, source.token, _file_stamp(source), settings)
+        _cache.pop(key, None)
+        _cached(_cache, key, CACHE_SIZE, lambda: r)
     r = _cached(_cache, key, CACHE_SIZE, lambda: _load(source, settings, crop))
     if r.crop == crop:
         return r
@@ -88,6 +108,8 @@ def renderer_for(source: SceneSource, settings: tuple[tuple[str, Any], ...], cro
 def _load(source: SceneSource, settings: tuple[tuple[str, Any], ...], crop: Crop | None) -> Renderer:
     try:
         scene = load(source.path, **dict(source.defines)) if source.path is not None else source.scene
+        if source.path is not None:
+            _read_files[(source.path, source.defines)] = tuple(str(p) for p in scene.files)
     except Exception as exc:
         raise WorkerError(f"worker {worker_name()}: cannot open scene {source.name}: "
                           f"{type(exc).__name__}: {exc}") from None

@@ -35,6 +35,8 @@ class Adam(MutableMapping[str, np.ndarray]):
         if not (self.beta_1 < 1.0 and self.beta_2 < 1.0):
             raise ValueError(f"beta_1 and beta_2 must be < 1, got {beta_1}, {beta_2}")
         self.epsilon = check_float(epsilon, "epsilon", lo=0.0)
+        if self.epsilon == 0.0:  # a zero gradient would divide 0 by 0: NaN parameters
+            raise ValueError(f"epsilon must be a finite number > 0, got {epsilon}")
         self._values: dict[str, np.ndarray] = {}
         self._state: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
         for k, v in (params or {}).items():
@@ -83,7 +85,15 @@ class Adam(MutableMapping[str, np.ndarray]):
             m = self.beta_1 * m + (1.0 - self.beta_1) * g64
             v = self.beta_2 * v + (1.0 - self.beta_2) * g64 * g64
             lr_t = self.lr * np.sqrt(1.0 - self.beta_2**t) / (1.0 - self.beta_1**t)
-            self._values[name] = (self._values[name] - lr_t * m / (np.sqrt(v) + self.epsilon)).astype(np.float32)
+            with np.errstate(over="ignore", invalid="ignore"):
+                new = self._values[name] - lr_t * m / (np.sqrt(v) + self.epsilon)
+                stored = new.astype(np.float32)
+            if not np.all(np.isfinite(stored)):  # nothing changed: the parameter and its moments stay
+                bad = np.flatnonzero(~np.isfinite(stored))[0]
+                raise ValueError(f"Adam: step {t} of {name} gives a value not finite in float32 "
+                                 f"({float(new.reshape(-1)[bad])!r} at index {int(bad)}) with lr={self.lr}: "
+                                 f"lower lr")
+            self._values[name] = stored
             self._state[name] = (t, m, v)
 
     def __repr__(self) -> str:

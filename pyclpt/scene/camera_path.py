@@ -135,6 +135,15 @@ class CameraPath:
         self.interpolation = check_choice(interpolation, "camera path interpolation", INTERPOLATIONS)
         self.keyframes = keys
         self._poses = [_Pose.of(k.camera) for k in keys]
+        for (ka, a), (kb, b) in zip(zip(keys, self._poses), zip(keys[1:], self._poses[1:])):
+            # The column scales are interpolated linearly: between a mirrored camera (det < 0) and an
+            # unmirrored one a scale passes through 0, a degenerate camera (det 0) that smears the image.
+            if np.any(np.sign(a.columns) != np.sign(b.columns)):
+                def hand(p: _Pose) -> str:
+                    return "mirrored (det < 0)" if np.prod(np.sign(p.columns)) < 0 else "unmirrored (det > 0)"
+                raise ValueError(f"camera path keyframes at frames {ka.time:g} and {kb.time:g} differ in handedness: "
+                                 f"{hand(a)} and {hand(b)}; the frames between them would pass through a "
+                                 f"degenerate camera (det 0): give both keyframes the same handedness")
 
     def __len__(self) -> int:
         """Frames from the first keyframe to the last, both included (rounded up)."""

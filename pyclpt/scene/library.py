@@ -116,4 +116,5 @@ def load(name_or_path: str | os.PathLike, /, **params: object) -> Scene:
                     f"exist: set PYCLPT_SCENES to the folder holding meshes/ (e.g. ../shared/scenes)")
     scene = load_dict(d, base_dir=path.parent, name=name, origin=str(path))
     scene.source = path
+    scene.files = list(dict.fromkeys([Path(os.path.abspath(path)), *scene.files]))
     return scene

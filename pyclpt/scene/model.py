@@ -17,6 +17,7 @@ it runs before a scene is put on a device, so no negative or NaN value reaches t
 from __future__ import annotations
 
 import abc
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, get_args
@@ -26,6 +27,7 @@ import numpy as np
 from pyclpt.common.checks import check_bool, check_float, check_int
 
 RGB = tuple[float, float, float]
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def rgb(value: object, what: str = "color") -> RGB:
@@ -38,6 +40,9 @@ def rgb(value: object, what: str = "color") -> RGB:
         arr = np.repeat(arr, 3)
     if arr.size != 3 or not np.all(np.isfinite(arr)):
         raise ValueError(f"{what}: expected a number or 3 finite numbers, got {value!r}")
+    if np.any(np.abs(arr) > FLOAT32_MAX):  # finite here, infinite in the float32 the device stores
+        raise ValueError(f"{what}: {arr.tolist()} is not finite in float32 (largest {FLOAT32_MAX:g}); "
+                         f"give values within +-{FLOAT32_MAX:g}")
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
@@ -46,7 +51,9 @@ def radiance(value: object, what: str) -> RGB:
     problem = f"{what}: expected a number or 3 finite numbers >= 0, got {value!r}"
     try:
         out = rgb(value, what)
-    except ValueError:
+    except ValueError as exc:
+        if "not finite in float32" in str(exc):  # that message says more than the generic one
+            raise
         raise ValueError(problem) from None
     if min(out) < 0:
         raise ValueError(problem)
@@ -883,6 +890,9 @@ class Scene(Checked):
     # Mitsuba's shapegroups by name, and the instances placing them (docs/bvh.md, "Instances")
     groups: dict[str, ShapeGroup] = field(default_factory=dict)
     instances: list[Instance] = field(default_factory=list)
+    # every file the loaders read for this scene (the scene file, its includes, meshes, textures,
+    # spectra), absolute: what a cache of the loaded scene checks (pyclpt.distributed.worker)
+    files: list[Path] = field(default_factory=list)
 
     def _check(self) -> None:
         where = f"scene {self.name!r}"
@@ -978,3 +988,44 @@ class Scene(Checked):
                 meshes.append(Mesh(f"{inst.name}/{k}/{mesh.name}", pos, idx, mesh.material, normals, mesh.uvs))
         return Scene(meshes, self.materials, self.camera, self.film, self.environment, self.spp, self.max_depth,
                      self.name, self.source, self.lights, dict(self.ids))
+
+
+_GEOMETRY_FIELDS = {Mesh: ("positions", "indices", "normals", "uvs"), Instance: ("to_world",)}
+
+
+def content_digest(scene: Scene, *, values: bool = True) -> tuple[bytes, bytes]:
+    """A cheap digest of what ``scene`` holds, in one pass: (geometry, everything else). Geometry: every
+    mesh's (and shapegroup mesh's) positions, indices, normals and uvs, and the instances' transforms;
+    the rest: every other array (texels, environment map, transforms) and, with ``values``, every other
+    field (numbers, names, enum-like strings) of every element. Arrays are hashed by their bytes, dtype
+    and shape, so an in-place edit (a vertex moved, a texel set to NaN) changes the digest. Cost: one
+    SHA-1 pass over the arrays (not a security use; about 2 GB/s: ~0.1 ms for the Cornell box, ~1.7 ms
+    for a 100k-triangle mesh with normals and uvs)."""
+    geo, rest = hashlib.sha1(usedforsecurity=False), hashlib.sha1(usedforsecurity=False)  # SHA-NI: ~2 GB/s
+
+    def array(h, a: np.ndarray) -> None:
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(memoryview(np.ascontiguousarray(a)).cast("B") if a.dtype != object else repr(a).encode())
+
+    def walk(h, obj: object) -> None:
+        if isinstance(obj, np.ndarray):
+            array(h, obj)
+        elif isinstance(obj, Checked):
+            h.update(type(obj).__name__.encode())
+            split = _GEOMETRY_FIELDS.get(type(obj), ())
+            for name, value in vars(obj).items():
+                walk(geo if name in split else h, value)
+        elif isinstance(obj, (list, tuple)):
+            h.update(f"[{len(obj)}".encode())
+            for item in obj:
+                walk(h, item)
+        elif isinstance(obj, dict):
+            h.update(f"{{{len(obj)}".encode())
+            for k, v in obj.items():
+                walk(h, k)
+                walk(h, v)
+        elif values:
+            h.update(repr(obj).encode())
+
+    walk(rest, scene)
+    return geo.digest(), rest.digest()

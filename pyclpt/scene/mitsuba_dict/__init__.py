@@ -55,4 +55,6 @@ def load_dict(d: Mapping[str, Any], *, base_dir: str | os.PathLike | None = None
     ``origin`` (default ``name``) names the source in messages. Raises :class:`SceneDictError`;
     logs one warning listing what the scene holds that pyclpt does not use."""
     ctx = LoadContext(Path(base_dir) if base_dir is not None else None, origin or name)
-    return load_scene(ctx, d, name)
+    scene = load_scene(ctx, d, name)
+    scene.files = list(dict.fromkeys(ctx.files))
+    return scene

@@ -51,6 +51,7 @@ class LoadContext:
 
     def __init__(self, base_dir: Path | None, origin: str) -> None:
         self.base_dir = base_dir
+        self.files: list[Path] = []  # the files read (Scene.files)
         self.origin = origin
         self.named: dict[str, Mapping[str, Any]] = {}  # objects with an id
         self.referenced: set[str] = set()
@@ -148,6 +149,7 @@ class LoadContext:
             p = self.base_dir / p
         if not p.exists():
             raise self.fail(where, f"file not found: {p}", d)
+        self.files.append(Path(os.path.abspath(p)))
         return p
 
     def transform(self, d: Mapping[str, Any], key: str, where: str) -> np.ndarray:

@@ -78,9 +78,17 @@ def load_xml(path: str | os.PathLike, **params: object) -> Scene:
     """A :class:`~pyclpt.scene.model.Scene` from a Mitsuba XML file; ``params`` (converted with ``str``)
     override its ``<default>`` values. The scene is named after its folder for ``scene.xml``,
     else after the file."""
+    from pyclpt.scene.mitsuba_xml.document import READ_FILES
+
     path = Path(path)
-    d = xml_to_dict(path, {k: str(v) for k, v in params.items()})
+    read: list[Path] = [Path(os.path.abspath(path))]
+    token = READ_FILES.set(read)
+    try:
+        d = xml_to_dict(path, {k: str(v) for k, v in params.items()})
+    finally:
+        READ_FILES.reset(token)
     name = path.resolve().parent.name if path.name.lower() == "scene.xml" else path.stem
     scene = load_dict(d, base_dir=path.parent, name=name or path.stem, origin=str(path))
     scene.source = path
+    scene.files = list(dict.fromkeys([*read, *scene.files]))
     return scene

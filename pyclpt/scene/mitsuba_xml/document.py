@@ -8,6 +8,7 @@ finds a file named in the scene as Mitsuba's file resolver does.
 """
 from __future__ import annotations
 
+import contextvars
 import os
 import re
 from collections.abc import Mapping
@@ -43,7 +44,18 @@ def parse_version(text: str, where: str, tag: str) -> Version:
     return int(m.group(1)), int(m.group(2)), int(m.group(3))
 
 
+# the files read while a scene loads (load_xml collects them into Scene.files); None: not collected
+READ_FILES: contextvars.ContextVar[list[Path] | None] = contextvars.ContextVar("pyclpt_read_files", default=None)
+
+
+def _note_read(path: str | os.PathLike) -> None:
+    files = READ_FILES.get()
+    if files is not None:
+        files.append(Path(os.path.abspath(path)))
+
+
 def parse_file(path: Path) -> etree._Element:
+    _note_read(path)
     parser = etree.XMLParser(resolve_entities=False, no_network=True, remove_comments=True,
                              remove_pis=True, huge_tree=True)
     try:
@@ -62,6 +74,7 @@ def resolve_file(name: str, node: Node, root_dir: Path, what: str = "file") -> s
         candidates += [p] if p.is_absolute() else [node.file.parent / p, root_dir / p]
     for p in dict.fromkeys(candidates):
         if p.is_file():
+            _note_read(p)
             return os.path.abspath(p)
     raise node_error(node, f"{what} not found: {os.path.abspath(candidates[0])}")
 
