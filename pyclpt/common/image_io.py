@@ -227,6 +227,22 @@ def _write(out: oiio.ImageOutput, path: Path, target: Path, spec: oiio.ImageSpec
         raise error from exc
 
 
+def _replace(out: oiio.ImageOutput, path: Path, spec: oiio.ImageSpec, pixels: np.ndarray) -> None:
+    """Write ``pixels`` (:func:`_write`) to a temporary file beside ``path``'s real file and rename it over
+    that: a symbolic link is written through (its target replaced), the permissions of the image it
+    replaces are kept, and a failed or interrupted (KeyboardInterrupt) write leaves no half file."""
+    real = Path(os.path.realpath(path))
+    tmp = _temporary_path(real)
+    try:
+        _write(out, tmp, path, spec, pixels)
+        if real.is_file():
+            os.chmod(tmp, stat.S_IMODE(real.stat().st_mode))
+        os.replace(tmp, real)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0) -> Path:
     """Write an (H, W, 3) linear image; the format follows the extension; ``exposure`` in stops
     (finite, within +-64) scales 8-bit output only: a linear file (.exr, .hdr, .pfm) keeps the
@@ -259,16 +275,7 @@ def write_image(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.
     spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], fmt)
     if ext not in LINEAR_EXTENSIONS:
         spec.attribute("oiio:ColorSpace", "sRGB")
-    real = Path(os.path.realpath(path))  # a symbolic link is written through: its target is replaced
-    tmp = _temporary_path(real)
-    try:
-        _write(out, tmp, path, spec, pixels)
-        if real.is_file():  # keep the permissions of the image it replaces
-            os.chmod(tmp, stat.S_IMODE(real.stat().st_mode))
-        os.replace(tmp, real)
-    except BaseException:  # failed or interrupted (KeyboardInterrupt): leave no half file behind
-        tmp.unlink(missing_ok=True)
-        raise
+    _replace(out, path, spec, pixels)
     return path
 
 
@@ -304,16 +311,7 @@ def write_layers(path: str | os.PathLike, image: np.ndarray,
         raise OSError(f"{path}: no image writer for .exr: {oiio.geterror()}")
     spec = oiio.ImageSpec(img.shape[1], img.shape[0], len(names), "float")
     spec.channelnames = tuple(names)
-    real = Path(os.path.realpath(path))  # a symbolic link is written through: its target is replaced
-    tmp = _temporary_path(real)
-    try:
-        _write(out, tmp, path, spec, pixels)
-        if real.is_file():  # keep the permissions of the image it replaces
-            os.chmod(tmp, stat.S_IMODE(real.stat().st_mode))
-        os.replace(tmp, real)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    _replace(out, path, spec, pixels)
     return path
 
 

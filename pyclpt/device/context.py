@@ -99,7 +99,7 @@ class Device:
     @property
     def device_class(self) -> str:
         """``"cpu"`` or ``"gpu"``: what the kernels' data layouts are shaped for (the BVH's width, leaf
-        packets and traversal stack: pyclpt.accel.bvh.LAYOUTS, docs/bvh.md). ``"gpu"`` for any non-CPU
+        packets and traversal stack: pyclpt.accel.bvh.layout_settings, docs/bvh.md). ``"gpu"`` for any non-CPU
         device, ``"cpu"`` otherwise; the ``PYCLPT_DEVICE_CLASS`` setting overrides it (read each time, so
         a renderer made after it changes follows it)."""
         if self.class_override is not None:

@@ -186,14 +186,20 @@ def record_programs(*, dry: bool = False) -> Iterator[list[ProgramSource]]:
         _recorders.pop()
 
 
-_KERNEL_HEAD = re.compile(r"__kernel\b[^;{]*?\bvoid\s+\w+\s*\(")
+# A kernel's head up to its parameter list, with its name (kernels return void).
+KERNEL_HEAD = re.compile(r"__kernel\b[^;{]*?\bvoid\s+(\w+)\s*\(")
+
+
+def kernel_names(text: str) -> set[str]:
+    """The names of the ``__kernel`` functions of a program text."""
+    return set(KERNEL_HEAD.findall(text))
 
 
 def empty_kernels(text: str) -> str:
     """``text`` with the body of every ``__kernel`` function replaced by ``{}`` (the parameters kept),
     for :func:`record_programs`' dry builds. Braces inside comments are not expected in kernel bodies."""
     out, pos = [], 0
-    for m in _KERNEL_HEAD.finditer(text):
+    for m in KERNEL_HEAD.finditer(text):
         if m.start() < pos:
             continue
         open_brace = text.find("{", m.end())

@@ -27,6 +27,7 @@ import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from pyclpt.device.program import kernel_names
 from pyclpt.gpu.targets import TARGETS, Target, occupancy, resident_slots, target
 
 log = logging.getLogger("pyclpt.gpu.isa")
@@ -216,11 +217,6 @@ def back_end(t: Target, tc: Toolchain, folder: Path, what: str, program: str) ->
         return parse_ptxas(report, program, t)
     _run([tc.llc, *t.llc_args, str(d / "o.bc"), "-o", str(d / "k.s")], what)
     return parse_amdgcn((d / "k.s").read_text(), program, t)
-
-
-def kernel_names(text: str) -> set[str]:
-    """The names of the ``__kernel`` functions of a program text."""
-    return set(re.findall(r"__kernel\b[^;{]*?\bvoid\s+(\w+)\s*\(", text))
 
 
 def check_kernels(costs: list[KernelCost], text: str, what: str) -> list[KernelCost]:

@@ -44,6 +44,7 @@ import pyopencl as cl
 from pyclpt.device.context import alloc
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
+from pyclpt.gpu.targets import resident_slots, target
 from pyclpt.integrators.megakernel import MEGAKERNEL_LAUNCH, Megakernel
 from pyclpt.integrators.path_state import FIELDS
 
@@ -235,19 +236,11 @@ class Gpu:
     max_warps: int = 64
 
     def resident_warps(self, registers: int, lanes: int = 32) -> int:
-        """Warps per SM that fit ``registers`` per thread (sm_90's rule; as pyclpt.gpu.targets)."""
-        try:
-            from pyclpt.gpu.targets import resident_slots, target
-
-            t = target("sm_90")
-            if (t.registers, t.partitions, t.granule, t.max_slots, lanes) == (
-                    self.registers, self.partitions, self.granule, self.max_warps, t.lanes):
-                return resident_slots(t, registers)
-        except (ImportError, AttributeError, ValueError):
-            pass
-        per_warp = -(-registers // self.granule) * self.granule * lanes
-        fit = self.partitions * ((self.registers // self.partitions) // per_warp)
-        return max(0, min(self.max_warps, fit))
+        """Warps per SM that fit ``registers`` per thread: sm_90's rule (pyclpt.gpu.targets) on this
+        machine's register file."""
+        t = replace(target("sm_90"), registers=self.registers, partitions=self.partitions, granule=self.granule,
+                    max_slots=self.max_warps, lanes=lanes)
+        return resident_slots(t, registers)
 
     def occupancy(self, registers: dict[str, int] | None = None) -> dict[str, float]:
         """{kernel: fraction of the SM's warp slots resident} from registers per thread."""
