@@ -70,18 +70,12 @@ static inline uint film_sample(const Scene* sc, uint first_sample, int f) {
     return first_sample + (uint)(f / film_pixels(sc));
 }
 
-/* path init: the camera ray of (pixel, sample) through a position drawn from the film's reconstruction
- * filter around the pixel's centre (film/rfilter.h; the box: uniform in the pixel) and, for a thin lens,
- * a point on the aperture. */
-static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
+/* path init: the camera ray through the film position (x, y) (pixels from the image's top-left corner)
+ * and, for a thin lens, a point on the aperture. */
+static inline void camera_ray(const Scene* sc, RngKey key, float x, float y, PathState* ps) {
     __global const float* c = sc->consts;
-    int width = (int)c[CONST_WIDTH], height = (int)c[CONST_HEIGHT];
-    int px = pixel % width, py = pixel / width;
-    vec2 j = rng_2d(key, 0, DIM_CAMERA_X);
-    j.x = rfilter_position(c, j.x);
-    j.y = rfilter_position(c, j.y);
-    float sx = 2.0f * (((float)px + j.x) / (float)width) - 1.0f;
-    float sy = 1.0f - 2.0f * (((float)py + j.y) / (float)height);
+    float sx = 2.0f * (x / c[CONST_WIDTH]) - 1.0f;
+    float sy = 1.0f - 2.0f * (y / c[CONST_HEIGHT]);
     vec3 forward = rgb_at(c + CONST_CAM_FORWARD, sc->unit), right = rgb_at(c + CONST_CAM_RIGHT, sc->unit);
     vec3 up = rgb_at(c + CONST_CAM_UP, sc->unit);
     ps->org = rgb_at(c + CONST_CAM_ORIGIN, sc->unit);
@@ -109,6 +103,16 @@ static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState
     ps->eta_scale = 1.0f;
     ps->depth = 0;
     ps->flags = PATH_PREV_DELTA; /* the camera ray counts as a delta sample: no MIS */
+}
+
+/* The camera ray of (pixel, sample) through a position drawn from the film's reconstruction filter around
+ * the pixel's centre (film/rfilter.h; the box: uniform in the pixel). */
+static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
+    __global const float* c = sc->consts;
+    int width = (int)c[CONST_WIDTH];
+    vec2 j = rng_2d(key, 0, DIM_CAMERA_X);
+    camera_ray(sc, key, (float)(pixel % width) + rfilter_position(c, j.x), (float)(pixel / width) +
+               rfilter_position(c, j.y), ps);
 }
 
 /* miss: the environment seen along the ray, MIS-weighted against light sampling. */

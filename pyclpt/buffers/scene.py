@@ -11,13 +11,24 @@ The layout of each array is documented in ``cl/scene/scene.h``, ``cl/scene/bsdf.
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.accel.bvh import STACK_DISTANCES, BuildSettings, FlatBVH, build_bvh, layout_settings, leaf_packet_buffer
+from pyclpt.accel.bvh import (
+    REBUILD_GROWTH,
+    STACK_DISTANCES,
+    BuildSettings,
+    FlatBVH,
+    box_area_ratio,
+    build_bvh,
+    layout_settings,
+    leaf_packet_buffer,
+    refit_bvh,
+)
 from pyclpt.accel.instances import build_instanced, instanced_node_buffer
 from pyclpt.buffers.lights import LightArrays, camera_consts, camera_kind, pack_lights
 from pyclpt.buffers.materials import (  # noqa: F401
@@ -30,6 +41,8 @@ from pyclpt.buffers.materials import (  # noqa: F401
 from pyclpt.buffers.rfilter import filter_kind
 from pyclpt.device.context import Device, upload
 from pyclpt.scene.model import Camera, Mesh, Scene
+
+log = logging.getLogger("pyclpt.buffers.scene")
 
 #: Test an 8-wide BVH's leaf triangles 8 at a time (cl/scene/bvh.h BVH_LEAF_PACKETS, docs/bvh.md);
 #: the same hits as the scalar loop, faster on PoCL and Intel's runtime (measured for width 8 only).
@@ -188,9 +201,11 @@ def _leaf_packets(width: int, device_class: str) -> bool:
     return LEAF_PACKETS and width == 8 and device_class == "cpu"
 
 
-def pack_scene(scene: Scene, device_class: str = "cpu") -> SceneArrays:
+def pack_scene(scene: Scene, device_class: str = "cpu", refit: FlatBVH | None = None) -> SceneArrays:
     """The scene's arrays with the BVH layout of ``device_class`` (``"cpu"`` or ``"gpu"``: a device's
-    :attr:`~pyclpt.device.context.Device.device_class`; pyclpt.accel.bvh.layout_settings)."""
+    :attr:`~pyclpt.device.context.Device.device_class`; pyclpt.accel.bvh.layout_settings). ``refit``: a
+    BVH of this scene's triangles (same count and order) whose tree is kept, its boxes refitted to the
+    positions now (pyclpt.accel.bvh.refit_bvh), instead of a build; not for instanced scenes."""
     settings = layout_settings(device_class)  # also checks device_class
     scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
     P, tris, vnormals, vuvs = concat_meshes(scene_meshes(scene))
@@ -199,7 +214,7 @@ def pack_scene(scene: Scene, device_class: str = "cpu") -> SceneArrays:
         bvh, bounds, node_buffer, packets, tri_bits = _instanced_bvh(scene, settings, device_class)
         geometry = {"SCENE_HAS_INSTANCES": True}
     else:
-        bvh = build_bvh(P, tris, settings=settings)
+        bvh = build_bvh(P, tris, settings=settings) if refit is None else refit_bvh(refit, P, tris)
         packets = _leaf_packets(bvh.width, device_class)
         bounds = np.stack([P.min(0), P.max(0)])
         node_buffer = leaf_packet_buffer(bvh) if packets else bvh.nodes
@@ -233,6 +248,7 @@ class SceneBuffers:
         # the BVH layout of the device's class (PYCLPT_DEVICE_CLASS overrides it)
         self.arrays = arrays = pack_scene(scene, device.device_class)
         self.pack_seconds = time.perf_counter() - start
+        self.built_area_ratio: float | None = None  # box_area_ratio of the last build (refresh_geometry)
         self._buffers = [upload(device, a, f"scene {scene.name!r} {n}") for n, a in arrays.device_arrays()]
         self._consts: dict[tuple, cl.Buffer] = {}
         self.previous_camera: Camera | None = None  # the previous frame's, for motion vectors (None: no motion)
@@ -269,6 +285,44 @@ class SceneBuffers:
                 uploaded.append(name)
         self.arrays = new
         self._consts.clear()  # the environment's light index and the number of emitters live there
+        return uploaded
+
+    def refresh_geometry(self) -> list[str]:
+        """Re-read everything, the geometry included (after vertices, a mesh's pose or an instance's
+        transform moved) and upload the buffers whose contents changed; the kernels stay as they are. The
+        BVH is refitted (its tree kept, its boxes recomputed: pyclpt.accel.bvh.refit_bvh) while the
+        triangles are the same ones and the tree's box areas (box_area_ratio) have grown less than
+        REBUILD_GROWTH times since it was built, else built again (Embree); instanced scenes build their
+        top level again (their groups' BVHs come from the cache). Returns the names of the buffers
+        uploaded. ValueError when the change needs other kernels (the BVH layout or a scene feature
+        changes): then make a new renderer."""
+        start = time.perf_counter()
+        old = self.arrays
+        if self.built_area_ratio is None:
+            self.built_area_ratio = box_area_ratio(old.bvh)
+        built = self.built_area_ratio
+        same = not self.scene.instances and not old.geometry_defines and \
+            sum(m.triangle_count for m in self.scene.meshes) == old.bvh.triangle_count
+        new = pack_scene(self.scene, old.device_class, refit=old.bvh if same else None)
+        grown = box_area_ratio(new.bvh) / built if same else 1.0
+        if grown > REBUILD_GROWTH:  # the refitted tree got too loose for where things are now
+            log.info("scene %r: the refitted BVH's boxes grew %.2fx; building it again", self.scene.name, grown)
+            new = pack_scene(self.scene, old.device_class)
+        if not same or grown > REBUILD_GROWTH:
+            built = box_area_ratio(new.bvh)
+        changed = {k: (old.defines.get(k), v) for k, v in new.defines.items() if old.defines.get(k) != v}
+        if changed or set(old.defines) != set(new.defines):
+            what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items()) or "the defines' names"
+            raise ValueError(f"scene {self.scene.name!r}: the new geometry changes what the kernels are compiled "
+                             f"for ({what}); render it with a new renderer")
+        uploaded = []
+        for k, ((name, before), (_, after)) in enumerate(zip(old.device_arrays(), new.device_arrays())):
+            if before.dtype != after.dtype or before.shape != after.shape or before.tobytes() != after.tobytes():
+                self._buffers[k] = upload(self.device, after, f"scene {self.scene.name!r} {name}")
+                uploaded.append(name)
+        self.arrays, self.built_area_ratio = new, built
+        self._consts.clear()  # the bounds and the emitters' areas live there
+        self.pack_seconds = time.perf_counter() - start
         return uploaded
 
     def refresh_camera(self, previous: Camera | None = None) -> None:

@@ -52,6 +52,7 @@ def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wav
     replay = PathReplay(device, r.scene_buffers, SIZE, SIZE, 4)
     for name in ("backward", "forward"):
         replay.kernel(name, GRAD_DEFINES)
+    replay.kernel("edge_radiance")  # the boundary term of primary visibility (pyclpt.gradients.edges)
 
 
 def collect_programs(scenes: Iterable[Scene | str], *, device_class: str | None = "gpu",

@@ -81,15 +81,25 @@ def replay_for(scene: Scene, *, width: int | None = None, height: int | None = N
     session = _SESSIONS.get(key)
     digest = content_digest(scene, values=False)  # arrays edited in place (checked every call)
     if session is not None and session.scene is scene and session.digest[0] != digest[0]:
-        forget(scene)  # the geometry changed in place: new buffers and BVH, checked again
-        session = None
+        try:  # the geometry changed in place: its BVH refitted or built again, the scene checked again
+            scene.validate()
+            session.buffers.refresh_geometry()
+            session.key, session.digest = appearance_key(scene), digest
+        except ValueError:  # it needs other kernels (or is invalid: validated again below, raising)
+            forget(scene)
+            session = None
     if session is None or session.scene is not scene:
         scene.validate()
         session = _Session(scene, dev, SceneBuffers(scene, dev), appearance_key(scene), digest)
         _SESSIONS[key] = session
 
-        def refresh(s: _Session = session) -> None:
-            s.buffers.refresh_appearance()
+        def refresh(areas: frozenset[str], s: _Session = session) -> None:
+            if "geometry" in areas:
+                s.buffers.refresh_geometry()
+            else:
+                s.buffers.refresh_appearance()
+            if "camera" in areas:
+                s.buffers.refresh_camera()
             s.key = appearance_key(s.scene)
             s.digest = content_digest(s.scene, values=False)
 
@@ -155,15 +165,35 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     bad = [f"{p.name} ({p.reason})" for p in chosen if not p.differentiable]
     if bad:
         raise ValueError(f"not differentiable: {'; '.join(bad)}")
+    # The gradient is linear in image_grad: a large one (3e38 is finite in float32) is scaled down by a power
+    # of two for the kernels, whose float32 products and sums would overflow to inf (and drop paths), and the
+    # result scaled back in double. A power of two changes no rounding, so the gradient of an image_grad of
+    # at most 1 in magnitude is unchanged, bit for bit.
+    peak = float(np.max(np.abs(grad), initial=0.0))
+    shift = int(np.ceil(np.log2(peak))) if peak > 1.0 else 0
+    if shift:
+        grad = np.ldexp(grad, -shift).astype(np.float32)
     buffers = replay.backward(grad, spp, seed, {p.kind for p in chosen})
     if replay.dropped:
         log.warning("%s: render_backward dropped %d paths with NaN/inf radiance", scene.name, replay.dropped)
     out = {}
     for p in chosen:
         value_shape = p.get().shape
-        out[p.name] = parameter_slots(scene, replay.scene.arrays, p).gather(buffers).astype(np.float32).reshape(
-            value_shape)
+        exact = np.ldexp(parameter_slots(scene, replay.scene.arrays, p).gather(buffers), shift)
+        _check_float32(exact, p.name, peak)
+        out[p.name] = exact.astype(np.float32).reshape(value_shape)
     return out
+
+
+def _check_float32(gradient: np.ndarray, name: str, peak: float) -> None:
+    """OverflowError naming the element and its value when a gradient (float64) exceeds float32's range:
+    the result is returned as float32, where it would be inf."""
+    big = np.flatnonzero(np.abs(gradient) > np.finfo(np.float32).max)
+    if big.size:
+        i = int(big[0])
+        raise OverflowError(f"render_backward: the gradient of {name}[{i}] is {float(gradient.flat[i]):.6g}, "
+                            f"beyond float32's range (max {float(np.finfo(np.float32).max):.6g}; the largest "
+                            f"image_grad value is {peak:.6g}): scale the loss down")
 
 
 def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Iterable[float], spp: int | None = None,

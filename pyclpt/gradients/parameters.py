@@ -7,11 +7,15 @@ dielectric's roughness (``.alpha`` for a rough plastic's), ``<shape id>.emitter.
 an area light, ``<emitter id>.radiance.value`` for a constant environment and ``<emitter id>.data`` for
 an environment map's texels. A BSDF without an id is named after its place (``floor.bsdf``); a
 two-sided one's parameters sit under ``.brdf_0``, a mask's or bump map's under ``.nested_bsdf``.
+Where things are: ``<shape id>.vertex_positions`` and ``<shape id>.to_world`` (a pose), an instance's,
+a spot light's and the sensor's ``to_world``, the sensor's ``x_fov``, a point light's ``position``
+(:mod:`pyclpt.gradients.placement`).
 
 Values are numpy arrays. Assign a new value (``params[name] = value``), then call
 :meth:`SceneParameters.update`: it checks the values, writes them into the scene and uploads what
-changed to the devices that hold the scene for gradients (:mod:`pyclpt.gradients.replay`), without
-rebuilding its BVH; renders made afterwards (``pyclpt.render``) see them too.
+changed to the devices that hold the scene for gradients (:mod:`pyclpt.gradients.replay`): a changed
+geometry gets its BVH rebuilt there, the rest keeps it, and no kernel is compiled again; renders made
+afterwards (``pyclpt.render``) see the changes too.
 
 Parameters whose gradient pyclpt does not compute are listed too, with the reason
 (:meth:`SceneParameters.unsupported`); they can still be changed with ``update``.
@@ -24,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.common.image_io import srgb_to_linear
+from pyclpt.gradients import placement
 from pyclpt.scene.model import (
     Bitmap,
     BumpMap,
@@ -37,6 +42,7 @@ from pyclpt.scene.model import (
     Material,
     Mesh,
     Plastic,
+    PointLight,
     Scene,
     SpotLight,
     ThinDielectric,
@@ -51,8 +57,9 @@ NOT_DIFFERENTIABLE = {
     "conductor": "complex IOR of a conductor: not differentiated yet",
     "transmission": "dielectric reflectance and transmittance: not differentiated yet",
     "checkerboard": "checkerboard colours: not differentiated (only bitmap texels are)",
-    "geometry": "vertex positions: visibility (silhouette) gradients need edge sampling, not implemented "
-                "(docs/differentiable.md)",
+    "geometry": "where a surface, the sensor or a light is: update() moves it (the BVH rebuilt, no kernel "
+                "compiled again), but its gradient needs the boundary term of visibility (silhouettes, shadow "
+                "edges), not implemented yet (docs/differentiable.md)",
     "point": "point light intensity: not differentiated yet",
     "spot": "spot light intensity: not differentiated yet",
     "directional": "directional light irradiance: not differentiated yet",
@@ -75,6 +82,7 @@ class Parameter:
     target: object  # the model element it belongs to (material, mesh, bitmap, envmap, scene)
     reason: str = ""  # why it is not differentiable
     material: int = -1  # the index in scene.materials of a material's parameter
+    area: str = "appearance"  # what update() refreshes on the devices: appearance, geometry or camera
 
     @property
     def differentiable(self) -> bool:
@@ -151,12 +159,12 @@ class _Walker:
         self.only_listed = ""  # a reason that holds for every parameter added now (a TwoSided's back)
 
     def add(self, name: str, kind: str, accessors: tuple[Callable, Callable], target: object,
-            reason: str = "") -> None:
+            reason: str = "", area: str = "appearance") -> None:
         get, put = accessors
         if self.only_listed:
             kind, reason = "", self.only_listed
         self.params[name] = Parameter(name, kind, get, put, target, NOT_DIFFERENTIABLE.get(reason, reason),
-                                      self.index)
+                                      self.index, area)
 
     def color(self, prefix: str, obj: object, attr: str, kind: str) -> None:
         value = getattr(obj, attr)
@@ -224,14 +232,9 @@ class _Walker:
             self.add(f"{prefix}.int_ior", "", _scalar_param(mat, "int_ior"), mat, "ior")
 
     def mesh(self, mesh: Mesh) -> None:
-        def get() -> np.ndarray:
-            return mesh.positions.reshape(-1).copy()
-
-        def put(v: np.ndarray) -> None:
-            raise ValueError(f"{mesh.name}.vertex_positions: changing geometry needs a new BVH; "
-                             f"edit scene.meshes and render again")
-
-        self.add(f"{mesh.name}.vertex_positions", "", (get, put), mesh, "geometry")
+        positions, pose = placement.mesh_accessors(mesh)
+        self.add(f"{mesh.name}.vertex_positions", "", positions, mesh, "geometry", "geometry")
+        self.add(f"{mesh.name}.to_world", "", pose, mesh, "geometry", "geometry")
         if mesh.emission is not None and mesh.emission_texture is not None:
             self.add(f"{mesh.name}.emitter.radiance.value", "", _rgb_param(mesh, "emission"), mesh,
                      "emission_texture")
@@ -260,16 +263,30 @@ class _Walker:
             else:
                 self.add(f"{name}.intensity.value", "", _rgb_param(light, "intensity"), light,
                          "spot" if isinstance(light, SpotLight) else "point")
+            if isinstance(light, SpotLight):
+                self.add(f"{name}.to_world", "", placement.spot_accessors(light), light, "geometry")
+            elif isinstance(light, PointLight):
+                self.add(f"{name}.position", "", placement.point_accessors(light), light, "geometry")
+        names = [i.name for i in sc.instances]
+        for k, inst in enumerate(sc.instances):
+            name = inst.name if names.count(inst.name) == 1 else f"{inst.name}_{k}"
+            self.add(f"{name}.to_world", "", placement.instance_accessors(inst), inst, "geometry", "geometry")
+        sensor = sc.ids.get("camera", "sensor")
+        to_world, x_fov = placement.camera_accessors(sc)
+        self.add(f"{sensor}.to_world", "", to_world, sc, "geometry", "camera")
+        if x_fov is not None:
+            self.add(f"{sensor}.x_fov", "", x_fov, sc, "geometry", "camera")
         return self.params
 
 
 # What update() refreshes, by id(scene): the device copies of a scene kept for gradients
 # (differentiate.py registers and forgets them).
-_LISTENERS: dict[int, list[Callable[[], object]]] = {}
+_LISTENERS: dict[int, list[Callable[[frozenset[str]], object]]] = {}
 
 
-def on_update(scene: Scene, refresh: Callable[[], object]) -> None:
-    """Call ``refresh`` after :meth:`SceneParameters.update` wrote new values into ``scene``."""
+def on_update(scene: Scene, refresh: Callable[[frozenset[str]], object]) -> None:
+    """Call ``refresh(areas)`` after :meth:`SceneParameters.update` wrote new values into ``scene``; ``areas``:
+    what changed (:attr:`Parameter.area`: ``appearance``, ``geometry``, ``camera``)."""
     _LISTENERS.setdefault(id(scene), []).append(refresh)
 
 
@@ -348,6 +365,14 @@ class SceneParameters(Mapping[str, np.ndarray]):
             self._staged.clear()
             raise
         names = list(self._staged)
+        targets = [id(self._params[k].target) for k in names if self._params[k].area == "geometry"
+                   and isinstance(self._params[k].target, Mesh)]
+        if len(targets) != len(set(targets)):
+            twice = [k for k in names if targets.count(id(self._params[k].target)) > 1]
+            self._staged.clear()
+            raise ValueError(f"{' and '.join(twice)}: one mesh's positions and pose in one update; set one of "
+                             f"them (the pose moves the positions)")
+        areas = frozenset(self._params[k].area for k in names)
         olds = {k: self._params[k].get() for k in names}
         done: list[str] = []
         try:
@@ -362,13 +387,13 @@ class SceneParameters(Mapping[str, np.ndarray]):
         if names:
             try:
                 for refresh in _LISTENERS.get(id(self.scene), []):
-                    refresh()
+                    refresh(areas)
             except ValueError:
                 for k in names:
                     self._params[k].set(olds[k])
                 self._staged.clear()
                 for refresh in _LISTENERS.get(id(self.scene), []):
-                    refresh()
+                    refresh(areas)
                 raise
         self._staged.clear()
         return names

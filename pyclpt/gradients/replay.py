@@ -19,7 +19,7 @@ import pyopencl as cl
 
 from pyclpt.buffers.materials import MAT_STRIDE, pack_materials
 from pyclpt.buffers.scene import SceneBuffers
-from pyclpt.device.context import Device, alloc, upload
+from pyclpt.device.context import Device, alloc, fill_buffer, upload
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
 from pyclpt.film.film import Film, frames_per_batch
@@ -117,7 +117,7 @@ class PathReplay:
             buf = self._grads.get(name)
             if buf is None or buf.size != 4 * max(n, 1):
                 buf = self._grads[name] = alloc(self.device, 4 * max(n, 1), f"gradient buffer {name}")
-            cl.enqueue_fill_buffer(q, buf, np.float32(0), 0, buf.size)
+            fill_buffer(q, buf, np.float32(0), 0, buf.size)
         return self._grads
 
     def _launch(self, kernel: cl.Kernel, name: str, spp: int, seed: int, head: tuple, tail: tuple) -> None:
@@ -174,6 +174,33 @@ class PathReplay:
             host = np.empty(self._grads[name].size // 4, np.float32)
             cl.enqueue_copy(self.device.queue, host, self._grads[name])
             out[name] = host
+        return out
+
+    def edge_radiance(self, points: np.ndarray, seed: int, eps: float) -> np.ndarray:
+        """The radiance (N, 2, 3) of the camera paths through film points ``points[:, :2]`` minus and plus
+        ``eps`` times the unit film directions ``points[:, 2:]`` (the edge_radiance kernel; N, 4 float32),
+        both with the random numbers of (seed, point). NaN or inf paths give 0 and are counted in
+        :attr:`dropped`."""
+        kernel = self.kernel("edge_radiance")
+        pts = np.ascontiguousarray(points, np.float32).reshape(-1, 4)
+        n = len(pts)
+        out = np.zeros((n, 2, 3), np.float32)
+        args = self.scene.args(self.width, self.height)
+        self.dropped = 0
+        for start in range(0, n, LAUNCH):
+            count = min(LAUNCH, n - start)
+            p_buf = upload(self.device, pts[start:start + count], "edge points")
+            r_buf = alloc(self.device, 4 * 6 * count, "edge radiance")
+            marks = np.zeros(2 * count, np.uint8)
+            m_buf = alloc(self.device, marks.nbytes, "edge drop marks")
+            fill_buffer(self.device.queue, m_buf, np.uint8(0), 0, marks.nbytes)
+            g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
+            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, p_buf, r_buf, m_buf, np.uint32(seed),
+                        np.int32(count), np.int32(self.max_depth), np.float32(eps))
+            self.profile.record("edge_radiance", ev)
+            cl.enqueue_copy(self.device.queue, out[start:start + count], r_buf)
+            cl.enqueue_copy(self.device.queue, marks, m_buf)
+            self.dropped += int(marks.astype(np.int64).sum())
         return out
 
     def forward(self, tangent: dict[str, np.ndarray], spp: int, seed: int) -> np.ndarray:

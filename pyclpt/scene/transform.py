@@ -41,6 +41,22 @@ def rotate(axis, angle: float) -> np.ndarray:
     return m
 
 
+def pose(translate=(0.0, 0.0, 0.0), rotate=(0.0, 0.0, 0.0), scale=1.0) -> np.ndarray:
+    """A pose, ``T @ R @ S`` (4x4): ``scale`` (a number or per axis) first, then ``rotate``, a rotation
+    vector in degrees (its direction the axis, its length the angle: ``(0, 30, 0)`` is 30 degrees about
+    +y), then ``translate``. What ``<shape>.to_world`` and ``<instance>.to_world`` take
+    (:func:`pyclpt.traverse`)."""
+    r = _vec3(rotate, "pose rotate")
+    angle = float(np.linalg.norm(r))
+    m = _translate(translate)
+    if angle > 0:
+        m = m @ _rotate(r / angle, angle)
+    return m @ _scale(scale)
+
+
+_translate, _rotate, _scale = translate, rotate, scale  # for pose(), whose parameters have their names
+
+
 def look_at(origin, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     """Mitsuba's look_at: columns (left, up, direction, origin)."""
     o, t, u = _vec3(origin, "look_at origin"), _vec3(target, "look_at target"), _vec3(up, "look_at up")

@@ -1,0 +1,378 @@
+"""The boundary term of primary visibility, by edge sampling (Li, Aittala, Durand and Lehtinen 2018).
+
+Moving a surface moves its silhouette over the image: a pixel integral whose integrand jumps across an
+edge changes at the rate (Reynolds transport, screen space)::
+
+    d/dtheta  integral w(x) L(x) dx  =  integral over the edges of  w(x) (L_-(x) - L_+(x)) (n . dx/dtheta) dl
+
+with n the edge's unit normal in the film plane, L_+ the radiance on the side n points to, L_- on the
+other, and dx/dtheta how the edge's point moves with the parameter. Holding paths fixed (path replay)
+misses it entirely. This module computes it for the meshes' vertex positions (and the poses that move
+them, :mod:`pyclpt.gradients.placement`):
+
+1. :func:`silhouette_edges`: the edges that can bound what the camera sees, in film coordinates: a
+   mesh's boundary edges (one triangle), and edges whose two triangles face the camera on different
+   sides (silhouettes) or that have more than two; clipped to the image. Edges between two front-facing
+   triangles (shading creases) are left out: the image is continuous there up to shading.
+2. :func:`primary_boundary`: points sampled on those edges, stratified, with density proportional to
+   their length in pixels; the radiance on both sides of each point from the ``edge_radiance`` kernel
+   (``cl/gradients/edge_radiance.cl``: the full path estimator, both sides with the same random
+   numbers); the difference weighted by the image gradient through the film's reconstruction filter and
+   scattered to the edge's two vertices through the perspective projection's Jacobian.
+
+It is one term of the derivative: the interior term of moving geometry (shading that changes with the
+surface's position and normal) and the boundary terms of shadow rays and indirect bounces are not
+computed yet, so ``render_backward`` still lists geometry as not differentiable. Exact where the
+radiance on each side is constant across a parameter change (tests/test_edges.py: a square emitter
+moving over a constant background, a sphere's silhouette against its radius).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from pyclpt.buffers.rfilter import filter_eval
+from pyclpt.device.context import Device
+from pyclpt.gradients.differentiate import replay_for
+from pyclpt.gradients.parameters import SceneParameters, traverse
+from pyclpt.scene.model import Mesh, ReconstructionFilter, Scene
+
+#: Film-space offset (pixels) of the two rays on either side of an edge point.
+SIDE_EPS = 1e-3
+
+
+@dataclass
+class ScreenEdges:
+    """Silhouette edges in film coordinates (pixels from the image's top-left corner), clipped to it."""
+
+    a: np.ndarray  # (E, 2) film position of the clipped start
+    b: np.ndarray  # (E, 2) and end
+    mesh: np.ndarray  # (E,) index in scene.meshes
+    v0: np.ndarray  # (E,) the 3D edge's first vertex (index in its mesh)
+    v1: np.ndarray  # (E,) and second
+    s0: np.ndarray  # (E,) the clipped start and end as parameters of the whole projected edge
+    s1: np.ndarray
+    z0: np.ndarray  # (E,) depth along the view direction of v0 and v1
+    z1: np.ndarray
+
+    @property
+    def lengths(self) -> np.ndarray:
+        return np.linalg.norm(self.b - self.a, axis=1)
+
+
+@dataclass
+class Projection:
+    """A perspective camera's map from world points to film coordinates and its Jacobian."""
+
+    origin: np.ndarray
+    forward: np.ndarray
+    right: np.ndarray  # scaled: the image's half-extent at unit depth (as the kernels' CONST_CAM_RIGHT)
+    up: np.ndarray
+    width: int
+    height: int
+
+    @classmethod
+    def of(cls, scene: Scene, width: int, height: int, to_world: np.ndarray | None = None) -> Projection:
+        """The projection of ``scene``'s camera (with ``to_world`` instead of its own, when given)."""
+        cam = scene.camera
+        if cam.kind != "perspective":
+            raise ValueError(f"the boundary term of primary visibility is implemented for perspective cameras; "
+                             f"scene {scene.name!r} has a {cam.kind} camera")
+        if to_world is not None:
+            cam = dataclasses.replace(cam, to_world=np.asarray(to_world, np.float64))
+        o, f, r, u = (np.asarray(v, np.float64) for v in cam.basis(width, height))
+        return cls(o, f / np.linalg.norm(f), r, u, width, height)
+
+    def depth(self, p: np.ndarray) -> np.ndarray:
+        return (p - self.origin) @ self.forward
+
+    def film(self, p: np.ndarray) -> np.ndarray:
+        """(N, 2) film coordinates of points p (N, 3) in front of the camera."""
+        d = p - self.origin
+        z = d @ self.forward
+        sx = (d @ self.right) / (self.right @ self.right) / z
+        sy = (d @ self.up) / (self.up @ self.up) / z
+        return np.stack([(sx + 1) * 0.5 * self.width, (1 - sy) * 0.5 * self.height], axis=1)
+
+    def normal_velocity(self, p: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """(N, 3): n . d(film position)/dp at points p (N, 3) for film-space directions n (N, 2)."""
+        d = p - self.origin
+        z = (d @ self.forward)[:, None]
+        sx = ((d @ self.right) / (self.right @ self.right))[:, None] / z
+        sy = ((d @ self.up) / (self.up @ self.up))[:, None] / z
+        dsx = (self.right / (self.right @ self.right) - sx * self.forward) / z
+        dsy = (self.up / (self.up @ self.up) - sy * self.forward) / z
+        return n[:, :1] * (0.5 * self.width) * dsx - n[:, 1:] * (0.5 * self.height) * dsy
+
+
+def _clip(a: np.ndarray, b: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Liang-Barsky: the parameters [s0, s1] of segments a -> b inside [0, width] x [0, height] (s0 > s1:
+    outside)."""
+    s0, s1 = np.zeros(len(a)), np.ones(len(a))
+    d = b - a
+    for k, hi in ((0, width), (1, height)):
+        for p, q in ((-d[:, k], a[:, k]), (d[:, k], hi - a[:, k])):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = q / p
+            parallel = p == 0
+            s1 = np.where(parallel & (q < 0), -1.0, s1)
+            s0 = np.where(~parallel & (p < 0), np.maximum(s0, r), s0)
+            s1 = np.where(~parallel & (p > 0), np.minimum(s1, r), s1)
+    return s0, s1
+
+
+def mesh_edges(mesh: Mesh, camera_origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertex pairs (K, 2) of ``mesh``'s edges that can bound what a camera at ``camera_origin``
+    sees: boundary edges, silhouettes (their two triangles facing the camera on different sides) and
+    edges of more than two triangles; and how many triangles share each (K,)."""
+    p = mesh.positions.astype(np.float64)
+    f = mesh.indices.astype(np.int64)
+    n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    facing = np.sign(np.einsum("ij,ij->i", n, camera_origin - p[f[:, 0]]))
+    pairs = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    face = np.tile(np.arange(len(f)), 3)
+    key = np.sort(pairs, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key, face, pairs = key[order], face[order], pairs[order]
+    new = np.ones(len(key), bool)
+    new[1:] = np.any(key[1:] != key[:-1], axis=1)
+    group = np.cumsum(new) - 1
+    count = np.bincount(group)
+    lo = np.full(len(count), np.inf)
+    hi = np.full(len(count), -np.inf)
+    np.minimum.at(lo, group, facing[face])
+    np.maximum.at(hi, group, facing[face])
+    keep = (count != 2) | (lo != hi)
+    first = np.flatnonzero(new)
+    return pairs[first][keep], count[keep]
+
+
+def silhouette_edges(scene: Scene, meshes: Sequence[int], width: int, height: int) -> ScreenEdges:
+    """The silhouette edges of ``scene.meshes[i]`` for i in ``meshes`` seen by the scene's camera on a
+    width x height image (see the module); edges with an end at or behind the camera's plane are left out."""
+    proj = Projection.of(scene, width, height)
+    cols: dict[str, list[np.ndarray]] = {k: [] for k in ("a", "b", "mesh", "v0", "v1", "s0", "s1", "z0", "z1")}
+    for i in meshes:
+        mesh = scene.meshes[i]
+        pairs, _ = mesh_edges(mesh, proj.origin)
+        p = mesh.positions.astype(np.float64)
+        z0, z1 = proj.depth(p[pairs[:, 0]]), proj.depth(p[pairs[:, 1]])
+        scale = max(float(np.abs(p - proj.origin).max()), 1e-30)
+        front = (z0 > 1e-6 * scale) & (z1 > 1e-6 * scale)
+        pairs, z0, z1 = pairs[front], z0[front], z1[front]
+        a, b = proj.film(p[pairs[:, 0]]), proj.film(p[pairs[:, 1]])
+        s0, s1 = _clip(a, b, width, height)
+        inside = (s1 > s0) & np.all(np.isfinite(a) & np.isfinite(b), axis=1)
+        for k, v in (("a", a + s0[:, None] * (b - a)), ("b", a + s1[:, None] * (b - a)),
+                     ("mesh", np.full(len(a), i)), ("v0", pairs[:, 0]), ("v1", pairs[:, 1]), ("s0", s0), ("s1", s1),
+                     ("z0", z0), ("z1", z1)):
+            cols[k].append(v[inside])
+    if not cols["a"]:
+        empty = np.zeros((0, 2))
+        return ScreenEdges(empty, empty, *(np.zeros(0, int) for _ in range(3)), *(np.zeros(0) for _ in range(4)))
+    return ScreenEdges(**{k: np.concatenate(v) for k, v in cols.items()})
+
+
+def _filter_weights(rfilter: ReconstructionFilter, x: np.ndarray, width: int, height: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For film positions x (N, 2): the pixels (N, K) (flat index, -1 outside) whose value the point
+    contributes to and its normalised filter weights (N, K): w(x - c) / integral of w, per axis."""
+    radius = {"box": 0.5, "tent": rfilter.radius, "gaussian": 4.0 * rfilter.stddev}[rfilter.kind]
+    grid = np.linspace(-radius, radius, 40001)
+    norm = float(np.trapezoid(filter_eval(rfilter, grid), grid)) if rfilter.kind != "box" else 1.0
+    r = int(math.ceil(radius))
+    offs = np.arange(-r, r + 1)
+    base = np.floor(x).astype(np.int64)
+    px = base[:, :1] + offs[None, :]  # (N, R) candidate columns
+    py = base[:, 1:] + offs[None, :]
+    wx = filter_eval(rfilter, x[:, :1] - (px + 0.5)) / norm
+    wy = filter_eval(rfilter, x[:, 1:] - (py + 0.5)) / norm
+    w = (wy[:, :, None] * wx[:, None, :]).reshape(len(x), -1)
+    ok = ((px >= 0) & (px < width))[:, None, :] & ((py >= 0) & (py < height))[:, :, None]
+    pix = (py[:, :, None] * width + px[:, None, :]).reshape(len(x), -1)
+    ok = ok.reshape(len(x), -1) & (w != 0)
+    return np.where(ok, pix, -1), np.where(ok, w, 0.0), ok
+
+
+@dataclass
+class EdgeSamples:
+    """Points sampled on the silhouette edges and what each contributes (see the module)."""
+
+    pixels: np.ndarray  # (N, K) flat pixel indices the point's filter reaches (-1: none)
+    weights: np.ndarray  # (N, K) the filter's normalised weights there
+    jump: np.ndarray  # (N, 3) (L- - L+) x total edge length / N: the estimator's weight of the point
+    mesh: np.ndarray  # (N,) index in scene.meshes
+    v0: np.ndarray  # (N,) the edge's vertices
+    v1: np.ndarray
+    t: np.ndarray  # (N,) the point's parameter on the 3D edge v0 -> v1
+    velocity: np.ndarray  # (N, 3) n . d(film position)/dp at the 3D point: how the edge moves with it
+    point: np.ndarray  # (N, 3) the 3D point
+    normal: np.ndarray  # (N, 2) the edge's unit normal in the film plane (towards the "+" side)
+
+
+def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, samples: int, seed: int,
+                 max_depth: int | None = None, device: Device | str | None = None,
+                 stratified: bool = True) -> EdgeSamples:
+    """``samples`` points on the silhouette edges of ``scene.meshes[i]`` (i in ``meshes``), stratified along
+    their total length in pixels (independent with ``stratified`` False), with the radiance on both sides of
+    each from the ``edge_radiance`` kernel (random numbers keyed by ``seed``)."""
+    edges = silhouette_edges(scene, meshes, width, height)
+    lengths = edges.lengths
+    total = float(lengths.sum())
+    n_pts = samples if total > 0 else 0
+    if n_pts == 0:
+        z = np.zeros(0)
+        return EdgeSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), np.zeros((0, 3)), z.astype(int),
+                           z.astype(int), z.astype(int), z, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)))
+    rng = np.random.default_rng([seed, 0x6564676573])  # "edges"
+    u = ((np.arange(n_pts) if stratified else 0) + rng.random(n_pts)) / (n_pts if stratified else 1) * total
+    cdf = np.cumsum(lengths)
+    e = np.minimum(np.searchsorted(cdf, u, side="right"), len(lengths) - 1)
+    local = np.clip((u - (cdf[e] - lengths[e])) / np.maximum(lengths[e], 1e-300), 0.0, 1.0)
+    d = edges.b[e] - edges.a[e]
+    x = edges.a[e] + local[:, None] * d
+    n = np.stack([-d[:, 1], d[:, 0]], axis=1) / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+    replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
+    points = np.concatenate([x, n], axis=1).astype(np.float32)
+    radiance = replay.edge_radiance(points, seed, SIDE_EPS).astype(np.float64)  # (N, 2, 3): minus, plus
+    pix, w, _ = _filter_weights(scene.film.rfilter, x, width, height)
+    # the 3D point of each sample (1/z is linear along the projected edge), the edge's normal velocity there
+    s = edges.s0[e] + local * (edges.s1[e] - edges.s0[e])
+    z0, z1 = edges.z0[e], edges.z1[e]
+    t = s * z0 / ((1 - s) * z1 + s * z0)
+    proj = Projection.of(scene, width, height)
+    point = np.zeros((n_pts, 3))
+    for i in set(edges.mesh[e].tolist()):
+        m = edges.mesh[e] == i
+        p = scene.meshes[i].positions.astype(np.float64)
+        tm = t[m][:, None]
+        point[m] = (1 - tm) * p[edges.v0[e][m]] + tm * p[edges.v1[e][m]]
+    return EdgeSamples(pix, w, (radiance[:, 0] - radiance[:, 1]) * total / n_pts, edges.mesh[e], edges.v0[e],
+                       edges.v1[e], t, proj.normal_velocity(point, n), point, n)
+
+
+def _meshes_of(scene: Scene, names: Sequence[str]) -> dict[int, list[str]]:
+    """The meshes whose parameters ``names`` are, by index (the sensor's to_world is not a mesh's)."""
+    by_name = {m.name: i for i, m in enumerate(scene.meshes)}
+    sensor = f"{scene.ids.get('camera', 'sensor')}.to_world"
+    wanted: dict[int, list[str]] = {}
+    for name in names:
+        if name == sensor:
+            continue
+        shape, _, prop = name.rpartition(".")
+        if prop not in ("vertex_positions", "to_world") or shape not in by_name:
+            raise ValueError(f"{name}: the boundary term is computed for a shape's vertex_positions or to_world "
+                             f"and for {sensor}; shapes: {', '.join(by_name)}")
+        wanted.setdefault(by_name[shape], []).append(name)
+    return wanted
+
+
+#: Step of the central differences of the film position with respect to the camera's matrix (float64).
+CAMERA_STEP = 1e-6
+
+
+def camera_velocity(scene: Scene, width: int, height: int, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(N, 4, 4): n . d(film position of each point)/d(the sensor's to_world), by central differences of
+    the projection (a closed form in float64: exact to about 1e-9 relative); the last row zero."""
+    m = np.asarray(scene.camera.to_world, np.float64)
+    out = np.zeros((len(point), 4, 4))
+    for r in range(3):
+        for c in range(4):
+            d = np.zeros((4, 4))
+            d[r, c] = CAMERA_STEP
+            up = Projection.of(scene, width, height, m + d).film(point)
+            down = Projection.of(scene, width, height, m - d).film(point)
+            out[:, r, c] = np.einsum("nk,nk->n", normal, (up - down) / (2 * CAMERA_STEP))
+    return out
+
+
+def _rest(params: SceneParameters, name: str, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh pose M (4x4) and the positions it moves (positions = M rest)."""
+    m4 = np.asarray(params[name], np.float64)
+    p = mesh.positions.astype(np.float64)
+    return m4, (p - m4[:3, 3]) @ np.linalg.inv(m4[:3, :3]).T
+
+
+def primary_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, samples: int = 65536,
+                     seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
+                     device: Device | str | None = None, stratified: bool = True) -> dict[str, np.ndarray]:
+    """Reverse mode: the boundary term of primary visibility of dLoss/dparameter for ``names``
+    (``SHAPE.vertex_positions``, ``SHAPE.to_world``, ``SENSOR.to_world``; :func:`pyclpt.traverse`), given dLoss/dImage
+    ``image_grad`` (H, W, 3) of an image rendered at that size: ``samples`` edge points, the radiance on
+    both sides of each traced with ``seed`` (:func:`sample_edges`). ``parameters``: the SceneParameters
+    whose poses the ``to_world`` gradients are for (default: a new traverse, where every pose is the
+    identity)."""
+    g = np.asarray(image_grad, np.float64)
+    if g.ndim != 3 or g.shape[2] != 3:
+        raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
+    height, width = g.shape[:2]
+    params = parameters if parameters is not None else traverse(scene)
+    wanted = _meshes_of(scene, names)
+    sensor = f"{scene.ids.get('camera', 'sensor')}.to_world"
+    meshes = range(len(scene.meshes)) if sensor in names else sorted(wanted)  # the camera moves every edge
+    es = sample_edges(scene, meshes, width, height, samples=samples, seed=seed, max_depth=max_depth,
+                      device=device, stratified=stratified)
+    gflat = g.reshape(-1, 3)
+    gw = np.einsum("nk,nkc->nc", es.weights, gflat[np.maximum(es.pixels, 0)] * (es.pixels >= 0)[..., None])
+    weight = np.einsum("nc,nc->n", gw, es.jump)
+    out: dict[str, np.ndarray] = {}
+    if sensor in names:
+        out[sensor] = np.einsum("n,nij->ij", weight, camera_velocity(scene, width, height, es.point,
+                                                                      es.normal)).astype(np.float32)
+    for i, mesh_names in wanted.items():
+        m = es.mesh == i
+        gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
+        q = es.velocity[m] * weight[m][:, None]
+        np.add.at(gv, es.v0[m], (1 - es.t[m])[:, None] * q)
+        np.add.at(gv, es.v1[m], es.t[m][:, None] * q)
+        for name in mesh_names:
+            if name.endswith(".vertex_positions"):
+                out[name] = gv.reshape(-1).astype(np.float32)
+            else:  # positions = M rest: dL/dM = sum over vertices of dL/dp (rest, 1)^T
+                _, rest = _rest(params, name, scene.meshes[i])
+                gm = np.zeros((4, 4))
+                gm[:3, :3] = gv.T @ rest
+                gm[:3, 3] = gv.sum(0)
+                out[name] = gm.astype(np.float32)
+    return out
+
+
+def primary_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
+                             height: int | None = None, samples: int = 65536, seed: int = 0,
+                             max_depth: int | None = None, parameters: SceneParameters | None = None,
+                             device: Device | str | None = None) -> np.ndarray:
+    """Forward mode: the boundary term of primary visibility of d image (H, W, 3) along ``tangent`` (shaped as
+    parameter ``name``'s value: (3 V,) for ``SHAPE.vertex_positions``, (4, 4) for ``SHAPE.to_world`` and
+    ``SENSOR.to_world``). The
+    same edge points as :func:`primary_boundary` for the same seed and size, so that
+    ``sum(forward * image_grad) == sum(backward[name] * tangent)`` up to rounding."""
+    width = width or scene.film.width
+    height = height or scene.film.height
+    params = parameters if parameters is not None else traverse(scene)
+    tan = np.asarray(tangent, np.float64)
+    if name == f"{scene.ids.get('camera', 'sensor')}.to_world":  # every edge moves in the film
+        es = sample_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
+                          max_depth=max_depth, device=device)
+        dx = np.einsum("nij,ij->n", camera_velocity(scene, width, height, es.point, es.normal), tan.reshape(4, 4))
+    else:
+        (i, _), = _meshes_of(scene, [name]).items()
+        mesh = scene.meshes[i]
+        if name.endswith(".vertex_positions"):
+            dp = tan.reshape(mesh.positions.shape)
+        else:
+            _, rest = _rest(params, name, mesh)
+            tm = tan.reshape(4, 4)
+            dp = rest @ tm[:3, :3].T + tm[:3, 3]
+        es = sample_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,
+                          device=device)
+        dx = (1 - es.t) * np.einsum("nc,nc->n", es.velocity, dp[es.v0]) + \
+            es.t * np.einsum("nc,nc->n", es.velocity, dp[es.v1])
+    contrib = es.weights[..., None] * (es.jump * dx[:, None])[:, None, :]  # (N, K, 3)
+    image = np.zeros((width * height, 3))
+    ok = es.pixels >= 0
+    np.add.at(image, es.pixels[ok], contrib[ok])
+    return image.reshape(height, width, 3).astype(np.float32)
