@@ -5,10 +5,12 @@ in test_wavefront.py over ``each_device``), within a tolerance across devices (d
 math libraries may differ in the last bits)."""
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
 
 import numpy as np
+import pyopencl as cl
 import pytest
 
 import pyclpt
@@ -17,7 +19,8 @@ from pyclpt.device import vendors
 from pyclpt.device.context import DeviceError, list_devices
 from scenes import material_zoo  # tests/ is on sys.path (conftest.py)
 
-CHILD = ("import pyclpt, os; print(os.environ.get('OCL_ICD_VENDORS', '')); "
+# importing pyclpt.device registers the runtime (import pyclpt alone loads nothing: its names are lazy)
+CHILD = ("import pyclpt.device, os; print(os.environ.get('OCL_ICD_VENDORS', '')); "
          "print([d.platform.name.strip() for _, _, d in pyclpt.list_devices()])")
 
 
@@ -32,9 +35,13 @@ def child(**extra: str) -> list[str]:
 
 
 def test_pocl_stays_first(device):
-    """The registered Intel platform is listed after the loader's others: PoCL keeps 0:0."""
-    assert list_devices()[0][2].platform.name.strip().lower().startswith("portable computing language")
-    assert pyclpt.get_device("0:0").is_pocl and device.is_pocl
+    """The registered Intel platform is listed after the loader's others: PoCL keeps its index (0:0, or 1:0
+    behind another ICD of the environment's, such as the test extra's Oclgrind, whose file sorts first)."""
+    names = [d.platform.name.strip() for _, _, d in list_devices()]
+    pocl = next(k for k, n in enumerate(names) if n.lower().startswith("portable computing language"))
+    assert vendors.INTEL_PLATFORM not in names[:pocl]
+    assert all(n in ("Oclgrind",) for n in names[:pocl]), names
+    assert pyclpt.get_device(f"{list_devices()[pocl][0]}:0").is_pocl and device.is_pocl
 
 
 def test_intel_selector(intel_device):
@@ -53,7 +60,8 @@ def test_registration_in_a_fresh_process(tmp_path):
     assert folder.startswith(str(tmp_path / "opencl-vendors"))
     icd = (tmp_path / "opencl-vendors").glob("*/intel-cpu.icd")
     assert [p.read_text().strip() for p in icd] == [str(vendors.intel_library())]
-    assert platforms == f"['Portable Computing Language', '{vendors.INTEL_PLATFORM}']"
+    listed = [n for n in ast.literal_eval(platforms) if n != "Oclgrind"]  # (the test extra's ICD, if installed)
+    assert listed == ["Portable Computing Language", vendors.INTEL_PLATFORM]
 
 
 def test_a_users_vendors_folder_is_respected(tmp_path):
@@ -72,6 +80,99 @@ def test_missing_intel_says_how_to_install(monkeypatch):
     monkeypatch.setattr(context, "_is_intel_cpu", lambda d: False)
     with pytest.raises(DeviceError, match=r'no Intel CPU OpenCL device: .*pip install "pyclpt\[intel\]"'):
         context._select("intel")
+
+
+# -- the default device: the fastest installed (fake platform lists: no real GPU here) ----------------
+class _FakePlatform:
+    def __init__(self, name: str, kinds: list[str]) -> None:
+        self.name = name
+        self.devices = [_FakeDevice(self, kind, i) for i, kind in enumerate(kinds)]
+
+    def get_devices(self) -> list:
+        return self.devices
+
+
+class _FakeDevice:
+    def __init__(self, platform: _FakePlatform, kind: str, index: int) -> None:
+        self.platform = platform
+        self.type = {"gpu": cl.device_type.GPU, "cpu": cl.device_type.CPU}[kind]
+        self.name = f"{kind} {index} of {platform.name}"
+
+
+POCL = ("Portable Computing Language", ["cpu"])
+INTEL = (vendors.INTEL_PLATFORM, ["cpu"])
+GPU = ("NVIDIA CUDA", ["gpu"])
+
+
+def _fake_platforms(monkeypatch, *platforms: tuple[str, list[str]]) -> None:
+    fakes = [_FakePlatform(name, kinds) for name, kinds in platforms]
+    monkeypatch.setattr(cl, "get_platforms", lambda: fakes)
+    monkeypatch.delenv("PYCLPT_DEVICE", raising=False)
+
+
+@pytest.mark.parametrize("platforms, expected, why", [
+    ([POCL, INTEL, GPU], "NVIDIA CUDA", "GPU"),
+    ([GPU, POCL], "NVIDIA CUDA", "GPU"),
+    ([POCL, INTEL], vendors.INTEL_PLATFORM, "Intel's CPU runtime"),
+    ([INTEL, POCL], vendors.INTEL_PLATFORM, "Intel's CPU runtime"),
+    ([POCL], "Portable Computing Language", 'pip install "pyclpt[intel]"'),
+    ([("Some CPU Vendor", ["cpu"])], "Some CPU Vendor", "the first device found"),
+], ids=["gpu-intel-pocl", "gpu-pocl", "intel-pocl", "intel-first", "pocl", "other"])
+def test_default_is_the_fastest_installed(monkeypatch, platforms, expected, why):
+    """GPU > Intel's CPU runtime > PoCL, whatever the platforms' order."""
+    from pyclpt.device import context
+
+    _fake_platforms(monkeypatch, *platforms)
+    chosen, reason = context.default_choice()
+    assert chosen.platform.name == expected and why in reason
+    assert context._select("") is chosen and context._select("default") is chosen
+
+
+def test_pyclpt_device_wins_over_the_fastest(monkeypatch):
+    from pyclpt.device import context
+
+    _fake_platforms(monkeypatch, POCL, INTEL, GPU)
+    monkeypatch.setenv("PYCLPT_DEVICE", "pocl")
+    chosen, reason = context.default_choice()
+    assert chosen.platform.name == "Portable Computing Language" and "PYCLPT_DEVICE='pocl'" in reason
+    assert context._select("intel").platform.name == vendors.INTEL_PLATFORM  # --device wins too
+    monkeypatch.setenv("PYCLPT_DEVICE", "no-such-device")
+    with pytest.raises(DeviceError, match="PYCLPT_DEVICE='no-such-device' \\(the default device\\)"):
+        context.default_choice()
+
+
+def test_default_choice_is_logged_once(monkeypatch, caplog):
+    from pyclpt.device import context
+
+    _fake_platforms(monkeypatch, POCL, INTEL)
+    opened = []
+
+    class Opened:
+        def __init__(self, dev) -> None:
+            self.name = f"{dev.platform.name} / {dev.name}"
+            opened.append(self)
+
+    monkeypatch.setattr(context, "_default", None)
+    monkeypatch.setattr(context, "_open", Opened)
+    caplog.set_level("INFO", logger="pyclpt")
+    first = context.default_device()
+    assert context.default_device() is first and len(opened) == 1
+    said = [r.getMessage() for r in caplog.records if r.name == "pyclpt"]
+    assert said == [f"device: {vendors.INTEL_PLATFORM} / cpu 0 of {vendors.INTEL_PLATFORM} (no GPU; Intel's CPU "
+                    f"runtime renders faster than PoCL on the same CPU)"]
+
+
+def test_the_test_session_runs_on_pocl(device):
+    """tests/conftest.py sets PYCLPT_DEVICE=pocl (unless already set), here and in the CLI's child processes:
+    the suite stays on PoCL where Intel's runtime, the faster default, is installed."""
+    if env.get("PYCLPT_DEVICE") != "pocl":
+        pytest.skip(f"{env.describe('PYCLPT_DEVICE')} chosen for this session")
+    assert device.is_pocl and pyclpt.default_device() is device
+    listed = [n for n in ast.literal_eval(child()[1]) if n != "Oclgrind"]  # the child inherits the setting
+    assert listed[0] == "Portable Computing Language"
+    out = subprocess.run([sys.executable, "-c", "import pyclpt; print(pyclpt.default_device().name)"],
+                         env=env.child_environment(), capture_output=True, text=True, timeout=120)
+    assert out.stdout.startswith("Portable Computing Language"), out.stderr
 
 
 @pytest.mark.parametrize("integrator,layout", [("megakernel", "soa"), ("wavefront", "soa"), ("wavefront", "aos")])

@@ -241,6 +241,58 @@ def test_progressive_sequence_equals_local(client):
         np.testing.assert_array_equal(a, b)  # the same adds in the same order
 
 
+def test_progressive_sequence_hands_frames_over_as_they_complete(client, monkeypatch):
+    """With on_frame, each running-average frame is handed over (the CLI writes it) as soon as the samples
+    before it are in: the first frame comes while most tasks are not even submitted (at most the window
+    of two tasks a worker runs or waits), the frames held are bounded, and they equal the frames the
+    sequence returns whole."""
+    dr = DistributedRenderer(client, "cornell-box", width=W, height=H, max_depth=3)
+    whole = dr.render_progressive(12, seed=2, task_spp=1, timeout=JOB_TIMEOUT)
+    submitted = []
+    submit = client.submit
+    monkeypatch.setattr(client, "submit", lambda *a, **k: submitted.append(k.get("key")) or submit(*a, **k))
+    seen = []
+    assert dr.render_progressive(12, seed=2, task_spp=1, timeout=JOB_TIMEOUT,
+                                 on_frame=lambda k, image: seen.append((k, image, len(submitted)))) == []
+    assert [k for k, _, _ in seen] == list(range(12)) and len(submitted) == 12
+    assert seen[0][2] <= dr.window == 4 < 12  # frame 0 handed over with 8 of the 12 tasks not yet submitted
+    assert all(n <= k + 1 + dr.window for k, _, n in seen)
+    assert 1 <= dr.held_tasks <= dr.window
+    assert all(p.frames is None for p in dr.parts)  # not kept once handed over
+    for (_, a, _), b in zip(seen, whole):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_cli_progressive_sequence_on_a_cluster_writes_frames_as_it_goes(client, tmp_path, capsys, monkeypatch):
+    """A running-average --sequence on a cluster writes each frame when it is complete, in frame order: Ctrl-C
+    (here: in the write of frame 3 of 40) leaves frames 0..2 on disk and cancels the rest."""
+    from pyclpt.common import image_io
+
+    args = ["render", "cornell-box", "--spp", "40", "--sequence", "--width", str(W), "--height", str(H),
+            "--max-depth", "2", "--quiet", "--scheduler", client.scheduler.address, "--task-spp", "1"]
+    write = image_io.write_image
+    order = []
+
+    def interrupted(path, image, exposure=0.0):
+        order.append(os.path.basename(str(path)))
+        if len(order) == 4:
+            raise KeyboardInterrupt
+        return write(path, image, exposure)
+
+    monkeypatch.setattr(image_io, "write_image", interrupted)
+    assert main([*args, "-o", str(tmp_path / "d_##.exr")]) != 0
+    assert "interrupted" in capsys.readouterr().err
+    assert order == ["d_00.exr", "d_01.exr", "d_02.exr", "d_03.exr"]
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["d_00.exr", "d_01.exr", "d_02.exr"]
+    _wait_released(client)
+    monkeypatch.setattr(image_io, "write_image", write)
+    assert main([*args[:2], "--spp", "3", *args[4:], "-o", str(tmp_path / "e_#.exr")]) == 0
+    pr = pyclpt.ProgressiveRenderer(pyclpt.load("cornell-box"), width=W, height=H, max_depth=2, seed=0)
+    for k in range(3):
+        pr.step()
+        np.testing.assert_array_equal(pyclpt.read_image(tmp_path / f"e_{k}.exr")[..., :3], pr.image())
+
+
 @pytest.mark.parametrize("mode,orbit", [("svgf", 30), ("blend", None)])
 def test_denoised_sequence_equals_local(client, mode, orbit):
     """A denoised sequence, a frame a task, denoised on the client in frame order: the local progressive
@@ -423,3 +475,48 @@ def test_shipped_scene_is_sent_again_after_an_edit(client):
     assert dr.source.token != token and not np.array_equal(after, before)
     np.testing.assert_allclose(after, _local(scene, 4, seed=5, max_depth=3)[0], rtol=1e-6, atol=1e-7)
     dr.close()
+
+
+def test_local_workers_beyond_the_cores_warn_and_absurd_counts_are_refused(monkeypatch, caplog, tmp_path, capsys):
+    from pyclpt.distributed import cluster
+
+    monkeypatch.setattr(cluster, "cores", lambda: 2)
+    with caplog.at_level("WARNING", logger="pyclpt"):
+        assert cluster.check_workers(2) == 2
+    assert not caplog.records
+    with caplog.at_level("WARNING", logger="pyclpt"):
+        assert cluster.check_workers(3) == 3
+    assert "3 local workers on 2 CPU cores" in caplog.text
+    with pytest.raises(ValueError, match=r"workers=9: a local cluster of 9 worker processes on 2 CPU cores \(at "
+                                         r"most 8"):
+        cluster.local_cluster(9)
+    rc = main(["render", "cornell-box", "--spp", "1", "--workers", "12", "--width", "4", "--height", "4",
+               "--quiet", "-o", str(tmp_path / "x.exr")])
+    assert rc == 1 and "workers=12: a local cluster of 12 worker processes" in capsys.readouterr().err
+    assert not (tmp_path / "x.exr").exists()
+
+
+def _closed_port() -> int:
+    """A local TCP port nothing listens on (bound, then closed)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_refused_scheduler_connection_fails_at_once_naming_the_address(tmp_path, capsys):
+    """Nothing listens at the address: ConnectionError naming it and saying it refused, from the probe (its
+    timeout only guards against a hang), not Dask's 30 s of retries."""
+    from pyclpt.distributed import connect
+
+    address = f"tcp://127.0.0.1:{_closed_port()}"
+    with pytest.raises(ConnectionError, match=f"the Dask scheduler at {address} refused the connection"):
+        with connect(address, probe_timeout=JOB_TIMEOUT):
+            pass
+    rc = main(["render", "cornell-box", "--spp", "1", "--scheduler", address, "--width", "4", "--height", "4",
+               "--quiet", "-o", str(tmp_path / "x.exr")])
+    assert rc == 1 and f"the Dask scheduler at {address} refused the connection" in capsys.readouterr().err
+    from pyclpt.distributed.cluster import probe_scheduler
+
+    probe_scheduler("inproc://nothing")  # not TCP: left to Dask

@@ -288,3 +288,24 @@ def test_emission_aov_of_a_huge_emitter_stays_finite(tmp_path):
     emission = aov["emission"]
     assert np.all(np.isfinite(emission)) and emission.max() > 1e38
     np.testing.assert_array_equal(emission, image)  # max_depth 1: the image is what the first vertex emits
+
+
+def test_render_backward_of_a_huge_finite_image_gradient_stays_finite():
+    """The gradient is linear in image_grad: a finite 3e38 one (float32's range ends at 3.4e38) gives the
+    gradient of a 1 scaled by 3e38 where that is representable, never inf; beyond float32's range an
+    OverflowError names the element and its value."""
+    box = pyclpt.load("cornell-box")
+    kw = dict(spp=1, seed=4, width=8, height=8, params=[RED, LIGHT])
+    unit = np.full((8, 8, 3), 1.0, np.float32)
+    small = np.full((8, 8, 3), 1.0 / 192, np.float32)
+    ref = pyclpt.render_backward(box, unit, **kw)
+    scale = 1e38 / max(float(np.max(np.abs(g))) for g in ref.values())  # the largest gradient becomes 1e38
+    huge = pyclpt.render_backward(box, unit * np.float32(scale), **kw)
+    for name in ref:
+        assert np.all(np.isfinite(huge[name])), (name, huge[name])
+        np.testing.assert_allclose(huge[name], ref[name].astype(np.float64) * np.float32(scale), rtol=1e-5)
+    assert max(float(np.abs(g).max()) for g in huge.values()) > 9.9e37
+    # the same gradient for an image_grad 192 times smaller, up to that factor (linear, no scaling below 1)
+    np.testing.assert_allclose(pyclpt.render_backward(box, small, **kw)[RED] * 192, ref[RED], rtol=1e-5)
+    with pytest.raises(OverflowError, match=r"the gradient of .*\[\d\] is -?[\d.]+e\+\d+, beyond float32's range"):
+        pyclpt.render_backward(box, np.full((8, 8, 3), 3e38, np.float32), **kw)

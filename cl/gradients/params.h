@@ -68,7 +68,9 @@ static inline void grad_add(__global float* p, float v) {
     if (v == 0.0f || !m_isfinite(v)) return;
 
     volatile __global uint* q = (volatile __global uint*)p;
-    uint old = *q, seen;
+    /* the first read atomic too (atomic_or with 0 changes nothing): a plain read racing another work
+       item's atomic_cmpxchg is a data race (Oclgrind reports it), though the loop retries on a stale value */
+    uint old = atomic_or(q, 0u), seen;
     do {
         seen = old;
         old = atomic_cmpxchg(q, seen, as_uint(as_float(seen) + v));

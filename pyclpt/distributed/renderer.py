@@ -45,6 +45,10 @@ from pyclpt.rendering.renderer import render as render_local
 from pyclpt.scene.camera_path import CameraPath
 from pyclpt.scene.model import Camera, Scene, content_digest
 
+# Samples a task of a running-average sequence written as it goes (render_progressive's on_frame) renders at
+# most: each sends back a frame per sample, and a task's frames are written only once all have arrived.
+PROGRESSIVE_TASK_SPP = 16
+
 
 class DistributedRenderer:
     """A scene rendered on the workers of a Dask ``client``.
@@ -121,21 +125,35 @@ class DistributedRenderer:
         return self._size
 
     def _run(self, tasks: list[RenderTask], progress: bool | None, desc: str, unit_of=lambda t: t.count,
-             timeout: float | None = None,
-             on_result: Callable[[int, PartialSum], None] | None = None) -> list[PartialSum]:
+             timeout: float | None = None, on_result: Callable[[int, PartialSum], None] | None = None,
+             window: int | None = None, consumed: Callable[[], int] | None = None) -> list[PartialSum]:
         """Run ``tasks`` on the cluster, a bar over their units; the results in the tasks' order
         (``on_result(i, part)``: called with each as it arrives). Any failure (or Ctrl-C, or ``timeout``
-        seconds) cancels the tasks not finished."""
+        seconds) cancels the tasks not finished. ``window``: task i is submitted only once ``consumed()``
+        (how many tasks, in order, ``on_result`` has used up) is above i - window, so that at most ``window``
+        tasks' results are running or held at a time (a long sequence need not fit in memory)."""
         d = self._distributed
         args = () if self._shipped is None else (self._shipped,)
-        futures = [self.client.submit(run_task, t, *args, key=f"pyclpt-{t.key}", pure=False, retries=0)
-                   for t in tasks]
-        index = {f.key: i for i, f in enumerate(futures)}
+        futures: list[Any] = []
+        index: dict[Any, int] = {}
+
+        def submit_more() -> list[Any]:
+            limit = len(tasks) if window is None else min(len(tasks), consumed() + window)
+            new = []
+            while len(futures) < limit:
+                t = tasks[len(futures)]
+                f = self.client.submit(run_task, t, *args, key=f"pyclpt-{t.key}", pure=False, retries=0)
+                index[f.key] = len(futures)
+                futures.append(f)
+                new.append(f)
+            return new
+
         results: list[PartialSum | None] = [None] * len(tasks)
         try:
             with tqdm(total=sum(unit_of(t) for t in tasks), desc=desc, unit="spp", disable=not progress,
                       delay=PROGRESS_DELAY_S, leave=False) as bar:
-                for future, part in d.as_completed(futures, with_results=True, timeout=timeout):
+                running = d.as_completed(submit_more(), with_results=True, timeout=timeout)
+                for future, part in running:
                     i = index[future.key]
                     if not isinstance(part, PartialSum):  # cancelled or failed: its exception, not a result
                         self._failed(future, part, desc, sum(r is not None for r in results), len(tasks))
@@ -143,6 +161,9 @@ class DistributedRenderer:
                     if on_result is not None:
                         on_result(i, part)
                     bar.update(unit_of(tasks[i]))
+                    if window is not None:
+                        futures[i].release()  # the worker forgets the result (the client has it)
+                        running.update(submit_more())
         except TimeoutError:
             left = sum(r is None for r in results)
             raise TimeoutError(f"{desc}: not finished within timeout={timeout} s: {left} of {len(tasks)} tasks "
@@ -227,17 +248,52 @@ class DistributedRenderer:
         return [average(p.total, spp) for p in parts]
 
     def render_progressive(self, spp: int, seed: int = 0, *, task_spp: int | None = None,
-                           progress: bool | None = None, timeout: float | None = None) -> list[np.ndarray]:
+                           progress: bool | None = None, timeout: float | None = None,
+                           on_frame: Callable[[int, np.ndarray], None] | None = None) -> list[np.ndarray]:
         """The image after each of ``spp`` samples, as a progressive render's accumulation gives them
         (frame k: the average of samples 0..k), (H, W, 3) float32 each: sample ranges on the workers,
-        every sample's frame sent back and added in order on the client."""
+        every sample's frame sent back and added in order on the client.
+
+        ``on_frame(k, image)``: called with each frame in order as soon as the samples before it have
+        arrived (the CLI writes it then); the frames are then not kept, and at most
+        :attr:`window` tasks (of at most :data:`PROGRESSIVE_TASK_SPP` samples by default) are running or
+        held at a time: a long sequence needs bounded memory on the client, and what is done is on disk
+        when it is stopped. Else the frames are returned."""
         spp = check_int(spp, "spp", lo=1, hi=2**32)
         seed = check_int(seed, "seed", lo=0, hi=2**32 - 1)
         task_spp = check_optional_int(task_spp, "task_spp", lo=1) or default_task_spp(spp, self.workers)
         self._ship()
+        if on_frame is None:
+            tasks = [self._task(seed, s, n, per_sample=True) for s, n in split_samples(spp, task_spp)]
+            parts = self._run(tasks, progress, f"{self.source.name}: {spp} frames", timeout=timeout)
+            return running_averages(parts, spp)
+        task_spp = min(task_spp, PROGRESSIVE_TASK_SPP)
         tasks = [self._task(seed, s, n, per_sample=True) for s, n in split_samples(spp, task_spp)]
-        parts = self._run(tasks, progress, f"{self.source.name}: {spp} frames", timeout=timeout)
-        return running_averages(parts, spp)
+        waiting: dict[int, PartialSum] = {}  # tasks arrived before the one whose frames come next
+        state = {"next": 0, "frame": 0, "total": None}
+        self.held_tasks = 0  # the most tasks held at once (arrived, not yet added): bounded by the window
+
+        def add_in_order(i: int, part: PartialSum) -> None:
+            waiting[i] = part
+            self.held_tasks = max(self.held_tasks, len(waiting))
+            while state["next"] in waiting:
+                ready = waiting.pop(state["next"])
+                for frame in ready.frames:
+                    total = state["total"]
+                    state["total"] = frame.astype(np.float64) if total is None else total + frame
+                    state["frame"] += 1
+                    on_frame(state["frame"] - 1, average(state["total"], state["frame"]))
+                ready.frames = None  # added: only the task's record stays
+                state["next"] += 1
+
+        self._run(tasks, progress, f"{self.source.name}: {spp} frames", timeout=timeout, on_result=add_in_order,
+                  window=self.window, consumed=lambda: state["next"])
+        return []
+
+    @property
+    def window(self) -> int:
+        """How many tasks of a sequence written as it goes may be running or held at once: two a worker."""
+        return 2 * self.workers
 
     def render_denoised(self, frames: int, seed: int = 0, *, camera_path: CameraPath | None = None,
                         denoiser: str = "svgf", denoiser_settings: DenoiserSettings | None = None,

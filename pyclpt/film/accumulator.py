@@ -34,7 +34,7 @@ import pyopencl as cl
 
 from pyclpt.common import env
 from pyclpt.common.checks import check_bool, check_choice, check_int
-from pyclpt.device.context import Device, alloc, check_alloc, get_device
+from pyclpt.device.context import Device, alloc, check_alloc, fill_buffer, get_device
 from pyclpt.device.program import build_program
 
 log = logging.getLogger("pyclpt.film.accumulator")
@@ -125,7 +125,7 @@ class Accumulator:
         self._opts = check_options(precision=precision, overflow=overflow, max_frame_count=max_frame_count,
                                    input_type=input_type, channels=channels, enabled=enabled)
         self.counters = alloc(self.device, 8, "accumulator counters")
-        cl.enqueue_fill_buffer(self.device.queue, self.counters, np.uint32(0), 0, 8)
+        fill_buffer(self.device.queue, self.counters, np.uint32(0), 0, 8)
         self._staging: cl.Buffer | None = None
         self._staging_bytes = 0
         self._state: cl.Buffer | None = None
@@ -144,12 +144,17 @@ class Accumulator:
         """The current options (a copy); change them with :meth:`configure`."""
         return dict(self._opts)
 
-    precision = property(lambda self: self._opts["precision"])
-    overflow = property(lambda self: self._opts["overflow"])
-    max_frame_count = property(lambda self: self._opts["max_frame_count"])
-    input_type = property(lambda self: self._opts["input_type"])
-    channels = property(lambda self: self._opts["channels"])
-    enabled = property(lambda self: self._opts["enabled"])
+    precision = property(lambda self: self._opts["precision"],
+                         doc="single, compensated or double (how it is kept: :attr:`implementation`).")
+    overflow = property(lambda self: self._opts["overflow"],
+                        doc="What happens once ``max_frame_count`` frames are summed (the overflow mode).")
+    max_frame_count = property(lambda self: self._opts["max_frame_count"],
+                               doc="Frames summed before the overflow mode acts (0: unlimited).")
+    input_type = property(lambda self: self._opts["input_type"],
+                          doc="The frames' value type: ``float``, ``uint`` or ``int``.")
+    channels = property(lambda self: self._opts["channels"], doc="Values per pixel (1 to 4).")
+    enabled = property(lambda self: self._opts["enabled"],
+                       doc="False: no accumulation, the image is the last frame.")
 
     def configure(self, **changes: Any) -> None:
         """Change options (validated together, as the constructor does); the accumulation restarts."""
@@ -171,6 +176,7 @@ class Accumulator:
 
     @property
     def emulated_double(self) -> bool:
+        """Whether double precision is emulated with float pairs (no fp64 on the device)."""
         return self.implementation == "double-float"
 
     @property
@@ -211,7 +217,7 @@ class Accumulator:
         """Start over: the sum and the frame count go to zero (the counters of skipped, overflowed
         and ignored samples are kept; they count over the accumulator's life)."""
         q = self.device.queue
-        cl.enqueue_fill_buffer(q, self._state, np.uint32(0), 0, self.state_bytes)
+        fill_buffer(q, self._state, np.uint32(0), 0, self.state_bytes)
         self.frame_count = 0
 
     @property
@@ -375,7 +381,7 @@ class Accumulator:
             return
         c = np.zeros(2, np.uint32)
         cl.enqueue_copy(self.device.queue, c, self.counters)
-        cl.enqueue_fill_buffer(self.device.queue, self.counters, np.uint32(0), 0, 8)
+        fill_buffer(self.device.queue, self.counters, np.uint32(0), 0, 8)
         self._pending = 0
         self.skipped_total += int(c[0])
         if c[1]:
@@ -397,6 +403,7 @@ class Accumulator:
         return self.overflowed_total
 
     def stats(self) -> dict[str, Any]:
+        """The options, the implementation, the frame count, the counters and the state's size."""
         return {**self.options, "implementation": self.implementation, "frame_count": self.frame_count,
                 "skipped_samples": self.skipped_samples, "overflowed_samples": self.overflowed_samples,
                 "ignored_frames": self.ignored_frames, "state_bytes": self.state_bytes,

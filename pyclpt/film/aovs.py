@@ -20,7 +20,7 @@ from collections.abc import Iterable
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.device.context import Device, alloc
+from pyclpt.device.context import Device, alloc, fill_buffer
 from pyclpt.device.program import build_program
 
 # The channel layout of cl/film/aovs.h: name -> (first channel, EXR channel names).
@@ -97,15 +97,15 @@ class AovFilm:
         self.clear_slots()
         q = self.device.queue
         for buf in (self.sum, self.mean):
-            cl.enqueue_fill_buffer(q, buf, np.float32(0), 0, 4 * AOV_FLOATS * self.pixels)
-            cl.enqueue_fill_buffer(q, buf, np.int32(-1), 4 * AOV_FLOATS * self.pixels,
-                                   4 * (AOV_COUNT - AOV_FLOATS) * self.pixels)
+            fill_buffer(q, buf, np.float32(0), 0, 4 * AOV_FLOATS * self.pixels)
+            fill_buffer(q, buf, np.int32(-1), 4 * AOV_FLOATS * self.pixels,
+                        4 * (AOV_COUNT - AOV_FLOATS) * self.pixels)
 
     def clear_slots(self) -> None:
         """The records before a batch: 0, ids -1 (a path writes only what its events give)."""
         q, n = self.device.queue, self.slot_count
-        cl.enqueue_fill_buffer(q, self.slots, np.float32(0), 0, 4 * AOV_FLOATS * n)
-        cl.enqueue_fill_buffer(q, self.slots, np.int32(-1), 4 * AOV_FLOATS * n, 4 * (AOV_COUNT - AOV_FLOATS) * n)
+        fill_buffer(q, self.slots, np.float32(0), 0, 4 * AOV_FLOATS * n)
+        fill_buffer(q, self.slots, np.int32(-1), 4 * AOV_FLOATS * n, 4 * (AOV_COUNT - AOV_FLOATS) * n)
 
     def restart(self) -> None:
         """The next batch's frames start the sums over (its records are kept): the G-buffer of one frame."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.device.context import Device, alloc
+from pyclpt.device.context import Device, alloc, fill_buffer
 from pyclpt.device.program import build_program
 from pyclpt.film.accumulator import Accumulator
 from pyclpt.film.aovs import AovFilm
@@ -89,9 +89,9 @@ class Film:
     def clear(self) -> None:
         q = self.device.queue
         self.accumulator.reset()
-        cl.enqueue_fill_buffer(q, self.frame, np.float32(0), 0, 4 * self.pixels * 3 * self.batch)
-        cl.enqueue_fill_buffer(q, self.dropped, np.int32(0), 0, 4)
-        cl.enqueue_fill_buffer(q, self.drop_marks, np.uint8(0), 0, self.pixels * self.batch)
+        fill_buffer(q, self.frame, np.float32(0), 0, 4 * self.pixels * 3 * self.batch)
+        fill_buffer(q, self.dropped, np.int32(0), 0, 4)
+        fill_buffer(q, self.drop_marks, np.uint8(0), 0, self.pixels * self.batch)
         if self.aov is not None:
             self.aov.clear()
 

@@ -41,7 +41,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.device.context import alloc
+from pyclpt.device.context import alloc, fill_buffer
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
 from pyclpt.gpu.targets import resident_slots, target
@@ -167,7 +167,7 @@ class TracedMegakernel(Megakernel):
         q = self.device.queue
         nbytes = 4 * TRACE_WORDS * self.rows * total
         trace = alloc(self.device, nbytes, f"path trace ({total} paths x {self.rows} bounces)")
-        cl.enqueue_fill_buffer(q, trace, np.int32(0), 0, nbytes)
+        fill_buffer(q, trace, np.int32(0), 0, nbytes)
         for offset in range(0, total, self.wave_size):
             count = min(self.wave_size, total - offset)
             g = -(-count // self.local_size) * self.local_size
