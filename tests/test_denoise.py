@@ -295,9 +295,10 @@ def _atrous_reference(src: np.ndarray, geo: np.ndarray, step: int, s: DenoiserSe
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             v, inside = shifted(var, dy, dx)
-            gsum += inside * gk[abs(dx)] * gk[abs(dy)] * v
-            gw += inside * gk[abs(dx)] * gk[abs(dy)]
-    sigma_l = s.phi_color * np.sqrt(gsum / gw + 1e-10)
+            use = inside & (shifted(z, dy, dx)[0] > 0)  # surface pixels only
+            gsum += use * gk[abs(dx)] * gk[abs(dy)] * v
+            gw += use * gk[abs(dx)] * gk[abs(dy)]
+    sigma_l = s.phi_color * np.sqrt(np.where(gw > 0, gsum / np.maximum(gw, 1e-30), var) + 1e-10)
     sigma_z = s.phi_depth * np.maximum(grad, 1e-8) * step
     known = np.abs(nrm).sum(axis=-1) > 0
     bk = {0: 1.0, 1: 2 / 3, 2: 1 / 6}

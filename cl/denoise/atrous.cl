@@ -7,8 +7,9 @@
  *   depth      exp(-|z - zq| / (phi_depth max(GEO_GRAD, 1e-8) step |(dx, dy)|))
  *   normal     max(0, cos)^phi_normal (svgf.h, normal_weight; 1 where p's normal is unknown)
  *   luminance  exp(-|l - lq| / (phi_color sqrt(g3x3(var) + 1e-10)))
- * (g3x3: the 3x3 Gaussian 1/4, 1/8, 1/16 of the variance around p, renormalised over the pixels
- * inside the image). The centre counts with weight 1;
+ * (g3x3: the 3x3 Gaussian 1/4, 1/8, 1/16 of the variance around p, renormalised over the surface
+ * pixels inside the image: a background pixel's variance, never divided by its history, would
+ * loosen its neighbours' weights). The centre counts with weight 1;
  * taps outside the image or on the background count 0. The illumination is averaged with the weights
  * w, the variance with w^2 (/ (sum w)^2): the variance of the filtered value. Background pixels
  * (depth 0) pass through.
@@ -40,12 +41,14 @@ __kernel void atrous(__global const float* src, __global const float* geo, __glo
         UNROLL for (int dx = -1; dx <= 1; ++dx) {
             const float k = (dx == 0 ? 0.5f : 0.25f) * (dy == 0 ? 0.5f : 0.25f);
             int tx = x + dx, ty = y + dy;
-            float kin = (tx >= 0 && tx < width && ty >= 0 && ty < height) ? k : 0.0f;
-            gvar += kin * src[3 * n + row_at(y, dy, width, height) + tx];
+            int q = row_at(y, dy, width, height) + tx;
+            bool use = tx >= 0 && tx < width && ty >= 0 && ty < height && geo[GEO_DEPTH * n + q] > 0.0f;
+            float kin = use ? k : 0.0f;
+            gvar += kin * src[3 * n + q];
             gw += kin;
         }
     }
-    gvar /= gw;
+    gvar = gw > 0.0f ? gvar / gw : var; /* gw = 0: p is background and passes through */
     float inv_l = 1.0f / (phi_color * m_sqrt(gvar + VARIANCE_EPS));
     float inv_z = 1.0f / (phi_depth * m_max(geo[GEO_GRAD * n + p], 1e-8f) * (float)step);
 

@@ -8,9 +8,9 @@
  * lighting within those frames; the long one (alpha max(alpha_min, 1/N)) would show the old
  * lighting for tens of frames (ghosting). So before the blend, the reprojected long history is
  * clamped per channel into mean +- clip_gamma x sigma of the fast history over the
- * (2 CLIP_RADIUS + 1)^2 pixels around p inside the image; clip_gamma < 0: not
- * clipped. Then history = lerp(clipped, sample, max(alpha_min, 1/N)); a non-finite result (an
- * overflow) becomes the sample.
+ * (2 CLIP_RADIUS + 1)^2 pixels around p inside the image (sigma with Bessel's correction; a box of
+ * one pixel, in a 1x1 image, does not clip); clip_gamma < 0: not clipped. Then history =
+ * lerp(clipped, sample, max(alpha_min, 1/N)); a non-finite result (an overflow) becomes the sample.
  *
  * Consumes: temporal[0..2] (the sample) and temporal[3..5] (the reprojected long history) from
  *           reproject; fast[c * pixels + p] (this frame's fast history); len[p] (N); all
@@ -50,10 +50,15 @@ __kernel void clip_history(__global const float* temporal, __global const float*
     }
     float dmean = sum / count;
     float mean = centre + dmean;
-    float sigma = m_sqrt(m_max(sum2 / count - dmean * dmean, 0.0f));
+    /* the spread of the box's values with Bessel's correction (count / (count - 1)): a box of one
+     * pixel (a 1x1 image) tells nothing of the spread and does not clip, rather than clipping the
+     * long history to the fast one, its noise and all */
+    float var_s = m_max(sum2 / count - dmean * dmean, 0.0f);
+    float sigma = count > 1.5f ? m_sqrt(var_s * count / (count - 1.0f)) : INFINITY;
     float s = temporal[p], h = temporal[3 * n + p];
     float g = m_max(clip_gamma, 0.0f);
-    h = clip_gamma >= 0.0f ? m_clamp(h, mean - g * sigma, mean + g * sigma) : h;
+    float spread = sigma < INFINITY ? g * sigma : INFINITY; /* not 0 x inf */
+    h = clip_gamma >= 0.0f ? m_clamp(h, mean - spread, mean + spread) : h;
     float out = lerpf(h, s, m_max(alpha_min, 1.0f / len[p]));
     accum[p] = m_isfinite(out) ? out : s;
 }

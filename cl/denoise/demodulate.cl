@@ -4,7 +4,8 @@
  * channel where the albedo is > ALBEDO_MIN and finite (else by 1; a non-finite albedo is marked
  * too), clamped to +-MAX_RADIANCE: the illumination that the history accumulates, and its
  * luminance. The geometry record of this frame (svgf.h, GEO_*) but its depth gradient: depth
- * (non-finite or <= 0: 0, the background), the unit normal (0 where unknown), the material id.
+ * (non-finite or <= 0: 0, the background; +inf, the sky convention, too), the unit normal (0 where
+ * unknown), the material id.
  * A pass of its own, without neighbours, so that it vectorizes and reproject reads its
  * neighbours' values from padded planes instead of demodulating each of them again.
  *
@@ -12,7 +13,8 @@
  *           pixels + p] (cl/film/aovs.h: albedo, normal, depth, material).
  * Produces: sample[c * pixels + p] (padded, svgf.h): c < 3 the illumination, c = 3 its luminance;
  *           geo[GEO_DEPTH, GEO_NORMAL.., GEO_MATERIAL] (padded); marks[p] = 1 if the colour was
- *           not finite + 1 if the albedo was not (a plain store, summed by film/count_dropped.cl). */
+ *           not finite + 1 if the albedo was not + 1 each for a NaN/-inf depth, a non-finite normal,
+ *           a non-finite motion (a plain store, summed by film/count_dropped.cl). */
 #include "denoise/svgf.h"
 
 __kernel void demodulate(__global const float* color, __global const float* aovs, __global float* sample,
@@ -37,5 +39,13 @@ __kernel void demodulate(__global const float* color, __global const float* aovs
     geo[GEO_DEPTH * n + p] = (z > 0.0f && z < INFINITY) ? z : 0.0f;
     store_planar3(geo + GEO_NORMAL * n, n, p, (l2 > 1e-20f && l2 < INFINITY) ? v3_scale(nrm, m_rsqrt(l2)) : v3_splat(0.0f));
     geo[GEO_MATERIAL * n + p] = aovs[AOV_MATERIAL * n + p];
-    marks[p] = (uchar)((bad_color ? 1 : 0) + (bad_albedo ? 1 : 0));
+    /* the G-buffer's non-finite values, counted here and sanitized where read (this record; reproject
+     * reads the motion: a NaN/inf one is "not seen"): a NaN or -inf depth, a normal or motion with a
+     * NaN/inf channel (+inf depth is the sky convention: the background, not counted) */
+    float mx = aovs[AOV_MOTION * n + p], my = aovs[(AOV_MOTION + 1) * n + p];
+    bool bad_depth = m_isnan(z) || z == -INFINITY;
+    bool bad_normal = !all_finite3(nrm);
+    bool bad_motion = !(m_isfinite(mx) && m_isfinite(my));
+    marks[p] = (uchar)((bad_color ? 1 : 0) + (bad_albedo ? 1 : 0) + (bad_depth ? 1 : 0) + (bad_normal ? 1 : 0)
+                       + (bad_motion ? 1 : 0));
 }

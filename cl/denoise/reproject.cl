@@ -2,9 +2,15 @@
  * history of NRD's RELAX. One work-item per pixel, 2D range; after demodulate.
  *
  * 1. The frame's sample (demodulate's illumination) firefly-clamped: its luminance is scaled down to
- *    at most firefly_ratio x a reference, the larger of the mean luminance of its neighbours in the
- *    3x3 around p inside the image (centre excluded) and, where the history is valid, the
- *    reprojected history's luminance (firefly_ratio 0: no clamp).
+ *    at most sqrt(N) x the larger of firefly_ratio x a spatial reference (the larger of the mean
+ *    luminance of its neighbours in the 3x3 around p inside the image, centre excluded, and, where
+ *    the history is valid, the reprojected history's luminance) and, where the history is valid,
+ *    the pixel's own temporal moments, mean + firefly_sigma x sigma (NRD RELAX's idea). N is the
+ *    history length after this frame: the clamp relaxes as the history grows, so that what it
+ *    removes vanishes against the accumulated mean (firefly_ratio 0: no clamp; no reference at all,
+ *    a pixel without neighbours or history: no clamp). The moments take the clamped luminance where
+ *    the history is valid, else the sample's own (an isolated pixel whose neighbours are black is
+ *    clamped to 0 on its first frame, but its moments keep it, and it converges).
  * 2. The previous frame's history at p + motion: the 2x2 bilinear taps around it, each accepted only
  *    if inside the image, holding a history (length >= 1) and the same surface (consistent(): same
  *    material id; both background, or both surfaces with |z - z_prev| <= depth_threshold x (GEO_GRAD
@@ -67,7 +73,7 @@ __kernel void reproject(__global const float* sample, __global float* geo, __glo
                         __global const float* fast_prev, __global const float* moments_prev,
                         __global const float* len_prev, __global float* temporal, __global float* fast,
                         __global float* moments, __global float* len, int width, int height,
-                        float depth_threshold, float normal_threshold, float firefly_ratio,
+                        float depth_threshold, float normal_threshold, float firefly_ratio, float firefly_sigma,
                         float max_history, float moments_alpha_min, float fast_alpha) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -170,12 +176,15 @@ __kernel void reproject(__global const float* sample, __global float* geo, __glo
     float N = valid ? m_min(m_floor(h.len * inv + 0.5f) + 1.0f, max_history) : 1.0f;
 
     /* firefly clamp */
+    float l = luminance(s);
+    float mu = h.m1 * inv, sigma = m_sqrt(m_max(h.m2 * inv - mu * mu, 0.0f));
     float reference = m_max(around, valid ? luminance(hist) : 0.0f);
-    float cap = firefly_ratio * reference, ls = luminance(s);
-    s = v3_scale(s, (firefly_ratio > 0.0f && ls > cap) ? cap / ls : 1.0f);
+    float cap = m_sqrt(N) * m_max(firefly_ratio * reference, valid ? mu + firefly_sigma * sigma : 0.0f);
+    bool clamped = firefly_ratio > 0.0f && (count > 0.0f || valid) && l > cap;
+    s = v3_scale(s, clamped ? cap / l : 1.0f);
+    l = valid ? luminance(s) : l; /* the moments: clamped but on a new history (nothing to compare with) */
 
     /* accumulation (N = 1: the sample alone) */
-    float l = luminance(s);
     float am = m_max(moments_alpha_min, 1.0f / N), af = m_max(fast_alpha, 1.0f / N);
     store_planar3(fast, n, p, lerp3(hist_fast, s, af));
     moments[p] = lerpf(h.m1 * inv, l, am);

@@ -9,7 +9,7 @@ import pyopencl as cl
 
 from pyclpt.common.checks import check_float, check_int
 from pyclpt.denoise.svgf import BUILD_OPTIONS, COUNT_CHUNK, PROFILE_LIMIT, check_buffer
-from pyclpt.device.context import Device, alloc, get_device, take_count
+from pyclpt.device.context import Device, alloc, fill_buffer, get_device, take_count
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
 
@@ -35,7 +35,7 @@ class Blend:
         self._kernel = cl.Kernel(build_program(self.device, ["denoise/blend.cl"], options=BUILD_OPTIONS), "blend")
         self._count = cl.Kernel(build_program(self.device, ["film/count_dropped.cl"],
                                               defines={"COUNT_CHUNK": COUNT_CHUNK}), "count_dropped")
-        cl.enqueue_fill_buffer(self.device.queue, self._dropped, np.int32(0), 0, 4)
+        fill_buffer(self.device.queue, self._dropped, np.int32(0), 0, 4)
         self.frames = 0
 
     def reset(self) -> None:

@@ -95,8 +95,9 @@ class Denoiser:
 
     @property
     def dropped(self) -> int:
-        """Non-finite inputs replaced by 0 so far (svgf: one per pixel with a NaN/inf colour and one per
-        pixel with a NaN/inf albedo; blend and oidn: pixels with a NaN/inf colour)."""
+        """Non-finite inputs replaced by 0 so far (svgf: one per pixel with a NaN/inf colour, one per
+        pixel with a NaN/inf albedo, one each per pixel with a NaN/-inf depth, a NaN/inf normal or a
+        NaN/inf motion; blend and oidn: pixels with a NaN/inf colour)."""
         return self._oidn_dropped if self._impl is None else self._impl.dropped
 
     def reset(self) -> None:

@@ -25,7 +25,7 @@ import pyopencl as cl
 from pyclpt.common.checks import check_int
 from pyclpt.denoise.gbuffer import AOV_COUNT
 from pyclpt.denoise.settings import DenoiserSettings
-from pyclpt.device.context import Device, alloc, check_memory, get_device, take_count
+from pyclpt.device.context import Device, alloc, check_memory, fill_buffer, get_device, take_count
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
 
@@ -114,10 +114,10 @@ class Svgf:
         self._cur = 0
         self._src: cl.Buffer | None = None  # the a-trous input of the current frame
         self.frames = 0
-        cl.enqueue_fill_buffer(self.device.queue, self._dropped, np.int32(0), 0, 4)
-        cl.enqueue_fill_buffer(self.device.queue, self._marks, np.uint8(0), 0, n)
+        fill_buffer(self.device.queue, self._dropped, np.int32(0), 0, 4)
+        fill_buffer(self.device.queue, self._marks, np.uint8(0), 0, n)
         for buf, nbytes in self._padded:  # the pads stay 0: finite values for taps outside the image
-            cl.enqueue_fill_buffer(self.device.queue, buf, np.float32(0), 0, nbytes)
+            fill_buffer(self.device.queue, buf, np.float32(0), 0, nbytes)
         self.reset()
 
     def _alloc(self, channels: int, what: str) -> cl.Buffer:
@@ -173,7 +173,7 @@ class Svgf:
         for bufs, channels in ((self._geo, GEO_COUNT), (self._hist, 4), (self._fast, 3), (self._moments, 2),
                                (self._len, 1)):
             for buf in bufs:
-                cl.enqueue_fill_buffer(q, buf, np.float32(0), 4 * PAD, 4 * n * channels)
+                fill_buffer(q, buf, np.float32(0), 4 * PAD, 4 * n * channels)
         self.frames = 0
 
     @property
@@ -203,9 +203,14 @@ class Svgf:
 
     @property
     def dropped(self) -> int:
-        """Non-finite inputs replaced by 0 since the denoiser was made: one per pixel whose colour had
-        a NaN/inf, one per pixel whose albedo had one."""
-        self._dropped_total += take_count(self.device, self._dropped)
+        """Non-finite inputs replaced since the denoiser was made: one per pixel whose colour had a
+        NaN/inf, one per pixel whose albedo had one, and one each for a NaN or -inf depth, a normal
+        with a NaN/inf and a motion with a NaN/inf (+inf depth is the sky convention: not counted).
+        A bad G-buffer value makes that pixel background (depth, normal) or not reprojected (motion)."""
+        new = take_count(self.device, self._dropped)
+        if new:
+            log.info("svgf: %d non-finite inputs (colour, albedo or G-buffer values) replaced", new)
+        self._dropped_total += new
         return self._dropped_total
 
     def _record(self, name: str, event: cl.Event) -> cl.Event:
@@ -235,7 +240,8 @@ class Svgf:
             self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p],
             self._temporal, self._fast[c], self._moments[c], self._len[c], *self._args2d(),
             np.float32(s.depth_threshold), np.float32(s.normal_threshold), np.float32(s.firefly_ratio),
-            np.float32(s.max_history), np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
+            np.float32(s.firefly_sigma), np.float32(s.max_history), np.float32(s.moments_alpha_min),
+            np.float32(s.fast_alpha))
         return self._record("reproject", ev)
 
     def count_dropped(self) -> cl.Event:

@@ -1,0 +1,179 @@
+"""SVGF keeps the energy of its input and handles every G-buffer value (issue 29, items 1 and 3):
+the firefly clamp follows each pixel's own temporal moments and is relaxed as its history grows, so
+it removes (almost) no energy from a real render; a NaN/inf depth, normal or motion affects its own
+pixel only and is counted; +inf depth is the sky; a 1x1 image and an isolated bright pixel converge
+to their value instead of staying black."""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+import pyclpt
+from pyclpt.denoise import Denoiser, DenoiserSettings
+from pyclpt.denoise.gbuffer import AOV_COUNT
+
+SIZE = 64
+FRAMES = 32
+
+
+@pytest.fixture(scope="module")
+def frames(device) -> tuple[np.ndarray, np.ndarray]:
+    """FRAMES frames of the built-in cornell-box at SIZE x SIZE, 1 sample per pixel each, and their
+    G-buffers, (FRAMES, H, W, 3) and (FRAMES, AOV_COUNT, H, W)."""
+    pr = pyclpt.ProgressiveRenderer(pyclpt.load("cornell-box"), width=SIZE, height=SIZE, device=device,
+                                    denoiser="svgf")
+    colors, gbuffers = [], []
+    for _ in range(FRAMES):
+        pr.step()
+        colors.append(pr.frame_image())
+        g = np.empty(AOV_COUNT * SIZE * SIZE, np.float32)
+        cl.enqueue_copy(pr.device.queue, g, pr.renderer.film.aov.mean)
+        gbuffers.append(g.reshape(AOV_COUNT, SIZE, SIZE))
+    return np.array(colors), np.array(gbuffers)
+
+
+def denoised_mean(device, frames, settings: DenoiserSettings) -> np.ndarray:
+    """The channel means of the last denoised frame."""
+    colors, gbuffers = frames
+    d = Denoiser(device, SIZE, SIZE, settings=settings)
+    for color, gbuffer in zip(colors, gbuffers):
+        out = d.denoise_gbuffer(color, gbuffer)
+    return out.reshape(-1, 3).mean(axis=0).astype(np.float64)
+
+
+def test_the_firefly_clamp_keeps_the_energy(device, frames):
+    """The clamp removes less than 0.5 % of any channel's mean after 32 frames (the fixed-ratio clamp
+    of before removed 1.1 to 2.1 % here: 0.979 / 0.986 / 0.989 of the unclamped output)."""
+    clamped = denoised_mean(device, frames, DenoiserSettings())
+    unclamped = denoised_mean(device, frames, DenoiserSettings(firefly_ratio=0.0))
+    ratio = clamped / unclamped
+    assert np.all(np.abs(ratio - 1) < 0.005), ratio
+
+
+@pytest.mark.xfail(strict=True, reason="the a-trous filter darkens the light's jittered edges (6 % at 64x64): "
+                                       "docs/denoising.md, 'Energy'")
+def test_the_denoised_mean_converges_to_the_plain_average(device, frames):
+    """The goal of issue 29: the 32-frame denoised channel means within 0.5 % of the plain average's."""
+    plain = frames[0].reshape(-1, 3).mean(axis=0).astype(np.float64)
+    ratio = denoised_mean(device, frames, DenoiserSettings()) / plain
+    assert np.all(np.abs(ratio - 1) < 0.005), ratio
+
+
+def test_without_the_filter_the_history_is_the_plain_average(device, frames):
+    """The temporal part alone (no a-trous iteration, no clipping) keeps the energy: its 32-frame mean
+    is the plain average's within 0.5 %, clamp included."""
+    ratio = (denoised_mean(device, frames, DenoiserSettings(iterations=0, clip_gamma=-1.0))
+             / frames[0].reshape(-1, 3).mean(axis=0))
+    assert np.all(np.abs(ratio - 1) < 0.005), ratio
+
+
+# -- every G-buffer value ---------------------------------------------------------------------------
+W, H = 40, 32
+AT = (10, 10)
+
+
+def plane() -> dict[str, np.ndarray]:
+    """A lit plane (depth 5 .. 5.4, facing the camera) under a grey albedo, and its noise-free colour."""
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    illum = 0.3 + 0.5 * np.exp(-((xx - 12) ** 2 + (yy - 14) ** 2) / 200)
+    albedo = np.full((H, W, 3), 0.7, np.float32)
+    normal = np.zeros((H, W, 3), np.float32)
+    normal[..., 2] = -1.0
+    return {"truth": (illum[..., None] * np.array([1.0, 0.9, 0.8]) * albedo).astype(np.float32),
+            "albedo": albedo, "normal": normal, "depth": (5 + 0.01 * xx).astype(np.float32)}
+
+
+def run(device, change=None, frames: int = 8, width: int = W, sky: slice | None = None) -> tuple[np.ndarray, int]:
+    """The last of ``frames`` denoised noisy frames of the plane (seeded) and the dropped count;
+    ``change(k, depth, normal, motion)`` edits frame k's G-buffer in place."""
+    sc = plane()
+    rng = np.random.default_rng(1)
+    d = Denoiser(device, width, H)
+    material = np.zeros((H, W), np.int32)
+    for k in range(frames):
+        color = sc["truth"] * rng.gamma(0.5, 2.0, (H, W, 1)).astype(np.float32)
+        depth, normal, motion = sc["depth"].copy(), sc["normal"].copy(), np.zeros((H, W, 2), np.float32)
+        if change is not None:
+            change(k, depth, normal, motion)
+        out = d.denoise(color[:, :width], sc["albedo"][:, :width], normal[:, :width], depth[:, :width],
+                        motion[:, :width], material[:, :width])
+    return out, d.dropped
+
+
+def setter(what: str, value: float, channel: int | None = None):
+    def change(k, depth, normal, motion):
+        arr = {"depth": depth, "normal": normal, "motion": motion}[what]
+        arr[AT if channel is None else (*AT, channel)] = value
+    return change
+
+
+@pytest.mark.parametrize("what, value, channel, same_as", [
+    ("depth", np.nan, None, 0.0), ("depth", -np.inf, None, 0.0), ("depth", np.inf, None, 0.0),
+    ("normal", np.nan, 1, None), ("normal", np.inf, 0, None),
+    ("motion", np.nan, 0, None), ("motion", np.inf, 1, None)],
+    ids=["nan-depth", "-inf-depth", "+inf-depth", "nan-normal", "inf-normal", "nan-motion", "inf-motion"])
+def test_a_bad_gbuffer_value_is_counted_and_stays_in_its_pixel(device, what, value, channel, same_as):
+    """A NaN/inf in one pixel's depth, normal or motion, every frame: the output is what a known
+    value of that meaning gives (a bad or +inf depth: the background, depth 0; a bad normal: unknown,
+    0; a bad motion: not seen, off screen), bit for bit; the pixel is counted once a frame (+inf
+    depth, the sky convention, is not); and the other pixels change by at most a few per cent under
+    this heavy noise: the pixel is one tap fewer in their filters (it changed them by up to 18 %,
+    as its unfiltered variance loosened their weights)."""
+    clean, dropped = run(device)
+    assert dropped == 0
+    out, dropped = run(device, setter(what, value, channel))
+    meaning = {"depth": 0.0, "normal": 0.0, "motion": 1e6}[what] if same_as is None else same_as
+    known, _ = run(device, setter(what, meaning, channel) if what != "normal" else
+                   lambda k, d, n, m: n.__setitem__(AT, 0.0))
+    np.testing.assert_array_equal(out, known)
+    assert dropped == (0 if (what == "depth" and value == np.inf) else 8)
+    assert np.isfinite(out).all()
+    change = np.abs(out - clean).max(axis=-1) / clean.max(axis=-1)
+    change[AT] = 0
+    assert change.max() < 0.05, change.max()
+
+
+def test_inf_depth_is_the_sky(device):
+    """The right half of the image +inf depth (the sky convention) gives exactly what depth 0 gives,
+    and the lit half denoises as well as on its own (the sky's variance no longer loosens the weights
+    beside it)."""
+    half = slice(W // 2, W)
+
+    def sky(value):
+        def change(k, depth, normal, motion):
+            depth[:, half] = value
+        return change
+
+    inf, dropped = run(device, sky(np.inf))
+    zero, _ = run(device, sky(0.0))
+    np.testing.assert_array_equal(inf, zero)
+    assert dropped == 0
+    alone, _ = run(device, width=W // 2)
+    truth = plane()["truth"][:, :W // 2]
+    err = {name: float(np.mean((img[:, :W // 2] - truth) ** 2 / (truth ** 2 + 1e-2))) for name, img in
+           (("with sky", inf), ("alone", alone))}
+    assert err["with sky"] < 1.1 * err["alone"], err
+
+
+def test_a_1x1_image_denoises_to_its_average(device):
+    """No neighbour: no spatial reference, no clip box; the output of the first 16 frames (plain 1/N
+    weights) is their average."""
+    rng = np.random.default_rng(3)
+    d = Denoiser(device, 1, 1)
+    frames = (np.array([0.5, 1.0, 2.0], np.float32) * rng.uniform(0, 2, (16, 1, 1, 1))).astype(np.float32)
+    for frame in frames:
+        out = d.denoise(frame)
+    np.testing.assert_allclose(out, frames.mean(axis=0), rtol=1e-5)
+
+
+def test_an_isolated_bright_pixel_converges(device):
+    """A lit pixel among black ones: the first frame's clamp (its neighbours' mean is 0) takes it, but
+    its own moments keep it, and it converges to its value (it stayed black forever)."""
+    color = np.zeros((9, 9, 3), np.float32)
+    color[4, 4] = 5.0
+    d = Denoiser(device, 9, 9)
+    for _ in range(64):
+        out = d.denoise(color)
+    assert out[4, 4, 0] > 0.99 * 5.0, out[4, 4]
+    assert out.sum() / 3 == pytest.approx(5.0, rel=0.01)
