@@ -131,7 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="WIDTHxHEIGHT of the quality runs, or auto (about 160x90 pixels at each scene's aspect)")
     p.add_argument("--ref-spp", type=_positive, default=None, help="samples per pixel of the references")
     p.add_argument("--reference-cache", default=None,
-                   help="reference folder (default $PYCLPT_CACHE_DIR/denoise-references, ~/.cache/pyclpt/...); "
+                   help="reference folder (default $PYCLPT_CACHE_DIR/denoise-references, else in the platform's "
+                        "cache folder: ~/.cache/pyclpt/... on Linux); "
                         "'none': no cache")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--device", default=None, help="OpenCL device: intel, pocl, P:D or a name substring "

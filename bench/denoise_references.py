@@ -2,9 +2,10 @@
 
 A reference is ``pyclpt.Renderer(scene, width=, height=, device=).render(spp, seed=1)`` of the
 scene seen from one camera. It is cached in a folder (default ``$PYCLPT_CACHE_DIR/denoise-references``,
-that is ``~/.cache/pyclpt/denoise-references``) as ``<scene>-<W>x<H>-<spp>spp-<key>.npy`` with a
-``.json`` beside it (how it was made). The key is a SHA-1 over the scene's content (materials,
-emitters, geometry, by :func:`pyclpt.rendering.progressive.scene_fingerprint`), the camera (its
+the platform's cache folder without it: ``~/.cache/pyclpt/denoise-references`` on Linux) as
+``<scene>-<W>x<H>-<spp>spp-<key>.npy`` with a ``.json`` beside it (how it was made). The key is a
+SHA-1 over the scene's content (materials, emitters, geometry, by
+:func:`pyclpt.rendering.progressive.scene_fingerprint`), the camera (its
 matrix, field of view and axis), the size, the samples per pixel, the seed and the max depth: a
 changed scene or camera never reuses a stale image. References of one scene from several cameras
 (the orbit) share one renderer (:class:`ReferenceRenderer`), whose camera is swapped in place.

@@ -130,7 +130,8 @@ def agreement(a: list[list[float]], b: list[list[float]]) -> list[dict]:
 
 def report(results: dict) -> str:
     m = results["machine"]
-    lines = [f"Machine: {m['cpu']}; device: {m['device']}.", "",
+    lines = ["# Differentiable rendering: measured figures", "",  # the title of its page in the docs site
+             f"Machine: {m['cpu']}; device: {m['device']}.", "",
              "| setting | primal | backward | step | backward / primal | step / primal |", "|---|---|---|---|---|---|"]
     for t in results["timing"]:
         label = "one reflectance" if t["params"] != "all" else "every parameter"

@@ -16,6 +16,9 @@ import pytest
 
 # Caches (meshes, BVHs) go to a folder of this test session, never the user's.
 os.environ.setdefault("PYCLPT_CACHE_DIR", tempfile.mkdtemp(prefix="pyclpt-test-cache-"))
+# The session's device is PoCL (the default device is the fastest installed: Intel's CPU runtime where CI
+# installs it); child processes (the CLI tests) inherit it. PYCLPT_DEVICE=intel runs the suite there.
+os.environ.setdefault("PYCLPT_DEVICE", "pocl")
 
 import pyclpt  # noqa: E402
 from pyclpt.common import env  # noqa: E402

@@ -439,13 +439,14 @@ def test_cli_accumulation_options(tmp_path, capsys):
     out = tmp_path / "a.exr"
     rc = main(["render", "cornell-box", "--frames", "5", "--precision", "compensated", "--max-frames", "3",
                "--overflow", "ema", "--width", "8", "--height", "8", "--max-depth", "2", "-o", str(out),
-               "--stats", "--quiet"])
+               "--stats-json", str(tmp_path / "a.json"), "--quiet"])
     text = capsys.readouterr().out
     assert rc == 0
     lines = text.splitlines()
-    assert lines[0].startswith(f"{out}: 8x8, 5 spp, max depth 2")
-    assert "compensated, at most 3 frames then ema: the image averages 3 frames" in lines[1]
-    stats = json.loads(text[text.index("\n{") + 1:])
+    assert lines == [line for line in lines if line.startswith(f"{out}: ")]  # one line says it all
+    assert lines[0].startswith(f"{out}: 8x8, 5 frames rendered, the image their exponential moving average over a "
+                               f"window of 3 frames (--overflow ema), max depth 2")
+    stats = json.loads((tmp_path / "a.json").read_text())
     acc = stats["accumulation"]
     assert acc["precision"] == "compensated" and acc["frame_count"] == 5 and acc["overflow"] == "ema"
     assert pyclpt.read_image(out).shape == (8, 8, 3)
@@ -457,7 +458,7 @@ def test_cli_frames_default_and_stop(tmp_path, capsys):
                "--max-depth", "2", "-o", str(out), "--quiet"])
     text = capsys.readouterr().out
     assert rc == 0
-    assert ", 2 spp," in text.splitlines()[0]  # stopped at --max-frames
+    assert ", 2 spp of the 4 asked (--max-frames 2 stopped the accumulation)," in text.splitlines()[0]
     ref = pyclpt.render("cornell-box", spp=2, width=8, height=8, max_depth=2, progress=False)
     np.testing.assert_array_equal(pyclpt.read_image(out), ref)
 

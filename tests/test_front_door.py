@@ -44,7 +44,7 @@ def test_sigint_stops_a_long_render_with_one_line(tmp_path, quiet):
         seen = []
         for line in proc.stderr:  # -v logs "rendering N frame(s) ..." just before the first frame
             seen.append(line)
-            if "pyclpt.cli: rendering 100000 frame(s)" in line:
+            if "pyclpt: rendering 100000 frame(s)" in line:
                 break
         else:
             pytest.fail(f"the render did not start: {''.join(seen)}")

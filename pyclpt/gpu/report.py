@@ -85,10 +85,20 @@ def markdown(report: IsaReport) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _matplotlib():
+    """matplotlib (not a dependency of pyclpt: the ``gpu`` and ``bench`` extras), or an ImportError naming
+    the extra."""
+    try:
+        import matplotlib
+    except ImportError as exc:
+        raise ImportError(f"the GPU ISA check's plot (isa.png) needs matplotlib, which is not installed here "
+                          f'({exc}): pip install "pyclpt[gpu]"') from None
+    return matplotlib
+
+
 def plot(report: IsaReport, path: str | Path) -> Path:
     """Bars of each kernel's theoretical occupancy per target (the worst variant), saved to ``path``."""
-    import matplotlib
-
+    matplotlib = _matplotlib()
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -136,6 +146,7 @@ def run(scenes: list[Scene | str], out_dir: str | Path, *, targets: list[str] | 
     from pyclpt.gpu.isa import find_toolchain
 
     toolchain = find_toolchain()  # before the collection: missing tools are named at once
+    _matplotlib()  # and so is a missing plotting library
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = check_programs(collect_programs(scenes, device=device, every_variant=every_variant),

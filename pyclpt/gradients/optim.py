@@ -1,5 +1,5 @@
 """Gradient-descent optimisers over named numpy parameters: :class:`Adam` (as Mitsuba 3's
-``mi.ad.Adam``).
+``mi.ad.Adam``)::
 
     params = pyclpt.traverse(scene)
     opt = pyclpt.optim.Adam(lr=0.05)

@@ -26,7 +26,7 @@ import numpy as np
 import pyopencl as cl
 
 from pyclpt.buffers.scene import SceneBuffers
-from pyclpt.device.context import Device, alloc
+from pyclpt.device.context import Device, alloc, fill_buffer
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
 from pyclpt.film.film import Film
@@ -80,6 +80,8 @@ class Wavefront:
         self.flags = alloc(device, self.capacity, "queue flags")
         self.block_counts = alloc(device, 4 * -(-self.capacity // COMPACT_BLOCK), "compaction block counts")
         self.counters = alloc(device, 4 * Q_COUNT * (max_depth + 2), "queue counters")
+        # the paths finish_paths ran alive at each later bounce (bounce_stats), read and cleared after each tail
+        self.tail_counts = alloc(device, 4 * (max_depth + 2), "tail path counts")
         generated = {"path_state.h": opencl_header(layout)}
         # GPU class (the scene's layout): a work-group per compaction block (COMPACT_GROUP)
         self.compact_group = COMPACT_GROUP if scene.defines.get("DEVICE_CLASS_GPU") else 0
@@ -90,6 +92,9 @@ class Wavefront:
         self.profile = KernelProfile()
         self._bounce_totals = np.zeros((max_depth + 2, Q_COUNT), np.int64)
         self._tail_totals = np.zeros(max_depth + 2, np.int64)  # paths finish_paths took at each bounce
+        self._tail_alive_totals = np.zeros(max_depth + 2, np.int64)  # ... and ran alive at each later bounce
+        self._tail_alive = np.zeros(max_depth + 2, np.int32)
+        fill_buffer(device.queue, self.tail_counts, np.int32(0), 0, self._tail_alive.nbytes)
         self._counts = np.zeros((max_depth + 2, Q_COUNT), np.int32)
 
     @property
@@ -145,7 +150,7 @@ class Wavefront:
         """Run the ``n`` paths of the ray queue of ``bounce`` to their ends, one per work-item."""
         self._launch("finish_paths", n, *self._scene_args, *self._common(bounce), self.ray_queues[bounce % 2],
                      self.film.frame, self.film.drop_marks, np.uint32(seed), np.uint32(first_sample),
-                     np.int32(self.max_depth), *self.film.aov_args())
+                     np.int32(self.max_depth), *self.film.aov_args(), self.tail_counts)
 
     def _launch_blocks(self, stage: str, n: int, *args) -> None:
         """A compaction stage over the blocks of ``n`` queue entries: a work-item a block, or on the GPU
@@ -197,13 +202,13 @@ class Wavefront:
         (PoCL builds a work-group function on first launch) is counted as compile time."""
         self._scene_args = self.scene.args(*self.film.view)
         q = self.device.queue
-        cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
+        fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
         self.path_init(1, 0, 0, 0)
-        cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
+        fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
         self.bounce(1, 0, 0, 0)
-        cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
+        fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
         self.finish_paths(1, 0, 0, 0)  # an empty queue: compiled, nothing run
-        cl.enqueue_fill_buffer(q, self.film.frame, np.float32(0), 0, 4 * 3 * self.film.pixels * self.film.batch)
+        fill_buffer(q, self.film.frame, np.float32(0), 0, 4 * 3 * self.film.pixels * self.film.batch)
         q.finish()
         self.profile.clear()
 
@@ -223,7 +228,7 @@ class Wavefront:
         total = self.film.pixels * frames
         for offset in range(0, total, self.capacity):
             n = min(self.capacity, total - offset)
-            cl.enqueue_fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
+            fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
             self.path_init(n, seed, first_sample, offset)
             rays = n if self.max_depth != 0 else 0
             for bounce in range(self.max_depth):
@@ -234,6 +239,9 @@ class Wavefront:
                     if bounce > 0 and rays <= self.tail_paths:
                         self.finish_paths(rays, bounce, seed, first_sample)
                         self._tail_totals[bounce] += rays
+                        cl.enqueue_copy(q, self._tail_alive, self.tail_counts)
+                        fill_buffer(q, self.tail_counts, np.int32(0), 0, self._tail_alive.nbytes)
+                        self._tail_alive_totals += self._tail_alive
                         break
                 else:
                     # launch at capacity; kernels read their counts on the device. The host
@@ -255,7 +263,7 @@ class Wavefront:
     def bounce_stats(self) -> list[dict[str, int]]:
         """Per bounce since the last reset: paths alive (rays), hits, misses, shadow rays, unoccluded, and
         the paths finish_paths ran to their ends from this bounce on (``tail``; their later bounces
-        are not counted)."""
+        are in :meth:`tail_alive`, not here)."""
         rows = []
         for b in range(self.max_depth + 1):
             row = {"bounce": b, **{name: int(self._bounce_totals[b, i]) for i, name in enumerate(QUEUES)},
@@ -265,6 +273,14 @@ class Wavefront:
             rows.append(row)
         return rows
 
+    def tail_alive(self) -> list[int]:
+        """Per bounce since the last reset, the paths finish_paths (the tail) had alive there: a ray it traced
+        at that bounce, counted in no queue of :meth:`bounce_stats`. Empty when the tail traced none; paths
+        alive at bounce b: ``bounce_stats()[b]["rays"] + tail_alive()[b]``."""
+        n = int(np.flatnonzero(self._tail_alive_totals)[-1]) + 1 if self._tail_alive_totals.any() else 0
+        return [int(v) for v in self._tail_alive_totals[:n]]
+
     def reset_stats(self) -> None:
         self._bounce_totals[:] = 0
         self._tail_totals[:] = 0
+        self._tail_alive_totals[:] = 0

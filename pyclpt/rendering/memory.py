@@ -98,7 +98,7 @@ def render_memory(scene: Scene, width: int, height: int, *, precision: str, inte
 
         capacity = min(wave_size or DEFAULT_WAVE_SIZE, pixels * batch)
         parts[f"path state and queues ({capacity} paths)"] = (capacity * (bytes_per_path() + QUEUE_BYTES_PER_PATH)
-                                                              + 4 * Q_COUNT * (max_depth + 2))
+                                                              + 4 * (Q_COUNT + 1) * (max_depth + 2))
     return parts
 
 

@@ -59,6 +59,7 @@ from pyclpt.common.checks import check_bool, check_int, check_optional_bool, che
 from pyclpt.denoise import MODES as DENOISER_MODES
 from pyclpt.denoise import Denoiser, DenoiserSettings
 from pyclpt.device.context import Device
+from pyclpt.device.program import compile_notice
 from pyclpt.film.accumulator import Accumulator, check_options
 from pyclpt.film.aovs import AOV_NAMES, check_aovs
 from pyclpt.film.film import DEFAULT_PRECISION
@@ -171,8 +172,9 @@ class ProgressiveRenderer:
         self.stats = RenderStats()
         if camera_path is not None:
             scene.camera = camera_path.camera(0)
-        self.renderer: Renderer = self._make_renderer()
-        self.denoiser: Denoiser | None = self._make_denoiser()
+        with compile_notice(scene.name):  # one compile message for the renderer's and the denoiser's programs
+            self.renderer: Renderer = self._make_renderer()
+            self.denoiser: Denoiser | None = self._make_denoiser()
         self._fingerprint = self.fingerprint()
 
     # -- the device side -------------------------------------------------------------------------
@@ -191,18 +193,22 @@ class ProgressiveRenderer:
 
     @property
     def device(self) -> Device:
+        """The device the frames are rendered on."""
         return self.renderer.device
 
     @property
     def accumulator(self) -> Accumulator:
+        """The film's accumulator: the running average of the frames."""
         return self.renderer.film.accumulator
 
     @property
     def width(self) -> int:
+        """Image width in pixels."""
         return self.renderer.width
 
     @property
     def height(self) -> int:
+        """Image height in pixels."""
         return self.renderer.height
 
     @property
@@ -211,6 +217,7 @@ class ProgressiveRenderer:
         return self.accumulator.frame_count
 
     def fingerprint(self) -> dict[str, Hashable]:
+        """The scene's state by kind of change (camera, material, geometry, ...), as :meth:`sync` compares it."""
         return scene_fingerprint(self.scene, resolution=self._size, max_depth=self._max_depth)
 
     def sync(self) -> list[str]:
@@ -263,12 +270,14 @@ class ProgressiveRenderer:
 
     # -- setters: change the scene, then sync ------------------------------------------------------
     def set_camera(self, camera: Camera) -> None:
+        """Replace the camera, then :meth:`sync`."""
         if not isinstance(camera, Camera):
             raise TypeError(f"set_camera expects a pyclpt.Camera, got {type(camera).__name__}")
         self.scene.camera = camera
         self.sync()
 
     def set_material(self, index: int, material: Any) -> None:
+        """Replace the scene's material ``index`` (negative counts from the end), then :meth:`sync`."""
         n = len(self.scene.materials)
         if not is_int(index) or not -n <= index < n:
             raise IndexError(f"material index {index!r} out of range: the scene has {n} materials")
@@ -316,6 +325,7 @@ class ProgressiveRenderer:
         self.sync()
 
     def set_resolution(self, width: int, height: int) -> None:
+        """Render at ``width`` x ``height`` pixels from now on (the accumulation restarts)."""
         width = check_int(width, "width", lo=1, hi=MAX_RESOLUTION)
         height = check_int(height, "height", lo=1, hi=MAX_RESOLUTION)
         self._size = (width, height)

@@ -24,6 +24,7 @@ import numpy as np
 from pyclpt.buffers.scene import SceneBuffers, scene_meshes
 from pyclpt.common.checks import check_choice, check_int, check_optional_bool, check_optional_int
 from pyclpt.device.context import Device, get_device
+from pyclpt.device.program import compile_notice
 from pyclpt.film.accumulator import check_options
 from pyclpt.film.aovs import check_aovs, unpack
 from pyclpt.film.crop import Crop
@@ -44,6 +45,24 @@ MAX_RESOLUTION = 65536  # pixels a side
 
 @dataclass
 class RenderStats:
+    """What the last render of a :class:`Renderer` cost (``Renderer.stats``; ``pyclpt render --stats``).
+
+    Attributes:
+        spp: Samples per pixel rendered.
+        seconds: Device and host time of the frames; kernel compilation and scene setup excluded.
+        compile_seconds: Time spent building the kernel programs (near 0 from the kernel cache).
+        setup_seconds: Scene packing (BVH build or cache load) and upload to the device.
+        dropped_samples: NaN or infinite samples the film dropped.
+        kernels: One row per kernel: ``kernel``, ``launches``, ``total_ms``, ``mean_ms``, ``share``.
+        bounces: The wavefront integrator's rows per bounce (paths alive, hits, misses, shadow rays,
+            unoccluded, ``tail``); empty for the megakernel.
+        tail_alive: The wavefront's paths alive per bounce inside its tail (finish_paths: counted in no
+            row of ``bounces``); paths alive at bounce b are ``bounces[b]["rays"] + tail_alive[b]``.
+        memory: The wavefront integrator's wave size, bytes per path and path-state bytes.
+        accumulation: ``Accumulator.stats()``: precision, frames, counters.
+        denoise: The denoiser's passes (a :class:`ProgressiveRenderer` with a denoiser).
+    """
+
     spp: int = 0
     seconds: float = 0.0  # device + host time of the frames, compile and scene setup excluded
     compile_seconds: float = 0.0
@@ -51,6 +70,7 @@ class RenderStats:
     dropped_samples: int = 0  # NaN/inf samples dropped
     kernels: list[dict] = field(default_factory=list)
     bounces: list[dict] = field(default_factory=list)
+    tail_alive: list[int] = field(default_factory=list)  # wavefront: paths alive per bounce inside the tail
     memory: dict = field(default_factory=dict)  # wavefront: wave size, bytes per path, path-state bytes
     accumulation: dict = field(default_factory=dict)  # Accumulator.stats(): precision, frames, counters
     denoise: list[dict] = field(default_factory=list)  # the denoiser's passes (ProgressiveRenderer with one)
@@ -122,25 +142,28 @@ class Renderer:
         self.scene_buffers = scene_buffers or SceneBuffers(scene, self.device)
         self.device.queue.finish()
         t1 = time.perf_counter()
-        # small images: a batch of frames (samples) per wave or launch (rendering/memory.py: batch_frames)
-        self.film = Film(self.device, self.width, self.height, precision=precision,
-                         batch=batch_frames(film_w * film_h, wave_size), aovs=bool(self.aov_names), crop=self.crop)
-        options: dict = {"wave_size": wave_size} if wave_size else {}
-        if local_size:
-            options["local_size"] = int(local_size)
-        if integrator == "megakernel":
-            self.integrator = Megakernel(self.device, self.scene_buffers, self.film, self.depth_limit, **options)
-        else:
-            from pyclpt.integrators.wavefront import Wavefront
+        # the programs, and the drivers' lazy compilation on the first launches: a slow first build logs
+        # "compiling kernels for SCENE ..." (pyclpt.device.program.compile_notice)
+        with compile_notice(scene.name):
+            # small images: a batch of frames (samples) per wave or launch (rendering/memory.py: batch_frames)
+            self.film = Film(self.device, self.width, self.height, precision=precision,
+                             batch=batch_frames(film_w * film_h, wave_size), aovs=bool(self.aov_names), crop=self.crop)
+            options: dict = {"wave_size": wave_size} if wave_size else {}
+            if local_size:
+                options["local_size"] = int(local_size)
+            if integrator == "megakernel":
+                self.integrator = Megakernel(self.device, self.scene_buffers, self.film, self.depth_limit, **options)
+            else:
+                from pyclpt.integrators.wavefront import Wavefront
 
-            if schedule:
-                options["schedule"] = schedule
-            if tail_paths is not None:
-                options["tail_paths"] = tail_paths
-            self.integrator = Wavefront(self.device, self.scene_buffers, self.film, self.depth_limit,
-                                        layout=layout, **options)
-        self.integrator.warm_up()
-        self.film.warm_up()
+                if schedule:
+                    options["schedule"] = schedule
+                if tail_paths is not None:
+                    options["tail_paths"] = tail_paths
+                self.integrator = Wavefront(self.device, self.scene_buffers, self.film, self.depth_limit,
+                                            layout=layout, **options)
+            self.integrator.warm_up()
+            self.film.warm_up()
         # setup: scene packing (BVH build or cache load) and upload;
         # compile: program builds plus the driver's lazy compilation on the first launches
         self.stats.setup_seconds = t1 - t0
@@ -216,6 +239,7 @@ class Renderer:
         self.stats.accumulation = self.film.accumulator.stats()
         self.stats.kernels = self.integrator.profile.table()
         self.stats.bounces = getattr(self.integrator, "bounce_stats", lambda: [])()
+        self.stats.tail_alive = getattr(self.integrator, "tail_alive", lambda: [])()
         if hasattr(self.integrator, "paths"):
             self.stats.memory = {"wave_size": self.integrator.capacity,
                                  "bytes_per_path": self.integrator.bytes_per_path,

@@ -151,6 +151,7 @@ class CameraPath:
 
     @property
     def start(self) -> float:
+        """The first keyframe's time."""
         return self.keyframes[0].time
 
     def camera(self, time: float) -> Camera:

@@ -211,10 +211,12 @@ class Bitmap(Checked):
 
     @property
     def width(self) -> int:
+        """Pixels per row."""
         return int(self.pixels.shape[1])
 
     @property
     def height(self) -> int:
+        """Rows of pixels."""
         return int(self.pixels.shape[0])
 
     def rgba(self) -> np.ndarray:
@@ -648,6 +650,7 @@ class Mesh(Checked):
 
     @property
     def triangle_count(self) -> int:
+        """Triangles of the mesh."""
         return int(self.indices.shape[0])
 
     def _check(self) -> None:
@@ -704,6 +707,7 @@ class ShapeGroup(Checked):
 
     @property
     def triangle_count(self) -> int:
+        """Triangles of the group's meshes (once, whatever the number of instances)."""
         return sum(m.triangle_count for m in self.meshes)
 
     def _check(self) -> None:
@@ -791,6 +795,7 @@ class Camera(Checked):
 
     @staticmethod
     def look_at(origin, target, up=(0.0, 1.0, 0.0), fov: float = 45.0, fov_axis: str = "x") -> Camera:
+        """A camera at ``origin`` looking at ``target`` with ``up`` upwards; ``fov`` in degrees along ``fov_axis``."""
         from pyclpt.scene.transform import look_at
 
         return Camera(look_at(origin, target, up), fov, fov_axis)
@@ -825,7 +830,7 @@ class Camera(Checked):
 @dataclass
 class ReconstructionFilter(Checked):
     """The film's pixel filter, Mitsuba's ``rfilter``: a separable w(x) w(y), x and y in pixels from the
-    pixel's centre. ``box`` (w = 1 on [-0.5, 0.5)), ``tent`` (w = max(0, 1 - |x| / radius), ``radius``
+    pixel's centre. ``box`` (w = 1 on [-0.5, 0.5)), ``tent`` (``w = max(0, 1 - |x| / radius)``, ``radius``
     default 1) or ``gaussian`` (w = max(0, exp(-x^2 / (2 stddev^2)) - exp(-8)), cut off at 4 stddev,
     ``stddev`` default 0.5: Mitsuba's default filter). ``radius`` is read by the tent only and
     ``stddev`` by the gaussian only."""
@@ -954,10 +959,12 @@ class Scene(Checked):
 
     @property
     def triangle_count(self) -> int:
+        """Triangles of the scene's meshes (instanced triangles: :attr:`instanced_triangle_count`)."""
         return sum(m.triangle_count for m in self.meshes)
 
     @property
     def emitter_count(self) -> int:
+        """Emitting triangles, plus the environment (if any) and the point, spot and directional lights."""
         return (sum(m.triangle_count for m in self.meshes if m.emission is not None)
                 + (1 if self.environment is not None else 0) + len(self.lights))
 

@@ -59,6 +59,7 @@ def load_scene(ctx: LoadContext, d: Mapping[str, Any], name: str) -> Scene:
         ctx.named[str(value.get("id", key))] = value
         register_ids(ctx, value)
     have_sensor = have_integrator = False
+    sensor_id = "sensor"
     for key, value in entries:
         role = classify(key, value)
         if role in ("bsdf", "texture"):
@@ -69,6 +70,7 @@ def load_scene(ctx: LoadContext, d: Mapping[str, Any], name: str) -> Scene:
                 continue
             have_sensor = True
             camera, film, spp = sensors.load_sensor(ctx, value, key)
+            sensor_id = str(value.get("id", key))
         elif role == "integrator":
             if have_integrator:
                 ctx.note(value, key, "a second integrator ignored")
@@ -94,6 +96,9 @@ def load_scene(ctx: LoadContext, d: Mapping[str, Any], name: str) -> Scene:
         if classify(key, value) in ("bsdf", "texture") and ident not in ctx.referenced:
             ctx.note(value, key, f"{value.get('type')} defined but never referenced by a shape, unused")
     if ctx.notes:
-        log.warning("%s: not used by pyclpt (%d): %s", ctx.origin, len(ctx.notes), "; ".join(ctx.notes))
+        # one line; the command line shows the list ("ignored") as one short line per entry
+        log.warning("%s: not used by pyclpt (%d): %s", ctx.origin, len(ctx.notes), "; ".join(ctx.notes),
+                    extra={"ignored": tuple(ctx.notes), "origin": ctx.origin})
+    ctx.ids["camera"] = sensor_id  # the prefix of the sensor's parameters (pyclpt.traverse), after the others
     return Scene(ctx.meshes, ctx.materials, camera, film, ctx.environment, spp, max_depth, name, lights=ctx.lights,
                  ids=ctx.ids, groups=ctx.groups, instances=ctx.instances)
