@@ -143,18 +143,10 @@ class RenderSession:
             if not _is_integer(value, -1, MAX_DEPTH_LIMIT):
                 raise _setting_error(name, value, f"an integer in -1..{MAX_DEPTH_LIMIT} (-1: unlimited)")
             value = int(value)
-        elif name == "denoiser":
-            if value not in DENOISERS:
-                raise _setting_error(name, value, f"one of {', '.join(DENOISERS)}")
-        elif name == "integrator":
-            if value not in INTEGRATORS:
-                raise _setting_error(name, value, f"one of {', '.join(INTEGRATORS)}")
-        elif name == "layout":
-            if value not in LAYOUTS:
-                raise _setting_error(name, value, f"one of {', '.join(LAYOUTS)}")
-        elif name == "view":
-            if value not in VIEWS:
-                raise _setting_error(name, value, f"one of {', '.join(VIEWS)}")
+        elif name in (choices := {"denoiser": DENOISERS, "integrator": INTEGRATORS, "layout": LAYOUTS,
+                                   "view": VIEWS}):
+            if value not in choices[name]:
+                raise _setting_error(name, value, f"one of {', '.join(choices[name])}")
         elif name == "exposure":
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise _setting_error(name, value, "a number of stops")
