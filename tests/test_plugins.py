@@ -1,6 +1,7 @@
 """Plug-ins by kind, one place each: a material is one registry entry of the dict loader
 (pyclpt.scene.mitsuba_dict.bsdfs.BSDFS), one type id of the packing (pyclpt.buffers.materials.MAT_TYPES)
-and one header of the device (cl/scene/bsdfs/<name>.h) with its lines in the dispatch of cl/scene/bsdf.h."""
+and one header of the device (cl/scene/bsdfs/<name>.h, including the shared cl/scene/bsdfs/record.h) with its
+lines in the dispatch of cl/scene/bsdf.h."""
 from __future__ import annotations
 
 import logging
@@ -31,12 +32,14 @@ def _function_body(text: str, name: str) -> str:
 @pytest.mark.parametrize("name", sorted(MAT_TYPES))
 def test_every_device_material_has_its_header_type_id_loader_and_dispatch(name):
     text = _bsdf_h()
-    m = re.search(rf"#define MAT_{name.upper()} (\d+)", text)
-    assert m and int(m.group(1)) == MAT_TYPES[name], f"MAT_{name.upper()} in cl/scene/bsdf.h"
+    record = (cl_dir() / "scene" / "bsdfs" / "record.h").read_text()  # the shared types: no include circle
+    m = re.search(rf"#define MAT_{name.upper()} (\d+)", record)
+    assert m and int(m.group(1)) == MAT_TYPES[name], f"MAT_{name.upper()} in cl/scene/bsdfs/record.h"
     header = cl_dir() / "scene" / "bsdfs" / f"{name}.h"
     assert header.is_file(), header
     assert f'#include "scene/bsdfs/{name}.h"' in text
     source = header.read_text()
+    assert '#include "scene/bsdfs/record.h"' in source and '#include "scene/bsdf.h"' not in source
     assert source.startswith(f"/* {name}.h: "), f"{header}: starts with a comment saying what it holds"
     assert re.search(rf"static inline bool {name}_sample\(", source), f"{header}: {name}_sample"
     assert f"{name}_sample(" in _function_body(text, "bsdf_sample")
@@ -46,12 +49,15 @@ def test_every_device_material_has_its_header_type_id_loader_and_dispatch(name):
 
 
 def test_every_bsdf_header_says_what_it_holds_and_is_included():
-    text = _bsdf_h()
+    """Each header says what it holds and is included by bsdf.h (the materials and record.h) or by record.h (the
+    helpers it shares: fresnel.h, microfacet.h); no header under bsdfs/ includes bsdf.h back."""
+    text = _bsdf_h() + (cl_dir() / "scene" / "bsdfs" / "record.h").read_text()
     headers = sorted((cl_dir() / "scene" / "bsdfs").glob("*.h"))
-    assert {h.stem for h in headers} >= set(MAT_TYPES) | {"fresnel", "microfacet"}
+    assert {h.stem for h in headers} >= set(MAT_TYPES) | {"fresnel", "microfacet", "record"}
     for header in headers:
         assert header.read_text().startswith(f"/* {header.name}: "), header
         assert f'#include "scene/bsdfs/{header.name}"' in text, header
+        assert '#include "scene/bsdf.h"' not in header.read_text(), header
 
 
 def test_registries_name_the_mitsuba_plugins():

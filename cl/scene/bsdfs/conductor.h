@@ -1,12 +1,10 @@
 /* conductor.h: Mitsuba 3's `conductor` (MAT_CONDUCTOR, src/bsdfs/conductor.cpp): delta reflection
  * weighted by the complex Fresnel reflectance of (b->eta, b->k) times b->spec. Delta only (no
  * eval). One-sided: scene/bsdf.h, which includes this file, calls it with wi.z > 0. */
-#ifndef PYCLPT_BSDF_H
-#error "conductor.h is part of scene/bsdf.h: include that instead"
-#endif
 #ifndef PYCLPT_BSDFS_CONDUCTOR_H
 #define PYCLPT_BSDFS_CONDUCTOR_H
 
+#include "scene/bsdfs/record.h"
 #include "scene/bsdfs/fresnel.h"
 
 static inline bool conductor_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {

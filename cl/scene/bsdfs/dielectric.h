@@ -1,12 +1,10 @@
 /* dielectric.h: Mitsuba 3's `dielectric` (MAT_DIELECTRIC, src/bsdfs/dielectric.cpp): delta
  * reflection with probability F, else delta refraction with radiance scaled by eta_ti^2. Delta only
  * (no eval); two-sided by nature (wi on either side). Included by scene/bsdf.h. */
-#ifndef PYCLPT_BSDF_H
-#error "dielectric.h is part of scene/bsdf.h: include that instead"
-#endif
 #ifndef PYCLPT_BSDFS_DIELECTRIC_H
 #define PYCLPT_BSDFS_DIELECTRIC_H
 
+#include "scene/bsdfs/record.h"
 #include "scene/bsdfs/fresnel.h"
 
 /* Smooth dielectric: reflection with probability F, else refraction (dielectric.cpp). */

@@ -1,12 +1,10 @@
 /* diffuse.h: Mitsuba 3's `diffuse` (MAT_DIFFUSE, src/bsdfs/diffuse.cpp): Lambertian reflection of
  * the diffuse reflectance b->color, cosine-weighted sampling. One-sided: scene/bsdf.h, which
- * includes this file after the Bsdf record, calls it with wi.z > 0 (and wo.z > 0 for eval). */
-#ifndef PYCLPT_BSDF_H
-#error "diffuse.h is part of scene/bsdf.h: include that instead"
-#endif
+ * dispatches to it, calls it with wi.z > 0 (and wo.z > 0 for eval). */
 #ifndef PYCLPT_BSDFS_DIFFUSE_H
 #define PYCLPT_BSDFS_DIFFUSE_H
 
+#include "scene/bsdfs/record.h"
 #include "core/sampling.h"
 
 static inline vec3 diffuse_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {

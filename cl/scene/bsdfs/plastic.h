@@ -3,12 +3,10 @@
  * coating's internal reflections (b->fdr_int; MAT_FLAG_NONLINEAR for Mitsuba's `nonlinear`). Also
  * the helpers roughplastic.h shares: the lobe-choice probability and the base. One-sided:
  * scene/bsdf.h, which includes this file, calls it with wi.z > 0 (and wo.z > 0 for eval). */
-#ifndef PYCLPT_BSDF_H
-#error "plastic.h is part of scene/bsdf.h: include that instead"
-#endif
 #ifndef PYCLPT_BSDFS_PLASTIC_H
 #define PYCLPT_BSDFS_PLASTIC_H
 
+#include "scene/bsdfs/record.h"
 #include "core/sampling.h"
 #include "scene/bsdfs/fresnel.h"
 

@@ -1,12 +1,10 @@
 /* roughconductor.h: Mitsuba 3's `roughconductor` (MAT_ROUGHCONDUCTOR, src/bsdfs/roughconductor.cpp):
  * microfacet reflection F D G / (4 cos_i) (Walter et al. 2007), visible-normal sampling. One-sided:
  * scene/bsdf.h, which includes this file, calls it with wi.z > 0 (and wo.z > 0 for eval). */
-#ifndef PYCLPT_BSDF_H
-#error "roughconductor.h is part of scene/bsdf.h: include that instead"
-#endif
 #ifndef PYCLPT_BSDFS_ROUGHCONDUCTOR_H
 #define PYCLPT_BSDFS_ROUGHCONDUCTOR_H
 
+#include "scene/bsdfs/record.h"
 #include "scene/bsdfs/fresnel.h"
 #include "scene/bsdfs/microfacet.h"
 

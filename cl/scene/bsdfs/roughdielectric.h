@@ -2,12 +2,10 @@
  * microfacet reflection and refraction (Walter et al. 2007), a visible normal of wi's side, the
  * lobe chosen by F(wi.m). Two-sided (wi on either side). An index-matched interface
  * (bsdf_index_matched) is a delta pass-through. Included by scene/bsdf.h. */
-#ifndef PYCLPT_BSDF_H
-#error "roughdielectric.h is part of scene/bsdf.h: include that instead"
-#endif
 #ifndef PYCLPT_BSDFS_ROUGHDIELECTRIC_H
 #define PYCLPT_BSDFS_ROUGHDIELECTRIC_H
 
+#include "scene/bsdfs/record.h"
 #include "scene/bsdfs/fresnel.h"
 #include "scene/bsdfs/microfacet.h"
 

@@ -3,12 +3,10 @@
  * t(cos) (RP_KNOTS half floats the host computed, pyclpt/buffers/microfacet.py) and its internal
  * reflectance (b->fdr_int). One-sided: scene/bsdf.h, which includes this file, calls it with
  * wi.z > 0 (and wo.z > 0 for eval). */
-#ifndef PYCLPT_BSDF_H
-#error "roughplastic.h is part of scene/bsdf.h: include that instead"
-#endif
 #ifndef PYCLPT_BSDFS_ROUGHPLASTIC_H
 #define PYCLPT_BSDFS_ROUGHPLASTIC_H
 
+#include "scene/bsdfs/record.h"
 #include "core/sampling.h"
 #include "scene/bsdfs/fresnel.h"
 #include "scene/bsdfs/microfacet.h"

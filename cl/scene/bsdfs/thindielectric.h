@@ -2,12 +2,10 @@
  * a thin slab, delta reflection with the internal reflections summed, R' = 2R / (1 + R), and
  * straight-through transmission 1 - R' (no refraction, eta 1). Delta only (no eval); two-sided.
  * Included by scene/bsdf.h. */
-#ifndef PYCLPT_BSDF_H
-#error "thindielectric.h is part of scene/bsdf.h: include that instead"
-#endif
 #ifndef PYCLPT_BSDFS_THINDIELECTRIC_H
 #define PYCLPT_BSDFS_THINDIELECTRIC_H
 
+#include "scene/bsdfs/record.h"
 #include "scene/bsdfs/fresnel.h"
 
 /* R' = R + T R T / (1 - R^2) = 2R / (1 + R) with R at |cos_i| from outside; reflection with
