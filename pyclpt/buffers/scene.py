@@ -268,23 +268,30 @@ class SceneBuffers:
         mats, lights = pack_appearance(self.scene, old.bvh, old.bounds)
         packets = old.defines["BVH_LEAF_PACKETS"]
         defines = scene_defines(mats, lights, old.bvh, packets, self.scene, old.geometry_defines, old.device_class)
-        changed = {k: (old.defines[k], v) for k, v in defines.items() if old.defines[k] != v}
-        if changed:
-            what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items())
-            raise ValueError(f"scene {self.scene.name!r}: the new values change what the kernels are compiled "
-                             f"for ({what}); render it with a new renderer")
         new = SceneArrays(bvh=old.bvh, tri_info=triangle_info(self.scene, mats, lights, old.bvh.tri_order),
                           tri_vidx=old.tri_vidx, vnormals=old.vnormals, vuvs=old.vuvs, materials=mats.materials,
                           lights=lights, textures=mats.textures, bounds=old.bounds, defines=defines,
                           node_buffer=old.node_buffer, geometry_defines=old.geometry_defines,
                           instance_tri_bits=old.instance_tri_bits, device_class=old.device_class)
+        return self._adopt(new, "values")
+
+    def _adopt(self, new: SceneArrays, what: str) -> list[str]:
+        """Make ``new`` the scene's arrays, uploading the buffers whose contents changed (their names are
+        returned); ValueError, with nothing changed, when the kernels were compiled for other defines."""
+        old = self.arrays
+        changed = {k: (old.defines.get(k), v) for k, v in new.defines.items() if old.defines.get(k) != v}
+        if changed or set(old.defines) != set(new.defines):
+            diff = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items()) or "the defines' names"
+            raise ValueError(f"scene {self.scene.name!r}: the new {what} change what the kernels are compiled "
+                             f"for ({diff}); render it with a new renderer")
         uploaded = []
         for k, ((name, before), (_, after)) in enumerate(zip(old.device_arrays(), new.device_arrays())):
-            if before is not after and (before.dtype != after.dtype or before.tobytes() != after.tobytes()):
+            if before is not after and (before.dtype != after.dtype or before.shape != after.shape
+                                        or before.tobytes() != after.tobytes()):
                 self._buffers[k] = upload(self.device, after, f"scene {self.scene.name!r} {name}")
                 uploaded.append(name)
         self.arrays = new
-        self._consts.clear()  # the environment's light index and the number of emitters live there
+        self._consts.clear()  # the bounds, the environment's light index and the emitters live there
         return uploaded
 
     def refresh_geometry(self) -> list[str]:
@@ -310,18 +317,8 @@ class SceneBuffers:
             new = pack_scene(self.scene, old.device_class)
         if not same or grown > REBUILD_GROWTH:
             built = box_area_ratio(new.bvh)
-        changed = {k: (old.defines.get(k), v) for k, v in new.defines.items() if old.defines.get(k) != v}
-        if changed or set(old.defines) != set(new.defines):
-            what = ", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items()) or "the defines' names"
-            raise ValueError(f"scene {self.scene.name!r}: the new geometry changes what the kernels are compiled "
-                             f"for ({what}); render it with a new renderer")
-        uploaded = []
-        for k, ((name, before), (_, after)) in enumerate(zip(old.device_arrays(), new.device_arrays())):
-            if before.dtype != after.dtype or before.shape != after.shape or before.tobytes() != after.tobytes():
-                self._buffers[k] = upload(self.device, after, f"scene {self.scene.name!r} {name}")
-                uploaded.append(name)
-        self.arrays, self.built_area_ratio = new, built
-        self._consts.clear()  # the bounds and the emitters' areas live there
+        uploaded = self._adopt(new, "geometry and values")
+        self.built_area_ratio = built
         self.pack_seconds = time.perf_counter() - start
         return uploaded
 
