@@ -101,7 +101,7 @@ class Device:
     @property
     def is_pocl(self) -> bool:
         """PoCL, the Portable Computing Language runtime (``pocl-binary-distribution``)."""
-        return "portable computing language" in self.device.platform.name.lower()
+        return _is_pocl(self.device)
 
     @property
     def is_oclgrind(self) -> bool:
