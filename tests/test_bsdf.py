@@ -21,6 +21,8 @@ Every random input comes from a fixed seed, so every p-value is deterministic.
 """
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import pytest
 
@@ -257,6 +259,10 @@ def test_isotropic_unchanged_by_the_anisotropy_define(device, kit):
     """Isotropic rough materials evaluate and sample to the same bits with -DSCENE_HAS_ANISOTROPY as
     without it (the scenes without anisotropic materials compile without it)."""
     plain = Kit(device)
+    # A GPU compiler contracts a * b + c into FMAs per program, so two programs can differ in the last bits
+    # there (NVIDIA's OpenCL: 2.4e-7 at most); CPU devices give the same bits.
+    same = np.testing.assert_array_equal if device.is_cpu else partial(np.testing.assert_allclose, rtol=4e-6,
+                                                                         atol=1e-7)
     n = 5000
     wi = random_directions(161, n, hemisphere=False)
     wo = random_directions(162, n, hemisphere=False)
@@ -265,10 +271,10 @@ def test_isotropic_unchanged_by_the_anisotropy_define(device, kit):
                 _glass(0.3, "ggx"), _glass(0.1, "beckmann"), Plastic(alpha=0.3, distribution="beckmann"),
                 Conductor(*METALS["Cu"], alpha=0.2, alpha_v=0.2)):
         mat = pack_material(obj)
-        np.testing.assert_array_equal(kit.eval(mat, wi, wo), plain.eval(mat, wi, wo))
+        same(kit.eval(mat, wi, wo), plain.eval(mat, wi, wo))
         a, b = kit.sample(mat, wi, u), plain.sample(mat, wi, u)
         for key in a:
-            np.testing.assert_array_equal(a[key], b[key], err_msg=f"{obj}: {key}")
+            same(a[key], b[key], err_msg=f"{obj}: {key}")
 
 
 def test_erfinv(kit):

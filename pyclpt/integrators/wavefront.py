@@ -46,8 +46,24 @@ COMPACT_GROUP = 256
 QUEUE_BYTES_PER_PATH = 6 * 4 + 1
 SCHEDULES = ("readback", "capacity")
 DEFAULT_WAVE_SIZE = 1 << 18
+#: GPUs: a wave holds a whole 1920x1080 frame. Every wave pays each stage's launch (about 15-100 us of host
+#: time on NVIDIA's OpenCL, docs/gpu.md) and its tail's latency, and a GPU needs ~10^5 paths in flight to
+#: fill, so waves as large as memory allows; CPUs keep 2^18 (the state of a wave stays in their caches).
+GPU_WAVE_SIZE = 1 << 21
+GPU_WAVE_MEMORY_FRACTION = 8  # at most an eighth of the device's memory for the path state and queues
 CAPACITY_CHECK = 4
 TAIL_FRACTION = 4  # default tail_paths: a quarter of the wave (docs/wavefront.md, "The tail")
+
+
+def default_wave_size(device: Device) -> int:
+    """The wave size a renderer uses on ``device`` when none is given: DEFAULT_WAVE_SIZE on a CPU,
+    GPU_WAVE_SIZE on other devices unless an eighth of their memory (or their largest buffer, the AoS
+    state) holds fewer paths."""
+    if device.is_cpu:
+        return DEFAULT_WAVE_SIZE
+    per_path = bytes_per_path() + QUEUE_BYTES_PER_PATH
+    fits = min(device.global_mem // GPU_WAVE_MEMORY_FRACTION // per_path, device.max_alloc // bytes_per_path())
+    return int(max(DEFAULT_WAVE_SIZE, min(GPU_WAVE_SIZE, fits)))
 
 
 class Wavefront:
@@ -96,6 +112,7 @@ class Wavefront:
         self._tail_alive = np.zeros(max_depth + 2, np.int32)
         fill_buffer(device.queue, self.tail_counts, np.int32(0), 0, self._tail_alive.nbytes)
         self._counts = np.zeros((max_depth + 2, Q_COUNT), np.int32)
+        self._args_set: dict[str, tuple] = {}  # per stage, the arguments its kernel holds (_set_args)
 
     @property
     def bytes_per_path(self) -> int:
@@ -109,8 +126,31 @@ class Wavefront:
         # A fixed work-group size: PoCL compiles a kernel once per work-group size, and the
         # kernels ignore the work-items past their queue's count.
         g = -(-n // self.local_size) * self.local_size
-        ev = self.kernels[stage](self.device.queue, (g,), (self.local_size,), *args)
+        self._enqueue(stage, g, self.local_size, args)
+
+    def _enqueue(self, stage: str, global_size: int, local_size: int, args: tuple) -> None:
+        kernel = self._set_args(stage, args)
+        ev = cl.enqueue_nd_range_kernel(self.device.queue, kernel, (global_size,), (local_size,))
         self.profile.record(stage, ev)
+
+    def _set_args(self, stage: str, args: tuple) -> cl.Kernel:
+        """The stage's kernel with ``args`` set, setting only those that differ from its last launch's: a
+        stage takes up to ~40 arguments (the scene's buffers) and only the bounce and its seed change, while
+        each clSetKernelArg costs ~2 us on NVIDIA's OpenCL (docs/gpu.md, "Host overhead")."""
+        kernel = self.kernels[stage]
+        held = self._args_set.get(stage)
+        if held is None or len(held) != len(args):
+            kernel.set_args(*args)
+        else:
+            for i, (new, old) in enumerate(zip(args, held)):
+                if new is old:
+                    continue
+                if isinstance(new, np.generic) and isinstance(old, np.generic) and new.dtype == old.dtype \
+                        and new == old:
+                    continue
+                kernel.set_arg(i, new)
+        self._args_set[stage] = args
+        return kernel
 
     def _common(self, bounce: int) -> tuple:
         return (*self.paths.buffers, self.counters, np.int32(bounce))
@@ -160,8 +200,7 @@ class Wavefront:
             self._launch(stage, blocks, *args)
             return
         g = self.compact_group
-        ev = self.kernels[stage](self.device.queue, (blocks * g,), (g,), *args)
-        self.profile.record(stage, ev)
+        self._enqueue(stage, blocks * g, g, args)
 
     def compact_count(self, n: int, bounce: int, src_q: int) -> None:
         """Count the flagged entries per block of the queue ``src_q`` (at most ``n`` entries)."""

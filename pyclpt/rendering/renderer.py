@@ -130,6 +130,11 @@ class Renderer:
         self.crop = None if crop is None else Crop.of(crop, self.width, self.height)
         film_w, film_h = (self.width, self.height) if self.crop is None else self.crop[2:]
         self.depth_limit = UNLIMITED_DEPTH if self.max_depth == -1 else self.max_depth
+        # the wave (and film batch) size: the device's default unless given (GPUs take larger waves); the
+        # megakernel's launch size only when given
+        from pyclpt.integrators.wavefront import default_wave_size
+
+        launch_size, wave_size = wave_size, wave_size or default_wave_size(self.device)
         # all the buffers below together, before any is made (alloc() checks each on its own)
         check_render_memory(self.device, scene, film_w, film_h, precision=precision,
                             integrator=integrator, wave_size=wave_size, max_depth=self.depth_limit,
@@ -148,7 +153,7 @@ class Renderer:
             # small images: a batch of frames (samples) per wave or launch (rendering/memory.py: batch_frames)
             self.film = Film(self.device, self.width, self.height, precision=precision,
                              batch=batch_frames(film_w * film_h, wave_size), aovs=bool(self.aov_names), crop=self.crop)
-            options: dict = {"wave_size": wave_size} if wave_size else {}
+            options: dict = {"wave_size": launch_size} if launch_size else {}
             if local_size:
                 options["local_size"] = int(local_size)
             if integrator == "megakernel":
@@ -156,6 +161,7 @@ class Renderer:
             else:
                 from pyclpt.integrators.wavefront import Wavefront
 
+                options["wave_size"] = wave_size
                 if schedule:
                     options["schedule"] = schedule
                 if tail_paths is not None:

@@ -13,7 +13,11 @@ static inline float fresnel_conductor1(float cos_i, float eta, float k) {
     float t0 = eta2 - k2 - s2;
     float a2pb2 = m_sqrt(m_max(t0 * t0 + 4.0f * eta2 * k2, 0.0f));
     float t1 = a2pb2 + c2;
-    float a = m_sqrt(m_max(0.5f * (a2pb2 + t0), 0.0f));
+    /* a^2 = (a2pb2 + t0) / 2; for t0 < 0 its cancellation (exactly 0 for k = 0 or eta = 0, a mirror) turns
+     * into 4 eta^2 k^2 / (a2pb2 - t0), which the contraction into FMAs of GPU compilers cannot leave at
+     * ~1e-8 instead of 0 (whose square root made a mirror 0.9995). */
+    float a2 = t0 >= 0.0f ? 0.5f * (a2pb2 + t0) : 2.0f * eta2 * k2 / (a2pb2 - t0);
+    float a = m_sqrt(m_max(a2, 0.0f));
     float t2 = 2.0f * cos_i * a;
     float rs = (t1 - t2) / (t1 + t2);
     float t3 = c2 * a2pb2 + s2 * s2;
@@ -44,7 +48,8 @@ static inline float fresnel_dielectric(float cos_i, float eta, float* cos_t, flo
     float a_s = (ci - eta_it * ct) / (ci + eta_it * ct);
     float a_p = (eta_it * ci - ct) / (eta_it * ci + ct);
     *cos_t = outside ? -ct : ct;
-    return 0.5f * (a_s * a_s + a_p * a_p);
+    /* at most 1: a GPU compiler's FMAs can round it just above (1 - F then negative) */
+    return m_min(0.5f * (a_s * a_s + a_p * a_p), 1.0f);
 }
 
 /* F alone, for cos_i >= 0 on the outside of an interface int/ext = eta. */

@@ -18,7 +18,9 @@ static inline float plastic_prob_specular(const Bsdf* b, float t_i) {
     float sm = mean3(b->spec), dm = mean3(b->color);
     float s = (sm + dm) > 0.0f ? sm / (sm + dm) : 0.5f;
     float ps = (1.0f - t_i) * s, pd = t_i * (1.0f - s);
-    return (ps + pd) > 0.0f ? ps / (ps + pd) : s;
+    /* at most 1: a GPU compiler may contract ps + pd into fma((1 - t_i), s, pd), whose unrounded product can
+     * fall below the rounded ps (NVIDIA's OpenCL: 1 + 2^-23, so 1 - this a negative pdf) */
+    return (ps + pd) > 0.0f ? m_min(ps / (ps + pd), 1.0f) : s;
 }
 
 /* The diffuse base seen through the coating, without the transmittances:
