@@ -13,6 +13,7 @@ from pyclpt.buffers.scene import SceneBuffers, pack_scene
 from pyclpt.common.cache import cache_dir
 from pyclpt.common.env import EnvironmentVariableError
 from pyclpt.device.program import build_program
+from pyclpt.integrators.wavefront import STAGES
 from scenes import material_zoo
 
 CLASS_ENV = "PYCLPT_DEVICE_CLASS"
@@ -201,3 +202,21 @@ def test_gpu_compaction_gives_the_same_queues(device, monkeypatch):
     assert single.integrator.compact_group == 0
     np.testing.assert_array_equal(single.render(1, seed=4), image)
     assert wave.stats.bounces == single.stats.bounces  # the same queues, bounce by bounce
+
+
+def test_gpu_diagnostics_run_on_any_device(device, tmp_path):
+    """bench/gpu_diagnostics.py (docs/gpu.md, "Measured on an NVIDIA H200") measures launch costs, the
+    wavefront's variants and the driver's program binaries on whatever device runs it; on PoCL its binaries are
+    no PTX, so ptxas is not asked."""
+    from bench import gpu_diagnostics as gd
+
+    costs = gd.launch_costs(device, n=40)
+    assert set(costs) == {"profiling", "plain"}
+    assert all(v > 0 for row in costs.values() for v in row.values())
+    rows = gd.variants("cornell-box", 8, 8, depths=(2,), frames=1)
+    assert [(r["integrator"], r["options"]) for r in rows] == list(gd.VARIANTS)
+    assert all(r["wall_ms"] > 0 and r["device_ms"] > 0 for r in rows)
+    assert {r["wave"] for r in rows if r["options"].get("wave_size")} == {64 * 8 * 8}  # the 8x8 film's batch
+    ptx = gd.driver_ptx("cornell-box", tmp_path)
+    assert {r["kernel"] for r in ptx} == {"megakernel", *STAGES}
+    assert all((tmp_path / "cornell-box" / f"{r['kernel']}.ptx").stat().st_size > 0 for r in ptx)

@@ -3,14 +3,22 @@ same image; queues conserve paths; the launch sequence is the design's."""
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 import pytest
 from closed_forms import emitter_pixels
 
 import pyclpt
 from pyclpt.buffers import scene as scene_buffers
 from pyclpt.buffers.scene import pack_scene
+from pyclpt.integrators.megakernel import MEGAKERNEL_LAUNCH
 from pyclpt.integrators.path_state import FIELDS, bytes_per_path, opencl_header, record_words
-from pyclpt.integrators.wavefront import STAGES
+from pyclpt.integrators.wavefront import (
+    DEFAULT_WAVE_SIZE,
+    GPU_WAVE_SIZE,
+    QUEUE_BYTES_PER_PATH,
+    STAGES,
+    default_wave_size,
+)
 from scenes import interior_furnace, material_zoo, sensor
 
 
@@ -385,3 +393,60 @@ def test_path_state_component_buffers(cornell_box):
     aos = pyclpt.Renderer(cornell_box, integrator="wavefront", layout="aos", width=8, height=8)
     with pytest.raises(ValueError, match="keeps records"):
         aos.integrator.paths.component("hit_prim")
+
+
+class _FakeDevice:
+    """What default_wave_size reads of a device."""
+
+    def __init__(self, is_cpu: bool, global_mem: int, max_alloc: int) -> None:
+        self.is_cpu, self.global_mem, self.max_alloc = is_cpu, global_mem, max_alloc
+
+
+def test_default_wave_size_per_device_class():
+    """CPUs keep 2^18 paths a wave; GPUs get a whole 1920x1080 frame (2^21) unless an eighth of their memory or
+    their largest buffer holds fewer paths, and never fewer than a CPU's."""
+    per_path = bytes_per_path() + QUEUE_BYTES_PER_PATH
+    assert default_wave_size(_FakeDevice(True, 1 << 40, 1 << 40)) == DEFAULT_WAVE_SIZE == 1 << 18
+    assert default_wave_size(_FakeDevice(False, 141 << 30, 35 << 30)) == GPU_WAVE_SIZE == 1 << 21
+    assert GPU_WAVE_SIZE >= 1920 * 1080
+    assert default_wave_size(_FakeDevice(False, 2 << 30, 1 << 30)) == (2 << 30) // 8 // per_path
+    assert default_wave_size(_FakeDevice(False, 64 << 30, 128 << 20)) == (128 << 20) // bytes_per_path()
+    assert default_wave_size(_FakeDevice(False, 256 << 20, 64 << 20)) == DEFAULT_WAVE_SIZE
+    # a renderer on a CPU device uses the CPU default, the megakernel's launch size stays its own
+    r = pyclpt.Renderer(pyclpt.load("cornell-box"), integrator="megakernel", width=600, height=500)
+    assert r.integrator.wave_size == MEGAKERNEL_LAUNCH
+
+
+def test_launches_set_only_the_arguments_that_changed(cornell_box, monkeypatch):
+    """A stage's kernel keeps its arguments between launches: a launch sets those that differ from the
+    stage's last launch (the bounce, the queue, a seed), not the scene's ~40 buffers again; a changed buffer
+    or value is set, so the image follows the seed and the scene."""
+    calls = {"set_args": 0, "set_arg": 0}
+    set_args, set_arg = cl.Kernel.set_args, cl.Kernel.set_arg
+
+    def counting_set_args(self, *a):
+        calls["set_args"] += 1
+        return set_args(self, *a)
+
+    def counting_set_arg(self, i, a):
+        calls["set_arg"] += 1
+        return set_arg(self, i, a)
+
+    monkeypatch.setattr(cl.Kernel, "set_args", counting_set_args)
+    monkeypatch.setattr(cl.Kernel, "set_arg", counting_set_arg)
+    r = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=3, width=16, height=16, tail_paths=0)
+    wf = r.integrator
+    first = r.render(1, seed=3, progress=False)
+    launches, whole = len(wf.profile.sequence), calls["set_args"]
+    assert whole == len(STAGES)  # warm_up set every stage's arguments once, nothing since
+    total_args = sum(len(a) for a in wf._args_set.values())
+    calls["set_arg"] = 0
+    other = r.render(1, seed=4, progress=False)
+    again = r.render(1, seed=3, progress=False)
+    assert calls["set_args"] == whole  # never all of them again
+    assert 0 < calls["set_arg"] < total_args  # a few per launch, far fewer than all
+    assert calls["set_arg"] <= 3 * 2 * launches
+    assert np.array_equal(first, again) and not np.array_equal(first, other)
+    # against a fresh renderer (every argument set once): the same image
+    fresh = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=3, width=16, height=16, tail_paths=0)
+    assert np.array_equal(fresh.render(1, seed=4, progress=False), other)
