@@ -274,7 +274,8 @@ def test_jitter_does_not_reset_the_history(device):
 LUM = np.array([0.212671, 0.715160, 0.072169])
 
 
-def _atrous_reference(src: np.ndarray, geo: np.ndarray, step: int, s: DenoiserSettings) -> np.ndarray:
+def _atrous_reference(src: np.ndarray, geo: np.ndarray, step: int, s: DenoiserSettings,
+                      length: np.ndarray | None = None) -> np.ndarray:
     """One a-trous iteration in numpy, as cl/denoise/atrous.cl describes it: src (H, W, 4: RGB,
     variance), geo (H, W, 6: depth, normal, gradient, material)."""
     h, w = src.shape[:2]
@@ -298,7 +299,7 @@ def _atrous_reference(src: np.ndarray, geo: np.ndarray, step: int, s: DenoiserSe
             use = inside & (shifted(z, dy, dx)[0] > 0)  # surface pixels only
             gsum += use * gk[abs(dx)] * gk[abs(dy)] * v
             gw += use * gk[abs(dx)] * gk[abs(dy)]
-    sigma_l = s.phi_color * np.sqrt(np.where(gw > 0, gsum / np.maximum(gw, 1e-30), var) + 1e-10)
+    gvar = np.where(gw > 0, gsum / np.maximum(gw, 1e-30), var)
     sigma_z = s.phi_depth * np.maximum(grad, 1e-8) * step
     known = np.abs(nrm).sum(axis=-1) > 0
     bk = {0: 1.0, 1: 2 / 3, 2: 1 / 6}
@@ -313,6 +314,10 @@ def _atrous_reference(src: np.ndarray, geo: np.ndarray, step: int, s: DenoiserSe
             nq, _ = shifted(nrm, dy * step, dx * step)
             cos = np.maximum((nrm * nq).sum(axis=-1), 0.0)
             wn = np.where(known, cos ** s.phi_normal, 1.0)
+            # symmetric in p and q as the history grows (history length 8 -> 32)
+            sym = np.clip((length - 8.0) / 24.0, 0.0, 1.0) if length is not None else 0.0
+            var_pq = gvar + (np.minimum(gvar, np.maximum(vq, 0.25 * gvar)) - gvar) * sym
+            sigma_l = s.phi_color * np.sqrt(var_pq + 1e-10)
             e = -np.abs(lum - cq @ LUM) / sigma_l - np.abs(z - zq) / (sigma_z * np.hypot(dx, dy))
             wq = np.where(inside & (zq > 0), bk[abs(dx)] * bk[abs(dy)] * wn * np.exp(e), 0.0)
             sw += wq
@@ -336,7 +341,7 @@ def test_atrous_iteration_matches_numpy(device):
     src = svgf._planes(svgf._ping[1], 0, 4)  # iteration 0's output, iteration 1's input
     dst = svgf._planes(svgf._ping[0], 0, 4)
     geo = svgf._planes(svgf._geo[svgf._cur], 0, 6)
-    ref = _atrous_reference(src, geo, 2, settings)
+    ref = _atrous_reference(src, geo, 2, settings, svgf._planes(svgf._len[svgf._cur], 0, 1)[..., 0])
     np.testing.assert_allclose(dst[..., :3], ref[..., :3], rtol=2e-5, atol=1e-6)
     np.testing.assert_allclose(dst[..., 3], ref[..., 3], rtol=1e-4, atol=1e-9)
     assert np.abs(dst - src).max() > 0.01  # it did filter
@@ -540,7 +545,7 @@ def test_settings_changed_in_place_are_checked_and_applied(device):
     with pytest.raises(ValueError, match="DenoiserSettings.iterations"):
         d.denoise(sc["truth"], **gbuf(sc))
     d.settings.iterations = 2
-    d.settings.clip_radius = 2  # compiled in: rebuilt
+    d.settings.clip_radius = 1  # compiled in: rebuilt
     d.profile.clear()
     d.denoise(sc["truth"], **gbuf(sc))
     assert {row["kernel"]: row["launches"] for row in d.profile.table()}["atrous"] == 2

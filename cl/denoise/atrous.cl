@@ -6,26 +6,36 @@
  * 1/6) at taps p + step (dx, dy), each weighted by
  *   depth      exp(-|z - zq| / (phi_depth max(GEO_GRAD, 1e-8) step |(dx, dy)|))
  *   normal     max(0, cos)^phi_normal (svgf.h, normal_weight; 1 where p's normal is unknown)
- *   luminance  exp(-|l - lq| / (phi_color sqrt(g3x3(var) + 1e-10)))
+ *   luminance  exp(-|l - lq| / (phi_color sqrt(v_pq + 1e-10))),
+ *              v_pq = lerp(g, min(g, max(var_q, g / 4)), s), g = g3x3(var) of p
  * (g3x3: the 3x3 Gaussian 1/4, 1/8, 1/16 of the variance around p, renormalised over the surface
  * pixels inside the image: a background pixel's variance, never divided by its history, would
- * loosen its neighbours' weights). The centre counts with weight 1;
+ * loosen its neighbours' weights). s ramps from 0 at a history of SYMMETRIC_FROM (8) frames to 1 at
+ * SYMMETRIC_FULL (32): on a long history the weight is (nearly) symmetric in p and q, so a noisy
+ * pixel beside quiet ones no longer gives its energy away while they take none in (what darkened
+ * the converged image: docs/denoising.md, "Energy"); on a short one, whose variance is a spatial
+ * estimate, p's own keeps a bright neighbour's noise out. The centre counts with weight 1;
  * taps outside the image or on the background count 0. The illumination is averaged with the weights
  * w, the variance with w^2 (/ (sum w)^2): the variance of the filtered value. Background pixels
  * (depth 0) pass through.
  *
  * Consumes: src[c * pixels + p] (c < 3 illumination, c = 3 variance: variance or the previous
- *           iteration), geo (GEO_*, reproject); both padded (svgf.h, PAD).
+ *           iteration), geo (GEO_*, reproject), len (N, reproject); all padded (svgf.h, PAD).
  * Produces: dst[c * pixels + p] (padded), the same four channels filtered. */
 #include "denoise/svgf.h"
 
-__kernel void atrous(__global const float* src, __global const float* geo, __global float* dst,
-                     int width, int height, int step, float phi_color, float phi_normal, float phi_depth) {
+#define SYMMETRIC_FROM 8.0f
+#define SYMMETRIC_FULL 32.0f
+
+__kernel void atrous(__global const float* src, __global const float* geo, __global const float* len,
+                     __global float* dst, int width, int height, int step, float phi_color, float phi_normal,
+                     float phi_depth) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;
     src += PAD;
     geo += PAD;
+    len += PAD;
     dst += PAD;
 
     vec3 c = planar3(src, n, p);
@@ -49,7 +59,10 @@ __kernel void atrous(__global const float* src, __global const float* geo, __glo
         }
     }
     gvar = gw > 0.0f ? gvar / gw : var; /* gw = 0: p is background and passes through */
-    float inv_l = 1.0f / (phi_color * m_sqrt(gvar + VARIANCE_EPS));
+    float inv_phi = 1.0f / phi_color;
+    /* how far the luminance weight is made symmetric in p and q: 0 up to SYMMETRIC_FROM frames of
+     * history, 1 from SYMMETRIC_FULL on, linear between */
+    float sym = m_clamp((len[p] - SYMMETRIC_FROM) / (SYMMETRIC_FULL - SYMMETRIC_FROM), 0.0f, 1.0f);
     float inv_z = 1.0f / (phi_depth * m_max(geo[GEO_GRAD * n + p], 1e-8f) * (float)step);
 
     float sw = 1.0f, sv = var;
@@ -66,11 +79,14 @@ __kernel void atrous(__global const float* src, __global const float* geo, __glo
             vec3 cq = planar3(src, n, q);
             float zq = geo[GEO_DEPTH * n + q];
             float wn = normal_weight(m_dot(nrm, planar3(geo + GEO_NORMAL * n, n, q)), phi_n);
+            float vq = src[3 * n + q];
+            /* symmetric in p and q: sigma^2 = the smaller of p's blurred and q's own variance */
+            float inv_l = inv_phi * m_rsqrt(lerpf(gvar, m_min(gvar, m_max(vq, 0.25f * gvar)), sym) + VARIANCE_EPS);
             float e = -m_abs(l - luminance(cq)) * inv_l - m_abs(z - zq) * inv_z * inv_dist;
             float w = (inside && zq > 0.0f) ? k * wn * exp_weight(e) : 0.0f;
             sw += w;
             sum = v3_add(sum, v3_scale(cq, w));
-            sv += w * w * src[3 * n + q];
+            sv += w * w * vq;
         }
     }
     bool surface = z > 0.0f;

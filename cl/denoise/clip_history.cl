@@ -9,7 +9,8 @@
  * lighting for tens of frames (ghosting). So before the blend, the reprojected long history is
  * clamped per channel into mean +- clip_gamma x sigma of the fast history over the
  * (2 CLIP_RADIUS + 1)^2 pixels around p inside the image (sigma with Bessel's correction; a box of
- * one pixel, in a 1x1 image, does not clip); clip_gamma < 0: not clipped. Then history =
+ * one pixel, in a 1x1 image, does not clip), widened to hold p's own fast history; clip_gamma < 0:
+ * not clipped. Then history =
  * lerp(clipped, sample, max(alpha_min, 1/N)); a non-finite result (an overflow) becomes the sample.
  *
  * Consumes: temporal[0..2] (the sample) and temporal[3..5] (the reprojected long history) from
@@ -58,7 +59,9 @@ __kernel void clip_history(__global const float* temporal, __global const float*
     float s = temporal[p], h = temporal[3 * n + p];
     float g = m_max(clip_gamma, 0.0f);
     float spread = sigma < INFINITY ? g * sigma : INFINITY; /* not 0 x inf */
-    h = clip_gamma >= 0.0f ? m_clamp(h, mean - spread, mean + spread) : h;
+    /* the box always holds the pixel's own fast history: a history that agrees with its own recent
+     * frames is never clipped (an isolated bright pixel among dark ones would be, by a 5x5 box) */
+    h = clip_gamma >= 0.0f ? m_clamp(h, m_min(mean - spread, centre), m_max(mean + spread, centre)) : h;
     float out = lerpf(h, s, m_max(alpha_min, 1.0f / len[p]));
     accum[p] = m_isfinite(out) ? out : s;
 }

@@ -1,6 +1,7 @@
 /* demodulate: the frame's input as the other passes read it. One work-item per pixel, 2D range.
  *
- * The colour with NaN/inf replaced by 0 (all three channels; marked), divided by the albedo per
+ * The colour with NaN/inf replaced by 0 (all three channels; marked), less its emitted part (svgf.h,
+ * emitted3: the emission AOV, written to `emission` for reproject's emission history), divided by the albedo per
  * channel where the albedo is > ALBEDO_MIN and finite (else by 1; a non-finite albedo is marked
  * too), clamped to +-MAX_RADIANCE: the illumination that the history accumulates, and its
  * luminance. The geometry record of this frame (svgf.h, GEO_*) but its depth gradient: depth
@@ -10,26 +11,31 @@
  * neighbours' values from padded planes instead of demodulating each of them again.
  *
  * Consumes: color[3 p + c] (interleaved RGB, read through the opaque stride unit = 1); aovs[c *
- *           pixels + p] (cl/film/aovs.h: albedo, normal, depth, material).
+ *           pixels + p] (cl/film/aovs.h: albedo, normal, depth, material, emission).
  * Produces: sample[c * pixels + p] (padded, svgf.h): c < 3 the illumination, c = 3 its luminance;
+ *           emission[c * pixels + p] (padded, c < 3): the emitted part of the colour;
  *           geo[GEO_DEPTH, GEO_NORMAL.., GEO_MATERIAL] (padded); marks[p] = 1 if the colour was
  *           not finite + 1 if the albedo was not + 1 each for a NaN/-inf depth, a non-finite normal,
  *           a non-finite motion (a plain store, summed by film/count_dropped.cl). */
 #include "denoise/svgf.h"
 
 __kernel void demodulate(__global const float* color, __global const float* aovs, __global float* sample,
-                         __global float* geo, __global uchar* marks, int width, int height, int unit) {
+                         __global float* geo, __global float* emission, __global uchar* marks, int width, int height,
+                         int unit) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;
     sample += PAD;
     geo += PAD;
+    emission += PAD;
 
     bool bad_color;
     vec3 c = load_color(color, p, unit, &bad_color);
     vec3 albedo = planar3(aovs + AOV_ALBEDO * n, n, p);
     bool bad_albedo = !all_finite3(albedo);
-    vec3 s = clamp_radiance(v3_div(c, albedo_divisors(albedo)));
+    vec3 e = emitted3(c, planar3(aovs + AOV_EMISSION * n, n, p));
+    store_planar3(emission, n, p, e);
+    vec3 s = clamp_radiance(v3_div(v3_sub(c, e), albedo_divisors(albedo)));
     store_planar3(sample, n, p, s);
     sample[3 * n + p] = luminance(s);
 

@@ -20,20 +20,28 @@
  *    accepted taps (accepted if their weight sums to more than 0.01). Else the 3x3 pixels around the
  *    rounded previous position (itself inside the image), equally weighted (Falcor's fallback: a
  *    branch, taken at disocclusions only). Else a disocclusion: the history restarts.
- * 3. History length N = min(N_prev + 1, max_history) (N_prev: the accepted taps' weighted mean,
+ * 3. The emission history (the emitted part of the colour, demodulate, kept apart from the filtered
+ *    illumination and added back by modulate): the reprojected one clipped into the [min, max] box of
+ *    this frame's emission over the 3x3 pixels around p inside the image (an emitter is noise-free, so
+ *    its box is tight inside it and spans [dark, bright] on its jittered edges; a light that changes
+ *    leaves the box at once), then blended with weight max(alpha_min, 1/N), as the long history: a
+ *    static emitter's edge converges to the plain average of its frames.
+ * 4. History length N = min(N_prev + 1, max_history) (N_prev: the accepted taps' weighted mean,
  *    rounded), 1 at a disocclusion; moments of luminance blended with max(moments_alpha_min, 1/N),
  *    the fast history with max(fast_alpha, 1/N). The long history is blended by clip_history.
  * The depth gradient GEO_GRAD: |dz/dx| + |dz/dy|, each the smaller of the one-sided differences to
  * the surface neighbours (a depth edge on one side does not count).
  *
- * Consumes: sample (demodulate: illumination, luminance); geo (this frame's record from demodulate:
+ * Consumes: sample (demodulate: illumination, luminance); emission (demodulate: the emitted part); geo (this frame's record from demodulate:
  *           depth, normal, material); aovs[c * pixels + p] (cl/film/aovs.h: the motion); the
  *           previous frame's geo_prev (GEO_*), hist_prev (long history colour, channels 0..2),
- *           fast_prev (3), moments_prev (2), len_prev (history length; 0 = none, after a reset).
+ *           fast_prev (3), moments_prev (2), len_prev (history length; 0 = none, after a reset),
+ *           emis_prev (3, the emission history).
  *           All but aovs padded (svgf.h, PAD).
  * Produces: geo[GEO_GRAD]; temporal[0..2] the sample clamped, temporal[3..5] the long history
  *           reprojected (0 at a disocclusion); fast (the fast history accumulated), moments
- *           (luminance mean and mean of squares), len (N, a float); all padded. */
+ *           (luminance mean and mean of squares), len (N, a float), emis (the emission history);
+ *           all padded. */
 #include "denoise/svgf.h"
 
 /* Whether pixel q of the previous frame is the surface that the current pixel (depth z, unit
@@ -53,32 +61,38 @@ static inline float depth_step(float z, float zn) { return zn > 0.0f ? m_abs(z -
 
 /* The previous frame's history, summed over accepted taps with their weights. */
 typedef struct {
-    vec3 color, fast;
+    vec3 color, fast, emis;
     float m1, m2, len, weight;
 } history_t;
 
 static inline void add_tap(history_t* h, __global const float* hist_prev, __global const float* fast_prev,
-                           __global const float* moments_prev, __global const float* len_prev, int n, int q,
-                           float w) {
+                           __global const float* moments_prev, __global const float* len_prev,
+                           __global const float* emis_prev, int n, int q, float w) {
     h->color = v3_add(h->color, v3_scale(planar3(hist_prev, n, q), w));
     h->fast = v3_add(h->fast, v3_scale(planar3(fast_prev, n, q), w));
+    h->emis = v3_add(h->emis, v3_scale(planar3(emis_prev, n, q), w));
     h->m1 += w * moments_prev[q];
     h->m2 += w * moments_prev[n + q];
     h->len += w * len_prev[q];
     h->weight += w;
 }
 
-__kernel void reproject(__global const float* sample, __global float* geo, __global const float* aovs,
+__kernel void reproject(__global const float* sample, __global const float* emission, __global float* geo,
+                        __global const float* aovs,
                         __global const float* geo_prev, __global const float* hist_prev,
                         __global const float* fast_prev, __global const float* moments_prev,
-                        __global const float* len_prev, __global float* temporal, __global float* fast,
-                        __global float* moments, __global float* len, int width, int height,
-                        float depth_threshold, float normal_threshold, float firefly_ratio, float firefly_sigma,
-                        float max_history, float moments_alpha_min, float fast_alpha) {
+                        __global const float* len_prev, __global const float* emis_prev, __global float* temporal,
+                        __global float* fast, __global float* moments, __global float* len, __global float* emis,
+                        int width, int height, float depth_threshold, float normal_threshold, float firefly_ratio,
+                        float firefly_sigma, float max_history, float alpha_min, float moments_alpha_min,
+                        float fast_alpha) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;
     sample += PAD;
+    emission += PAD;
+    emis_prev += PAD;
+    emis += PAD;
     geo += PAD;
     geo_prev += PAD;
     hist_prev += PAD;
@@ -118,14 +132,20 @@ __kernel void reproject(__global const float* sample, __global float* geo, __glo
 
     /* the sample and its neighbours' mean luminance */
     vec3 s = planar3(sample, n, p);
+    vec3 e = planar3(emission, n, p);
+    vec3 e_lo = e, e_hi = e; /* the box of this frame's emission around p */
     float around = 0.0f, count = 0.0f;
     UNROLL for (int dy = -1; dy <= 1; ++dy) {
         UNROLL for (int dx = -1; dx <= 1; ++dx) {
             if (dx == 0 && dy == 0) continue;
             int tx = x + dx, ty = y + dy;
             float w = (tx >= 0 && tx < width && ty >= 0 && ty < height) ? 1.0f : 0.0f;
-            around += w * sample[3 * n + row_at(y, dy, width, height) + tx];
+            int q = row_at(y, dy, width, height) + tx;
+            around += w * sample[3 * n + q];
             count += w;
+            vec3 eq = planar3(emission, n, q);
+            e_lo = w > 0.0f ? v3(m_min(e_lo.x, eq.x), m_min(e_lo.y, eq.y), m_min(e_lo.z, eq.z)) : e_lo;
+            e_hi = w > 0.0f ? v3(m_max(e_hi.x, eq.x), m_max(e_hi.y, eq.y), m_max(e_hi.z, eq.z)) : e_hi;
         }
     }
     around = count > 0.0f ? around / count : 0.0f;
@@ -142,20 +162,20 @@ __kernel void reproject(__global const float* sample, __global float* geo, __glo
     float fx0 = m_floor(px), fy0 = m_floor(py);
     float fx = px - fx0, fy = py - fy0;
     int x0 = (int)fx0, y0 = (int)fy0;
-    history_t h = {v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
+    history_t h = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
     UNROLL for (int t = 0; t < 4; ++t) {
         int tx = x0 + (t & 1), ty = y0 + (t >> 1);
         bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
         int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
         bool ok = inside & (len_prev[q] >= 1.0f) & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
         float bw = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
-        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, n, q, ok ? bw : 0.0f);
+        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, n, q, ok ? bw : 0.0f);
     }
     /* none (a weight below 0.01): Falcor's fallback, the 3x3 pixels around the rounded position,
      * equally weighted; a branch, taken at disocclusions only */
     if (!(h.weight > 0.01f)) {
         int rx = (int)m_floor(px + 0.5f), ry = (int)m_floor(py + 0.5f);
-        history_t f = {v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
+        history_t f = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
         if (rx >= 0 && rx < width && ry >= 0 && ry < height) {
             for (int dy = -1; dy <= 1; ++dy) {
                 for (int dx = -1; dx <= 1; ++dx) {
@@ -164,7 +184,7 @@ __kernel void reproject(__global const float* sample, __global float* geo, __glo
                     int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
                     bool ok = inside & (len_prev[q] >= 1.0f)
                               & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
-                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, n, q, ok ? 1.0f : 0.0f);
+                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, n, q, ok ? 1.0f : 0.0f);
                 }
             }
         }
@@ -190,6 +210,10 @@ __kernel void reproject(__global const float* sample, __global float* geo, __glo
     moments[p] = lerpf(h.m1 * inv, l, am);
     moments[n + p] = lerpf(h.m2 * inv, l * l, am);
     len[p] = N;
+    vec3 he = v3_scale(h.emis, inv);
+    he = v3(m_clamp(he.x, e_lo.x, e_hi.x), m_clamp(he.y, e_lo.y, e_hi.y), m_clamp(he.z, e_lo.z, e_hi.z));
+    vec3 e_out = lerp3(he, e, m_max(alpha_min, 1.0f / N)); /* N = 1 (a new history): e itself */
+    store_planar3(emis, n, p, all_finite3(e_out) ? e_out : e);
     store_planar3(temporal, n, p, s);
     store_planar3(temporal + 3 * n, n, p, hist);
     geo[GEO_GRAD * n + p] = grad;

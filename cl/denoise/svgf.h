@@ -73,6 +73,18 @@ static inline vec3 aov_divisor(__global const float* aovs, int n, int p) {
     return albedo_divisors(planar3(aovs + AOV_ALBEDO * n, n, p));
 }
 
+/* The part of colour c that the first hit emitted towards the camera (the AOV_EMISSION record e of
+ * cl/film/aovs.h: an emitter or the environment seen directly), per channel e clamped into
+ * [0, max(c, 0)] (a non-finite e: 0), so that c = (c - e) + e exactly and c - e >= 0 wherever c >= 0.
+ * It is taken out before demodulation and added back after the filter (Falcor's SVGF does the
+ * same): an emitter's radiance is noise-free and must not be blurred into, or demodulated with,
+ * the light its surroundings reflect. */
+static inline float emitted_part(float c, float e) { return m_isfinite(e) ? m_clamp(e, 0.0f, m_max(c, 0.0f)) : 0.0f; }
+
+static inline vec3 emitted3(vec3 c, vec3 e) {
+    return v3(emitted_part(c.x, e.x), emitted_part(c.y, e.y), emitted_part(c.z, e.z));
+}
+
 /* Colour p of an interleaved RGB buffer with NaN/inf replaced by 0 (all three channels, as the
  * film does); *bad is set when it was. */
 static inline vec3 load_color(__global const float* color, int p, int unit, bool* bad) {

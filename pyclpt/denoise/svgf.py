@@ -7,7 +7,8 @@ One frame is six passes, one kernel each in ``cl/denoise/`` and one method here 
 history length), :meth:`Svgf.clip_history` (clip the long history into the fast one's
 neighbourhood and blend), :meth:`Svgf.variance` (temporal or, on a short history, spatial
 variance), :meth:`Svgf.atrous` (``iterations`` a-trous iterations) and :meth:`Svgf.modulate` (times
-the albedo). :meth:`Svgf.count_dropped` adds up the NaN/inf inputs (``cl/film/count_dropped.cl``).
+the albedo, plus the emission's own temporal history: the emitted part of the colour is kept out of
+the filter). :meth:`Svgf.count_dropped` adds up the NaN/inf inputs (``cl/film/count_dropped.cl``).
 
 All state stays on the device. The history is double-buffered: each frame writes the buffers the
 previous frame read from, and the two swap roles (nothing is copied); the a-trous iteration
@@ -94,8 +95,8 @@ class Svgf:
         self.global_size = (-(-self.width // lx) * lx, -(-self.height // ly) * ly)
         n, f = self.pixels, 4
         size = f"{self.width}x{self.height}"
-        needs = {"denoiser history": 2 * f * n * (GEO_COUNT + 4 + 3 + 2 + 1),
-                 "denoiser work buffers": f * n * (6 + 4 + 4 + 3) + n}
+        needs = {"denoiser history": 2 * f * n * (GEO_COUNT + 4 + 3 + 2 + 1 + 3),
+                 "denoiser work buffers": f * n * (6 + 4 + 4 + 3 + 3) + n}
         check_memory(self.device, needs, hint="denoise a smaller image")
         self._padded: list[tuple[cl.Buffer, int]] = []
         self._geo = [self._alloc(GEO_COUNT, f"denoiser geometry {size}") for _ in range(2)]
@@ -103,6 +104,8 @@ class Svgf:
         self._fast = [self._alloc(3, f"denoiser fast history {size}") for _ in range(2)]
         self._moments = [self._alloc(2, f"denoiser moments {size}") for _ in range(2)]
         self._len = [self._alloc(1, f"denoiser history length {size}") for _ in range(2)]
+        self._emis = [self._alloc(3, f"denoiser emission history {size}") for _ in range(2)]
+        self._emission = self._alloc(3, f"denoiser frame emission {size}")
         self._temporal = self._alloc(6, f"denoiser temporal {size}")
         self._ping = [self._alloc(4, f"denoiser a-trous {size}") for _ in range(2)]
         self.output = alloc(self.device, f * n * 3, f"denoised image {size}")
@@ -171,7 +174,7 @@ class Svgf:
         q = self.device.queue
         n = self.pixels
         for bufs, channels in ((self._geo, GEO_COUNT), (self._hist, 4), (self._fast, 3), (self._moments, 2),
-                               (self._len, 1)):
+                               (self._len, 1), (self._emis, 3)):
             for buf in bufs:
                 fill_buffer(q, buf, np.float32(0), 4 * PAD, 4 * n * channels)
         self.frames = 0
@@ -228,7 +231,7 @@ class Svgf:
         the a-trous buffer, free until the variance pass), this frame's geometry, the NaN/inf marks."""
         ev = self._kernels["demodulate"](
             self.device.queue, self.global_size, self.local, color, aovs, self._ping[0], self._geo[self._cur],
-            self._marks, *self._args2d(), np.int32(1))
+            self._emission, self._marks, *self._args2d(), np.int32(1))
         return self._record("demodulate", ev)
 
     def reproject(self, aovs: cl.Buffer) -> cl.Event:
@@ -236,12 +239,12 @@ class Svgf:
         fast history, moments and history length of this frame."""
         s, c, p = self._settings, self._cur, self._prev
         ev = self._kernels["reproject"](
-            self.device.queue, self.global_size, self.local, self._ping[0], self._geo[c], aovs,
-            self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p],
-            self._temporal, self._fast[c], self._moments[c], self._len[c], *self._args2d(),
+            self.device.queue, self.global_size, self.local, self._ping[0], self._emission, self._geo[c], aovs,
+            self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p],
+            self._temporal, self._fast[c], self._moments[c], self._len[c], self._emis[c], *self._args2d(),
             np.float32(s.depth_threshold), np.float32(s.normal_threshold), np.float32(s.firefly_ratio),
-            np.float32(s.firefly_sigma), np.float32(s.max_history), np.float32(s.moments_alpha_min),
-            np.float32(s.fast_alpha))
+            np.float32(s.firefly_sigma), np.float32(s.max_history), np.float32(s.alpha_min),
+            np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
         return self._record("reproject", ev)
 
     def count_dropped(self) -> cl.Event:
@@ -287,7 +290,8 @@ class Svgf:
         else:
             dst = self._ping[1] if src is self._ping[0] else self._ping[0]
         ev = self._kernels["atrous"](
-            self.device.queue, self.global_size, self.local, src, self._geo[self._cur], dst, *self._args2d(),
+            self.device.queue, self.global_size, self.local, src, self._geo[self._cur], self._len[self._cur], dst,
+            *self._args2d(),
             np.int32(1 << iteration), np.float32(s.phi_color), np.float32(s.phi_normal), np.float32(s.phi_depth))
         self._src = dst
         return self._record("atrous", ev)
@@ -295,8 +299,8 @@ class Svgf:
     def modulate(self, aovs: cl.Buffer) -> cl.Event:
         """Pass 6 (cl/denoise/modulate.cl): the filtered illumination times the albedo, into ``output``."""
         src = self._src if self._src is not None else self._ping[0]
-        ev = self._kernels["modulate"](self.device.queue, self.global_size, self.local, src, aovs, self.output,
-                                       *self._args2d(), np.int32(1))
+        ev = self._kernels["modulate"](self.device.queue, self.global_size, self.local, src, aovs,
+                                       self._emis[self._cur], self.output, *self._args2d(), np.int32(1))
         return self._record("modulate", ev)
 
     def run(self, color: cl.Buffer, aovs: cl.Buffer) -> cl.Buffer:
