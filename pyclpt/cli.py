@@ -221,6 +221,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--tile", type=_tile, default="auto", metavar="N|WxH",
                    help="with --workers/--scheduler: tasks render tiles of N x N or W x H pixels (0: the whole "
                         "image; default: 512-pixel tiles for images over 2 Mpixels)")
+    r.add_argument("--tev", nargs="?", const="127.0.0.1:14158", default=None, metavar="HOST:PORT",
+                   help="show the image in tev (the HDR viewer) as it converges, a few times a second and the last "
+                        "one, over tev's IPC protocol (the [tev] extra; default address 127.0.0.1:14158)")
     r.add_argument("--stats", action="store_true",
                    help="print a table of the paths alive per bounce and the time per kernel")
     r.add_argument("--stats-json", default=None, metavar="FILE",
@@ -268,16 +271,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the port on 127.0.0.1 to serve the page on (default 0: a free one)")
     v.add_argument("--no-browser", action="store_true", help="print the page's address instead of opening it")
     v.add_argument("--width", type=_positive, default=None,
-                   help="frame width in pixels (default: the scene's, scaled down to a longer side of at most 640)")
+                   help="a fixed frame width in pixels (default: the frame follows the page's window, the scene's "
+                        "aspect kept, up to --max-size)")
     v.add_argument("--height", type=_positive, default=None,
-                   help="frame height in pixels (default: from --width and the scene's aspect)")
+                   help="a fixed frame height in pixels (default: from --width and the scene's aspect)")
+    v.add_argument("--max-size", type=_int_in(8, 8193), default=640, metavar="PIXELS",
+                   help="the longer side of a frame that follows the window, at most (8 to 8192, default 640)")
     v.add_argument("--spp-per-frame", type=_int_in(1, 65), default=1,
                    help="samples per pixel rendered between two pictures shown, 1 to 64 (default 1)")
     v.add_argument("--max-depth", type=_depth, default=None, help="Mitsuba's max_depth; -1 = unlimited")
     v.add_argument("--denoiser", choices=("off", "blend", "svgf"), default="svgf",
                    help="svgf (default): camera moves keep the reprojected history; blend: the 70/30 history "
                         "blend; off: the plain average, which a camera move restarts")
-    v.add_argument("--view", choices=("color", "denoised", "albedo", "normal", "depth", "motion"), default=None,
+    v.add_argument("--view", choices=("color", "denoised", "albedo", "normal", "depth", "motion", "samples"),
+                   default=None,
                    help="what to show first (default denoised with a denoiser, else color)")
     v.add_argument("--integrator", choices=("megakernel", "wavefront"), default="megakernel",
                    help="megakernel (default) or wavefront (docs/wavefront.md)")
@@ -328,6 +335,7 @@ def _cmd_render(a: argparse.Namespace) -> int:
     _drop_linear_exposure(a, out, aovs)
     if not a.output:
         check_output_path(out)
+    tev = _open_tev(a, Path(out).name)  # before compiling: a tev that is not running is said at once
     size = {"width": a.width or scene.film.width, "height": a.height or scene.film.height}
     frames = _check_spp(a, a.frames or a.spp or scene.spp)
     path = CameraPath.orbit(scene, a.orbit, frames) if a.orbit is not None else None
@@ -349,8 +357,20 @@ def _cmd_render(a: argparse.Namespace) -> int:
         write(sequence_path(out, k), pr.denoised() if pr.denoiser is not None else pr.image())
         written.append(k)
 
+    def on_frame(k: int) -> None:
+        if a.sequence:
+            write_frame(k)
+        if tev is not None and tev.due():
+            tev.send(pr.denoised() if pr.denoiser is not None else pr.image())
+
     log.info("rendering %d frame(s) of %dx%d into %s", frames, pr.width, pr.height, out)
-    image = pr.run(frames, progress=not a.quiet, on_frame=write_frame if a.sequence else None)
+    try:
+        image = pr.run(frames, progress=not a.quiet, on_frame=on_frame if a.sequence or tev is not None else None)
+    except BaseException:
+        if tev is not None:
+            tev.close()
+        raise
+    tev_line = _finish_tev(tev, image)
     if not a.sequence:
         write(out, image)
     total = time.perf_counter() - a.started  # from the command's start to the written file
@@ -372,6 +392,8 @@ def _cmd_render(a: argparse.Namespace) -> int:
     if pr.denoiser is not None:
         print(f"denoised ({a.denoise}): {sum(row['total_ms'] for row in st.denoise) / 1000:.3f} s on the device"
               + (f", {pr.reprojections} camera moves reprojected" if pr.reprojections else ""))
+    if tev_line:
+        print(tev_line)
     if a.stats:
         print(stats_table(st), end="")
     if a.stats_json:
@@ -379,6 +401,29 @@ def _cmd_render(a: argparse.Namespace) -> int:
                                          "memory": st.memory, "dropped_samples": st.dropped_samples,
                                          "accumulation": acc, "denoise": st.denoise})
     return 0
+
+
+def _open_tev(a: argparse.Namespace, name: str):
+    """``--tev HOST:PORT``: the connection to tev (pyclpt.viewer.tev), or None without --tev."""
+    if a.tev is None:
+        return None
+    from pyclpt.viewer.tev import TevStream
+
+    return TevStream(a.tev, name)
+
+
+def _finish_tev(tev, image) -> str | None:
+    """Send the render's last image to tev and close the connection; the line that says so (None without
+    --tev; a tev that went away has been warned about)."""
+    if tev is None:
+        return None
+    try:
+        tev.send(image, force=True)
+    finally:
+        tev.close()
+    if tev.failed is not None:
+        return None
+    return f"sent {tev.sent} image{'s' if tev.sent != 1 else ''} to tev at {tev.host}:{tev.port} as {tev.name!r}"
 
 
 def _samples(a: argparse.Namespace, pr, frames: int) -> str:
@@ -500,6 +545,7 @@ def _render_distributed(a: argparse.Namespace) -> int:
     check_output_path(sequence_path(out, 0) if a.sequence else out)
     _drop_linear_exposure(a, out, None)
     spp = _check_spp(a, a.frames or a.spp or scene.spp)
+    tev = _open_tev(a, Path(out).name)  # the final image only: the tasks' partial sums are not an image
     with connect(a.scheduler, a.workers) as client:
         t1 = time.perf_counter()
         workers = len(client.nthreads())
@@ -540,12 +586,15 @@ def _render_distributed(a: argparse.Namespace) -> int:
     else:
         write_image(out, images[0], exposure=a.exposure)
         a.written = out
+    tev_line = _finish_tev(tev, images[-1])
     h, w = images[0].shape[:2]
     where = f"{workers} workers at {a.scheduler}" if a.scheduler else f"a local cluster of {workers} workers"
     print(f"{out}: {w}x{h}, {spp} {'frames' if a.sequence else 'spp'}, {a.integrator} on {where}: "
           f"{len(dr.parts)} tasks, render {seconds:.2f} s, total {time.perf_counter() - a.started:.2f} s")
     if a.sequence:
         print(f"wrote {spp} frames: {sequence_path(out, 0)} .. {sequence_path(out, spp - 1)}")
+    if tev_line:
+        print(tev_line)
     return 0
 
 
@@ -634,10 +683,12 @@ def _cmd_view(a: argparse.Namespace) -> int:
     from pyclpt.viewer.session import RenderSession
 
     scene = load(a.scene, **dict(a.define))
-    width, height = frame_size(scene, a.width, a.height)
+    follow = a.width is None and a.height is None  # the frame follows the page's window, up to --max-size
+    width, height = frame_size(scene, a.width, a.height, a.max_size)
     session = RenderSession(scene, width=width, height=height, spp_per_frame=a.spp_per_frame, max_depth=a.max_depth,
                             denoiser=a.denoiser, integrator=a.integrator, layout=a.layout, device=a.device,
-                            seed=a.seed, exposure=a.exposure, view=a.view, output_dir=a.output_dir)
+                            seed=a.seed, exposure=a.exposure, view=a.view, output_dir=a.output_dir,
+                            max_size=a.max_size if follow else None)
     viewer = Viewer(session, port=a.port).start()
     try:
         print(f"pyclpt view: {scene.name}, {width}x{height} on {session.pr.device.name.strip()}: {viewer.url} "

@@ -23,7 +23,16 @@ import pytest
 
 import pyclpt
 from pyclpt.viewer.camera import OrbitCamera, lookat_xml
-from pyclpt.viewer.display import ImageView, aov_to_display, encode_png, show, tonemap, tonemap_fast
+from pyclpt.viewer.display import (
+    SAMPLES_WHITE,
+    ImageView,
+    aov_to_display,
+    encode_png,
+    samples_to_display,
+    show,
+    tonemap,
+    tonemap_fast,
+)
 
 W, H = 48, 27  # the frames of the server tests: small, so that a picture takes milliseconds
 
@@ -92,6 +101,20 @@ def test_aov_displays():
     shown = aov_to_display("motion", motion)
     assert shown[0, 0].tolist() == [255, 128, 128] and shown[0, 1].tolist() == [128, 64, 128]
     assert shown[1, 0].tolist() == [128, 128, 128] and shown[1, 1].tolist() == [0, 0, 0]
+
+
+def test_samples_display():
+    """Black without a sample, dark blue for one, brighter with more (a log scale), white from SAMPLES_WHITE on."""
+    counts = np.array([[0, 1, 4, 64, 1024, SAMPLES_WHITE, 10 * SAMPLES_WHITE]])
+    shown = samples_to_display(counts)
+    assert shown.shape == (1, 7, 3) and shown.dtype == np.uint8
+    assert shown[0, 0].tolist() == [0, 0, 0] and shown[0, 5].tolist() == [255, 255, 255] == shown[0, 6].tolist()
+    r, g, b = shown[0, 1]
+    assert b > 90 and b > 3 * r
+    brightness = shown[0].astype(int).sum(axis=1)
+    assert all(brightness[k] < brightness[k + 1] for k in range(5))
+    with pytest.raises(ValueError, match="sample counts"):
+        samples_to_display(np.zeros((2, 2, 3)))
 
 
 # -- the camera ---------------------------------------------------------------------------------------
@@ -402,6 +425,93 @@ def test_default_size_keeps_the_aspect(cornell_box):
     assert frame_size(scene, 10, 20) == (10, 20)
 
 
+def test_fit_size_keeps_the_aspect_within_the_maximum():
+    from pyclpt.viewer.session import MIN_SIDE, fit_size
+
+    assert fit_size(256, 256, 500, 400, 640) == (400, 400)
+    assert fit_size(256, 256, 500, 400, 64) == (64, 64)  # the maximum caps it
+    assert fit_size(1920, 1080, 800, 800, 640) == (640, 360)
+    assert fit_size(1920, 1080, 300, 600, 640) == (300, 169)  # the width limits it
+    assert fit_size(1920, 1080, 1, 1, 640) == (14, MIN_SIDE)  # a tiny window still gets a picture
+    assert fit_size(256, 256, 4000, 4000, 10) == (10, 10)
+
+
+def _other_device(session) -> str:
+    """A device to switch to: another one than the session's (not the Oclgrind simulator), else the same."""
+    current = session.settings["device"]
+    others = [d["id"] for d in session.devices() if d["id"] != current and "oclgrind" not in d["name"].lower()]
+    return others[0] if others else current
+
+
+def test_samples_view_window_size_and_device_switch(cornell_box, device, tmp_path):
+    """The samples view shows the count of the plain average, uniform; the frame follows the window within
+    max_size, the scene's aspect kept; the device setting offers `pyclpt devices`' list and rebuilds the
+    renderer on the one chosen, and a device that fails leaves the previous renderer rendering."""
+    session = RenderSession(copy.deepcopy(cornell_box), width=24, height=24, device=device, denoiser=None,
+                            idle_after=60.0, max_size=40)
+    ids = [d["id"] for d in session.devices()]
+    assert ids == [f"{p}:{i}" for p, i, _ in pyclpt.list_devices()] and session.settings["device"] in ids
+    assert session.status()["settings"]["device"] == session.settings["device"]
+    session.start()
+    try:
+        session.set("view", "samples").result(timeout=30)
+        frame = session.wait_frame(session.frames, timeout=30)
+        while frame.status["spp"] < 2:
+            frame = session.wait_frame(frame.index, timeout=30)
+        assert frame.status["shown"] == "samples"
+        px = decode_png(frame.png, tmp_path)
+        assert (px == px[0, 0]).all()  # uniform: the renderer is not adaptive
+        assert px[0, 0].tolist() == samples_to_display(np.array([[frame.status["spp"]]]))[0, 0].tolist()
+        assert session.sample_counts().shape == (session.pr.height, session.pr.width)
+
+        assert session.fit(30, 20).result(timeout=30) == (20, 20)  # the scene's square, in the window
+        assert session.fit(400, 300, scale=2.0).result(timeout=30) == (40, 40)  # at most max_size
+        frame = session.wait_frame(session.frames, timeout=30)
+        while (frame.width, frame.height) != (40, 40):
+            frame = session.wait_frame(frame.index, timeout=30)
+        assert session.status()["max_size"] == 40
+        with pytest.raises(ValueError, match="viewport width"):
+            session.fit(float("nan"), 10)
+
+        with pytest.raises(ValueError, match="setting device: '99:99' is not one of the OpenCL devices"):
+            session.set("device", "99:99").result(timeout=30)
+        before, pr = session.settings["device"], session.pr
+        real_make = session._make_renderer
+        session._make_renderer = lambda: (_ for _ in ()).throw(RuntimeError("no kernels for this device"))
+        target = _other_device(session)
+        if target != before:
+            with pytest.raises(RuntimeError, match="no kernels for this device"):
+                session.set("device", target).result(timeout=30)
+            assert session.pr is pr and session.settings["device"] == before  # the previous one goes on
+            session.wait_frame(session.frames, timeout=30)
+        session._make_renderer = real_make
+        session.set("device", target).result(timeout=300)  # compiles the programs there (cached after)
+        assert session.settings["device"] == target
+        name = next(d["name"] for d in session.devices() if d["id"] == target)
+        assert session.pr.device.name == name and (session.pr.width, session.pr.height) == (40, 40)
+        frame = session.wait_frame(session.frames, timeout=60)
+        assert frame.status["device"] == name and session.error is None
+    finally:
+        session.close()
+
+
+def test_the_page_gets_the_devices_and_its_window_size(viewer):
+    """The server sends the device list first; a viewport message answers with the frame size (fixed here:
+    the module's viewer was made with a width and height)."""
+    async def script(page):
+        first = await page.ws.receive_json(timeout=20)
+        await page.ws.send_json({"type": "viewport", "width": 300, "height": 200, "scale": 1})
+        size = await page.reply("size")
+        await page.ws.send_json({"type": "viewport", "width": -1, "height": 200})
+        bad = await page.reply("error")
+        return first, size, bad
+
+    first, size, bad = on_page(viewer, script)
+    assert first["type"] == "devices" and first["devices"] == viewer.session.devices()
+    assert size == {"type": "size", "width": W, "height": H, "follows_window": False}
+    assert "viewport width must be a positive number" in bad["message"]
+
+
 # -- the command line ---------------------------------------------------------------------------------
 
 def _env() -> dict:
@@ -527,5 +637,73 @@ def test_in_chromium(cornell_box, device, tmp_path):
         while (session.clients or session.rendering) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert session.clients == 0 and not session.rendering
+    finally:
+        viewer.close()
+
+
+def test_in_chromium_window_size_samples_and_devices(cornell_box, device, tmp_path):
+    """The page in headless Chromium, with a frame that follows the window (max_size 64): the frame fills the
+    picture area up to 64 pixels and shrinks with the window; the samples view shows a uniform picture; the
+    device select lists the devices, an unknown one is refused on the page, and choosing another renders there."""
+    sync_playwright = _browser_or_skip()
+    session = RenderSession(copy.deepcopy(cornell_box), width=32, height=32, device=device, denoiser=None,
+                            output_dir=tmp_path, idle_after=0.5, max_size=64)
+    viewer = Viewer(session).start()
+    frame_of = "Number(document.getElementById('frame').dataset.frame || 0)"
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
+            try:
+                stage = "[document.getElementById('stage').clientWidth, document.getElementById('stage').clientHeight]"
+                page = browser.new_page(viewport={"width": 800, "height": 400})  # a picture area over 64 x 64
+                page.goto(viewer.url)
+                page.wait_for_function("document.getElementById('size').textContent.startsWith('64 × 64')",
+                                       timeout=30000)
+                assert "follows the window, ≤ 64" in page.text_content("#size")
+                page.set_viewport_size({"width": 370, "height": 300})  # beside the panel: under 64 pixels wide
+                area = page.evaluate(stage)
+                side = min(area)  # the scene is square
+                assert 8 <= side < 64, area
+                page.wait_for_function(f"document.getElementById('size').textContent.startsWith('{side} × {side}')",
+                                       timeout=30000)
+                assert (session.pr.width, session.pr.height) == (side, side)
+
+                page.select_option("#view", "samples")
+                page.wait_for_function("document.getElementById('frame').dataset.shown === 'samples'", timeout=10000)
+                page.wait_for_function(f"{frame_of} > {page.evaluate(frame_of) + 2}", timeout=10000)
+                size = page.evaluate("[document.getElementById('frame').naturalWidth, "
+                                     "document.getElementById('frame').naturalHeight]")
+                assert size == [side, side]
+                # the picture itself, as the page decoded it: one colour (the renderer is not adaptive)
+                colours = page.evaluate("""() => {
+                    const img = document.getElementById('frame'), c = document.createElement('canvas');
+                    c.width = img.naturalWidth; c.height = img.naturalHeight;
+                    const g = c.getContext('2d'); g.drawImage(img, 0, 0);
+                    const d = g.getImageData(0, 0, c.width, c.height).data, seen = new Set();
+                    for (let i = 0; i < d.length; i += 4) seen.add(d[i] + ',' + d[i + 1] + ',' + d[i + 2]);
+                    return [...seen];
+                }""")
+                assert len(colours) == 1 and colours[0] != "0,0,0", colours
+
+                listed = page.eval_on_selector_all("#device option", "els => els.map(e => e.value)")
+                assert listed == [d["id"] for d in session.devices()]
+                assert page.input_value("#device") == session.settings["device"]
+                page.evaluate("""() => { const o = document.createElement('option');
+                                          o.value = '99:99'; o.textContent = 'no such device';
+                                          document.getElementById('device').append(o); }""")
+                page.select_option("#device", "99:99")
+                page.wait_for_function("document.getElementById('notice').textContent.includes('setting device')",
+                                       timeout=10000)
+                target = _other_device(session)
+                name = next(d["name"] for d in session.devices() if d["id"] == target)
+                page.select_option("#device", target)
+                page.wait_for_function("document.getElementById('notice').textContent === ''", timeout=10000)
+                page.wait_for_function(f"document.getElementById('device-name').textContent === {json.dumps(name)}",
+                                       timeout=300000)  # the programs compile there first (cached after)
+                page.wait_for_function(f"{frame_of} > {page.evaluate(frame_of) + 2}", timeout=30000)
+                assert session.settings["device"] == target and session.error is None
+                page.close()
+            finally:
+                browser.close()
     finally:
         viewer.close()

@@ -17,8 +17,9 @@ import numpy as np
 
 from pyclpt.common.image_io import check_exposure, linear_to_srgb
 
-# What an image can be shown as: the radiance (plain average or denoised) and the G-buffer's AOVs.
-VIEWS = ("color", "denoised", "albedo", "normal", "depth", "motion")
+# What an image can be shown as: the radiance (plain average or denoised), the G-buffer's AOVs, and the
+# samples per pixel of the plain average (samples_to_display).
+VIEWS = ("color", "denoised", "albedo", "normal", "depth", "motion", "samples")
 # zlib's level for the frames: 1 encodes a 320x180 frame in about a millisecond, 6 saves a few per cent more.
 PNG_LEVEL = 1
 
@@ -91,6 +92,31 @@ def aov_to_display(name: str, values: np.ndarray, exposure: float = 0.0) -> np.n
             grey[hit] = 1.0 - 0.8 * (d[hit] - lo) / max(hi - lo, 1e-12)
         return np.repeat((grey * 255.0 + 0.5).astype(np.uint8)[:, :, None], 3, axis=2)
     raise ValueError(f"no display for AOV {name!r} (albedo, normal, depth, motion)")
+
+
+# The samples view's scale: no sample black, then log2(n) from 1 sample (dark blue) to SAMPLES_WHITE (white).
+SAMPLES_WHITE = 4096
+# Its colours along that scale, evenly spaced: black, dark blue, purple, red, orange, yellow, white.
+SAMPLES_RAMP = np.array([[0, 0, 0], [20, 20, 110], [120, 30, 140], [210, 50, 60], [245, 140, 20],
+                         [250, 225, 60], [255, 255, 255]], np.float32)
+
+
+def samples_to_display(counts: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 of a per-pixel sample count (H, W): a colour ramp on a log scale, black for no
+    sample, dark blue for 1, then purple, red, orange and yellow up to white at :data:`SAMPLES_WHITE` samples
+    and more. The scale is absolute, so that the colour says how far a render has come."""
+    n = np.nan_to_num(np.asarray(counts, np.float64), nan=0.0)
+    if n.ndim == 3 and n.shape[2] == 1:
+        n = n[:, :, 0]
+    if n.ndim != 2:
+        raise ValueError(f"expected an (H, W) array of sample counts, got shape {np.shape(counts)}")
+    steps = len(SAMPLES_RAMP) - 1
+    t = np.where(n > 0, 1.0 + (steps - 1) * np.log2(np.maximum(n, 1.0)) / np.log2(SAMPLES_WHITE), 0.0)
+    t = np.clip(t, 0.0, steps)
+    lo = np.minimum(t.astype(np.int32), steps - 1)
+    frac = (t - lo)[:, :, None].astype(np.float32)
+    rgb = SAMPLES_RAMP[lo] * (1.0 - frac) + SAMPLES_RAMP[lo + 1] * frac
+    return (rgb + 0.5).astype(np.uint8)
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:

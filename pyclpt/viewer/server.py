@@ -9,14 +9,18 @@ Routes:
 
 * ``GET /``: the page (``static/index.html``, ``static/viewer.js``);
 * ``GET /frame.png``: the latest picture; ``GET /status``: the readouts as JSON;
-* ``GET /ws``: the WebSocket. The server sends a JSON ``status`` message, then the picture as a binary
+* ``GET /ws``: the WebSocket. The server first sends ``{"type": "devices", "devices": [{"id": "1:0",
+  "name": ..., "type": "CPU"}, ...]}`` (the choices of the device setting), then a JSON ``status`` message and
+  the picture as a binary
   PNG message, each time there is a new one (only the newest: a slow page skips pictures, it never
   queues them; the status before a picture is the one it was made with). The page sends JSON:
   ``{"type": "camera", "op": "orbit", "yaw": 5, "pitch": 0}`` (and ``pan`` dx/dy, ``zoom`` factor,
   ``fly`` forward/right/up, ``reset``), ``{"type": "set", "name": "view", "value": "normal"}``,
-  ``{"type": "save"}``, ``{"type": "lookat"}``, ``{"type": "keyframe", "op": "add"}`` (``clear``,
-  ``play``, ``save``); the answers are ``saved``/``lookat``/``keyframes``/``error`` messages. Every tab
-  sees the same session.
+  ``{"type": "set", "name": "device", "value": "1:0"}``, ``{"type": "viewport", "width": 800, "height": 600,
+  "scale": 2}`` (the picture area in CSS pixels and the device pixel ratio: the frame follows it where the
+  session has a ``max_size``), ``{"type": "save"}``, ``{"type": "lookat"}``, ``{"type": "keyframe", "op":
+  "add"}`` (``clear``, ``play``, ``save``); the answers are ``size``/``saved``/``lookat``/``keyframes``/``error``
+  messages. Every tab sees the same session.
 """
 from __future__ import annotations
 
@@ -195,6 +199,7 @@ class Viewer:
         event.set()  # the current picture at once
         self._events.add(event)
         self.session.client_connected()
+        await ws.send_json({"type": "devices", "devices": self.session.devices()})
         sender = asyncio.ensure_future(self._send_frames(ws, event))
         try:
             async for msg in ws:
@@ -245,6 +250,9 @@ class Viewer:
             if kind == "set":
                 await asyncio.wrap_future(s.set(str(msg.get("name")), msg.get("value")))
                 return None
+            if kind == "viewport":
+                w, h = await asyncio.wrap_future(s.fit(msg.get("width"), msg.get("height"), msg.get("scale", 1.0)))
+                return {"type": "size", "width": w, "height": h, "follows_window": s.max_size is not None}
             if kind == "save":
                 return {"type": "saved", "paths": await asyncio.wrap_future(s.save())}
             if kind == "keyframe":
@@ -256,7 +264,8 @@ class Viewer:
             if kind == "ping":
                 s.touch()
                 return None
-            raise ValueError(f"unknown message type {kind!r} (camera, set, save, lookat, keyframe, ping)")
+            raise ValueError(f"unknown message type {kind!r} (camera, set, viewport, save, lookat, keyframe, "
+                             f"ping)")
         except (ValueError, TypeError, OSError) as exc:  # a bad message or setting, a file not written
             return {"type": "error", "message": str(exc)}
         except Exception as exc:  # anything else (a rebuild that failed to compile): the page and the terminal
@@ -268,22 +277,26 @@ def view(scene: Any, *, port: int = 0, host: str = HOST, open_browser: bool = Tr
          width: int | None = None, height: int | None = None, spp_per_frame: int = 1, max_depth: int | None = None,
          denoiser: str | None = "svgf", integrator: str = "megakernel", layout: str = "soa", device: Any = None,
          seed: int = 0, exposure: float = 0.0, view: str | None = None, output_dir: str | Path = ".",
-         idle_after: float = 2.0) -> Viewer:
+         idle_after: float = 2.0, max_size: int | None = None) -> Viewer:
     """Render ``scene`` (a Scene, a built-in scene's name or a scene file) live in the browser: starts a
     :class:`Viewer` on ``host``:``port`` (0: a free port), opens the page unless ``open_browser`` is False,
     and returns it (``viewer.url``; ``viewer.close()``). ``block``: wait until Ctrl-C (a script), instead of
     returning at once (a notebook, where the viewer shows itself as an IFrame). The other arguments are
-    :class:`RenderSession`'s; the frame size defaults to the scene's, scaled down to a longer side of at
-    most 640 pixels."""
+    :class:`RenderSession`'s. Without ``width`` and ``height`` the frame follows the page's window, with the
+    scene's aspect and a longer side of at most ``max_size`` pixels (default 640); with either, it stays at
+    that size (the other side from the scene's aspect)."""
     from pyclpt.scene.library import load
     from pyclpt.scene.model import Scene
 
     if not isinstance(scene, Scene):
         scene = load(scene)
-    width, height = frame_size(scene, width, height)
+    follow = width is None and height is None
+    max_size = DEFAULT_MAX_SIDE if max_size is None else max_size
+    width, height = frame_size(scene, width, height, max_size)
     session = RenderSession(scene, width=width, height=height, spp_per_frame=spp_per_frame, max_depth=max_depth,
                             denoiser=denoiser, integrator=integrator, layout=layout, device=device, seed=seed,
-                            exposure=exposure, view=view, output_dir=output_dir, idle_after=idle_after)
+                            exposure=exposure, view=view, output_dir=output_dir, idle_after=idle_after,
+                            max_size=max_size if follow else None)
     viewer = Viewer(session, host=host, port=port).start()
     if open_browser and not viewer.open_browser():
         log.warning("viewer: no browser could be opened; open %s", viewer.url)
@@ -292,7 +305,8 @@ def view(scene: Any, *, port: int = 0, host: str = HOST, open_browser: bool = Tr
     return viewer
 
 
-# The longest side of the default frame: the scene's film scaled down to it, its aspect kept.
+# The longest side of the default frame (and of a frame that follows the window, --max-size): the scene's film
+# scaled down to it, its aspect kept.
 DEFAULT_MAX_SIDE = 640
 
 
@@ -302,10 +316,11 @@ def default_size(width: int, height: int, max_side: int = DEFAULT_MAX_SIDE) -> t
     return max(1, round(width * scale)), max(1, round(height * scale))
 
 
-def frame_size(scene: Any, width: int | None, height: int | None) -> tuple[int, int]:
+def frame_size(scene: Any, width: int | None, height: int | None,
+               max_side: int = DEFAULT_MAX_SIDE) -> tuple[int, int]:
     """The viewer's frame size: ``width`` x ``height`` as given; one of them given, the other from the
-    scene's aspect; neither, :func:`default_size` of the scene's film."""
-    w, h = default_size(scene.film.width, scene.film.height)
+    scene's aspect; neither, :func:`default_size` of the scene's film (longer side at most ``max_side``)."""
+    w, h = default_size(scene.film.width, scene.film.height, max_side)
     if width is not None and height is not None:
         return width, height
     if width is not None:

@@ -1,11 +1,13 @@
 """A live render session: a :class:`~pyclpt.rendering.progressive.ProgressiveRenderer` driven by its own
 thread, which renders frame after frame, turns each into the picture the viewer shows (the plain
-average, the denoised frame or an AOV; tonemapped; PNG) and hands it to whoever listens (the server).
+average, the denoised frame, an AOV or the samples per pixel; tonemapped; PNG) and hands it to whoever
+listens (the server).
 
-Everything that touches the renderer runs in that thread: camera moves and setting changes from the
-page are queued (:meth:`RenderSession.submit`) and applied between frames, several camera moves at once
-as one. Without a listener for ``idle_after`` seconds (a closed tab, a lost connection) the thread
-stops rendering and waits; a new client wakes it. :meth:`RenderSession.close` ends it within a frame.
+Everything that touches the renderer runs in that thread: camera moves, setting changes (the device
+among them: a new renderer on it) and the window's size from the page are queued
+(:meth:`RenderSession.submit`) and applied between frames, several camera moves at once as one.
+Without a listener for ``idle_after`` seconds (a closed tab, a lost connection) the thread stops
+rendering and waits; a new client wakes it. :meth:`RenderSession.close` ends it within a frame.
 Needs no web server: tests and scripts can drive it directly.
 """
 from __future__ import annotations
@@ -23,12 +25,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pyopencl as cl
+
 from pyclpt.common.image_io import check_exposure, write_image
+from pyclpt.device.context import get_device, list_devices
 from pyclpt.rendering.progressive import ProgressiveRenderer
 from pyclpt.scene.camera_path import CameraPath, Keyframe
 from pyclpt.scene.model import Camera, Scene
 from pyclpt.viewer.camera import OrbitCamera, camera_path_to_json
-from pyclpt.viewer.display import VIEWS, aov_to_display, encode_png, tonemap_fast
+from pyclpt.viewer.display import VIEWS, aov_to_display, encode_png, samples_to_display, tonemap_fast
 
 log = logging.getLogger("pyclpt.viewer")
 
@@ -47,6 +53,10 @@ KEYFRAME_SPACING = 30
 KEYFRAME_OPS = ("add", "clear", "play", "save")
 # The kernels the page's time bars show, the longest first.
 MAX_KERNEL_ROWS = 8
+# The smallest side of a frame that follows the window (a window dragged narrow still shows a picture).
+MIN_SIDE = 8
+# The largest max_size a session takes (a longer side of 8192 pixels: 8K).
+MAX_SIZE_LIMIT = 8192
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,20 +83,38 @@ def _setting_error(name: str, value: object, allowed: str) -> ValueError:
     return ValueError(f"setting {name}: {value!r} is not {allowed}")
 
 
+def fit_size(width: int, height: int, view_width: float, view_height: float, max_size: int) -> tuple[int, int]:
+    """The frame of ``width`` x ``height``'s aspect that fills a ``view_width`` x ``view_height`` window
+    (device pixels) without cropping, its longer side at most ``max_size``, each side at least MIN_SIDE
+    (where the aspect allows: the shorter side of a very long film may be less)."""
+    scale = min(view_width / width, view_height / height, max_size / max(width, height))
+    scale = max(scale, MIN_SIDE / min(width, height))
+    scale = min(scale, max_size / max(width, height))  # the cap wins over the minimum
+    return max(1, round(width * scale)), max(1, round(height * scale))
+
+
+def device_id(platform: int, device: int) -> str:
+    """A device's selector as ``pyclpt devices`` lists it: ``P:D``."""
+    return f"{platform}:{device}"
+
+
 class RenderSession:
     """The scene rendered progressively in a thread of its own (:meth:`start`), as the viewer shows it.
 
     ``denoiser``: off, blend or svgf (a camera move then keeps the denoiser's history, reprojected;
     without a denoiser the average restarts). ``view``: what the pictures show (color, denoised,
-    albedo, normal, depth, motion; default denoised with a denoiser, else color). ``output_dir``: where
-    :meth:`save` and :meth:`write_lookat` write. The renderer is made (its programs compiled) here, so
-    a bad device or scene raises before any server starts."""
+    albedo, normal, depth, motion, samples; default denoised with a denoiser, else color). ``max_size``:
+    the frame follows the page's window (:meth:`fit`), the scene's aspect kept, its longer side at most
+    this many pixels; None: the frame stays ``width`` x ``height``. ``device``: a Device, a selector
+    (``pyclpt devices``) or None (the default); the page can switch to any device :meth:`devices` lists.
+    ``output_dir``: where :meth:`save` and :meth:`write_lookat` write. The renderer is made (its programs
+    compiled) here, so a bad device or scene raises before any server starts."""
 
     def __init__(self, scene: Scene, *, width: int | None = None, height: int | None = None,
                  spp_per_frame: int = 1, max_depth: int | None = None, denoiser: str | None = "svgf",
                  integrator: str = "megakernel", layout: str = "soa", device: Any = None, seed: int = 0,
                  exposure: float = 0.0, view: str | None = None, output_dir: str | Path = ".",
-                 idle_after: float = 2.0) -> None:
+                 idle_after: float = 2.0, max_size: int | None = None) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a pyclpt.Scene (pyclpt.load makes one), got {type(scene).__name__}")
         self.scene = copy.copy(scene)  # the session sets its camera and max depth; the caller's scene keeps its own
@@ -105,6 +133,11 @@ class RenderSession:
         self.output_dir = Path(output_dir)
         self.idle_after = float(idle_after)
         self._size = (width, height) if width is not None or height is not None else (None, None)
+        if max_size is not None and not _is_integer(max_size, MIN_SIDE, MAX_SIZE_LIMIT):
+            raise ValueError(f"max_size must be an integer number of pixels in {MIN_SIDE}..{MAX_SIZE_LIMIT} "
+                             f"(None: a fixed frame size), got {max_size!r}")
+        self.max_size = None if max_size is None else int(max_size)
+        self._target_size: tuple[int, int] | None = None  # the size the page's window asked for last
         self._device, self._seed = device, int(seed)
         self.error: str | None = None  # the last failure of the render thread, shown by the page
         self.frame: Frame | None = None
@@ -131,6 +164,8 @@ class RenderSession:
         self._changed = threading.Condition()
         self._thread: threading.Thread | None = None
         self.pr = self._make_renderer()
+        self._devices = self._list_devices()
+        self.settings["device"] = self._device_id(self.pr.device.device)
 
     # -- settings ----------------------------------------------------------------------------------
     def _set(self, name: str, value: Any) -> bool:
@@ -151,6 +186,10 @@ class RenderSession:
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise _setting_error(name, value, "a number of stops")
             value = check_exposure(value)
+        elif name == "device":
+            ids = [d["id"] for d in self._devices]
+            if value not in ids:
+                raise _setting_error(name, value, f"one of the OpenCL devices {', '.join(ids)} (pyclpt devices)")
         else:
             raise ValueError(f"unknown setting {name!r} (settings: {', '.join(self.settings)})")
         changed = self.settings.get(name) != value
@@ -167,11 +206,42 @@ class RenderSession:
         return ProgressiveRenderer(self.scene, seed=self._seed, integrator=s["integrator"], layout=s["layout"],
                                    width=w, height=h, device=self._device, denoiser=denoiser, aovs=aovs)
 
+    def _list_devices(self) -> list[dict[str, str]]:
+        """The OpenCL devices the page offers: id (``P:D``), name, type."""
+        return [{"id": device_id(p, i), "name": f"{d.platform.name.strip()} / {d.name.strip()}",
+                 "type": "GPU" if d.type & cl.device_type.GPU else "CPU" if d.type & cl.device_type.CPU else "other"}
+                for p, i, d in list_devices()]
+
+    def _device_id(self, device: Any) -> str | None:
+        for p, i, d in list_devices():
+            if d == device:
+                return device_id(p, i)
+        return None
+
+    def devices(self) -> list[dict[str, str]]:
+        """The OpenCL devices the page's device setting offers (``pyclpt devices``' list): dicts with
+        ``id`` (``P:D``, the selector), ``name`` and ``type``."""
+        return [dict(d) for d in self._devices]
+
+    def _switch_device(self, previous: str | None) -> None:
+        """A new renderer on the device of settings["device"]; on failure the previous one stays."""
+        old_device, old_pr = self._device, self.pr
+        try:
+            self._device = get_device(self.settings["device"])
+            self.pr = self._make_renderer()
+        except BaseException:
+            self._device, self.pr, self.settings["device"] = old_device, old_pr, previous
+            raise
+        log.info("viewer: rendering on %s", self.pr.device.name)
+
     def _apply(self, name: str, value: Any) -> None:
         """A setting changed from the page, in the render thread: rebuild what it needs."""
+        previous = self.settings.get(name)
         if not self._set(name, value):
             return
-        if name in ("denoiser", "integrator", "layout"):
+        if name == "device":
+            self._switch_device(previous)
+        elif name in ("denoiser", "integrator", "layout"):
             self.pr = self._make_renderer()
         elif name == "view" and value in VIEW_AOVS and value not in self.pr.aov_names:
             self.pr = self._make_renderer()  # the G-buffer is recorded from now on
@@ -340,7 +410,15 @@ class RenderSession:
             return tonemap_fast(self.pr.image(), exposure)
         if view == "denoised":
             return tonemap_fast(self.pr.denoised(), exposure)
+        if view == "samples":
+            return samples_to_display(self.sample_counts())
         return aov_to_display(view, self.pr.aovs([view])[view])
+
+    def sample_counts(self) -> np.ndarray:
+        """Samples per pixel of the plain average, (H, W) int64. The renderer is not adaptive: every
+        pixel has the same count, the frames accumulated so far (a camera move without a denoiser, a
+        change of resolution or of the scene restarts it)."""
+        return np.full((self.pr.height, self.pr.width), self.pr.frame_count, np.int64)
 
     def radiance(self):
         """The image a save writes: the denoised frame with a denoiser, else the plain average."""
@@ -358,7 +436,7 @@ class RenderSession:
                 "device": pr.device.name.strip(), "scene": self.scene.name, "rendering": self.rendering,
                 "clients": self.clients, "resets": pr.reset_count, "reprojections": pr.reprojections,
                 "keyframes": len(self.keyframes), "playing": self._playback is not None, "kernels": self.kernels,
-                "error": self.error}
+                "max_size": self.max_size, "error": self.error}
 
     def wait_frame(self, after: int = 0, timeout: float = 10.0) -> Frame:
         """Block until a picture with an index above ``after`` exists, then return it (TimeoutError)."""
@@ -407,10 +485,33 @@ class RenderSession:
         return self.submit(apply)
 
     def set(self, name: str, value: Any) -> concurrent.futures.Future:
-        """Change a setting (spp_per_frame, max_depth, denoiser, integrator, layout, view, exposure) before
-        the next frame; the future raises ValueError for a bad value."""
+        """Change a setting (spp_per_frame, max_depth, denoiser, integrator, layout, view, exposure, device)
+        before the next frame; the future raises ValueError for a bad value, and the device's error where a
+        renderer cannot be made on the device chosen (the previous one goes on)."""
         self.touch()
         return self.submit(lambda: self._apply(name, value))
+
+    def fit(self, width: float, height: float, scale: float = 1.0) -> concurrent.futures.Future:
+        """The page's picture area is ``width`` x ``height`` CSS pixels of ``scale`` device pixels each: render
+        the frame that fills it (:func:`fit_size`: the scene's aspect, the longer side at most ``max_size``),
+        from the next frame on (the accumulation restarts). The future holds the frame's (width, height); with
+        no ``max_size`` the size stays as it is."""
+        for what, v in (("width", width), ("height", height), ("scale", scale)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not 0 < v <= 1e5:
+                raise ValueError(f"viewport {what} must be a positive number, got {v!r}")
+        if self.max_size is not None:
+            film = self.scene.film
+            self._target_size = fit_size(film.width, film.height, width * scale, height * scale, self.max_size)
+
+        def apply() -> tuple[int, int]:
+            target = self._target_size  # the latest asked for: several queued resizes make one
+            if target is not None and target != (self.pr.width, self.pr.height):
+                self._size = target
+                self.pr.set_resolution(*target)
+            return self.pr.width, self.pr.height
+
+        self.touch()
+        return self.submit(apply)
 
     def save(self, directory: str | Path | None = None) -> concurrent.futures.Future:
         """Write the current image (:meth:`radiance`) as EXR (linear) and PNG (with the exposure) into

@@ -8,8 +8,35 @@ let imageUrl = null;
 let editing = null;  // the control being edited: its value is not overwritten by the server's status
 
 function send(msg) {
+  if (!["camera", "ping", "viewport"].includes(msg.type)) $("notice").textContent = "";  // a new request
   if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(msg));
 }
+
+// the device setting's choices, as the server lists them when the page connects
+function showDevices(devices) {
+  const select = $("device");
+  const current = select.value;
+  select.textContent = "";
+  for (const d of devices) {
+    const option = document.createElement("option");
+    option.value = d.id;
+    option.textContent = d.id + " " + d.name;
+    select.append(option);
+  }
+  if (current) select.value = current;
+}
+
+// the picture area's size: the server renders a frame that fills it (up to its maximum size)
+function sendViewport() {
+  const stage = $("stage");
+  send({type: "viewport", width: Math.max(1, stage.clientWidth), height: Math.max(1, stage.clientHeight),
+        scale: window.devicePixelRatio || 1});
+}
+let resizeTimer = null;
+new ResizeObserver(() => {
+  clearTimeout(resizeTimer);
+  resizeTimer = setTimeout(sendViewport, 150);  // once the window has stopped changing
+}).observe($("stage"));
 
 function showStatus(s) {
   $("title").textContent = "pyclpt · " + s.scene;
@@ -17,10 +44,10 @@ function showStatus(s) {
   $("spp").textContent = s.spp;
   $("frames").textContent = s.frame;
   $("frame_ms").textContent = s.frame_ms === null ? "–" : s.frame_ms.toFixed(1) + " ms";
-  $("size").textContent = s.width + " × " + s.height;
+  $("size").textContent = s.width + " × " + s.height + (s.max_size ? " (follows the window, ≤ " + s.max_size + ")" : "");
   $("reprojections").textContent = s.reprojections;
   $("state").textContent = s.error ? "failed" : s.rendering ? "rendering" : "paused";
-  $("device").textContent = s.device;
+  $("device-name").textContent = s.device;
   $("error").textContent = s.error || "";
   for (const [name, value] of Object.entries(s.settings)) {
     const el = $(name);
@@ -55,7 +82,7 @@ function connect() {
   const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws";
   ws = new WebSocket(url);
   ws.binaryType = "blob";
-  ws.onopen = () => { $("state").textContent = "connected"; };
+  ws.onopen = () => { $("state").textContent = "connected"; sendViewport(); };
   ws.onmessage = (ev) => {
     if (typeof ev.data !== "string") {
       const next = URL.createObjectURL(ev.data);
@@ -65,6 +92,7 @@ function connect() {
     }
     const msg = JSON.parse(ev.data);
     if (msg.type === "status") showStatus(msg);
+    else if (msg.type === "devices") showDevices(msg.devices);
     else if (msg.type === "saved") $("saved").textContent = "wrote " + msg.paths.join(", ");
     else if (msg.type === "lookat") {
       $("lookat").style.display = "block";
@@ -73,7 +101,7 @@ function connect() {
     } else if (msg.type === "keyframes") {
       $("keyframes").textContent = msg.count + (msg.count === 1 ? " keyframe" : " keyframes");
       if (msg.path) $("saved").textContent = "wrote " + msg.path;
-    } else if (msg.type === "error") $("error").textContent = msg.message;
+    } else if (msg.type === "error") $("notice").textContent = msg.message;  // kept until the next request
   };
   ws.onclose = () => {
     $("state").textContent = "disconnected: retrying";
