@@ -20,11 +20,12 @@ them, :mod:`pyclpt.gradients.placement`):
    numbers); the difference weighted by the image gradient through the film's reconstruction filter and
    scattered to the edge's two vertices through the perspective projection's Jacobian.
 
-It is one term of the derivative: the interior term of moving geometry (shading that changes with the
-surface's position and normal) and the boundary terms of shadow rays and indirect bounces are not
-computed yet, so ``render_backward`` still lists geometry as not differentiable. Exact where the
-radiance on each side is constant across a parameter change (tests/test_edges.py: a square emitter
-moving over a constant background, a sphere's silhouette against its radius).
+It is one term of the derivative: the boundary term of hard shadows is :mod:`pyclpt.gradients.shadows`'s; the
+interior term of moving geometry (shading that changes with the surface's position and normal) and the
+boundary terms of soft shadows and indirect bounces are not computed yet, so ``render_backward`` still lists
+geometry as not differentiable. Exact where the radiance on each side is constant across a parameter change
+(tests/test_edges.py: a square emitter moving over a constant background, a sphere's silhouette against its
+radius).
 """
 from __future__ import annotations
 

@@ -1,0 +1,235 @@
+"""The boundary term of hard shadows, by edge sampling from the lights (Li, Aittala, Durand and Lehtinen 2018).
+
+A point or spot light's shadow has a sharp outline on the surfaces it falls on: the receiver points whose
+segment to the light grazes a silhouette edge of an occluder as the light sees it. Moving the occluder (or
+the light) moves that outline over the receiver, and moving the camera moves it over the image: a jump of
+the image's integrand along a curve, whose derivative is the same Reynolds term as the silhouettes'
+(:mod:`pyclpt.gradients.edges`)::
+
+    d/dtheta  integral w(x) L(x) dx  =  integral over the shadow outline's image of  w(x) (L_- - L_+) (n . dx/dtheta) dl
+
+Points are sampled on the occluders' edges that the light sees as silhouettes (:func:`mesh_edges` from the
+light's position), stratified along their total length; each is projected from the light onto the first
+surface behind it (a ray cast with Embree on the host, through ``embreex``), kept where that point is lit
+through the edge and seen by the camera, and mapped to the image. There the outline's normal and speed
+come from the chain light -> edge point -> receiver plane -> film, and the radiance on its two sides from
+the ``edge_radiance`` kernel, as for silhouettes.
+
+Parameters: ``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders, ``SENSOR.to_world`` (the
+outline is fixed in the world and moves in the image), ``LIGHT.position`` of point lights. Left out (zero):
+the outline's motion when the receiver itself moves, soft shadows of area lights (an outline per shading
+point), shadows seen through specular bounces, instanced shapes (refused).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from pyclpt.device.context import Device
+from pyclpt.gradients.differentiate import replay_for
+from pyclpt.gradients.edges import SIDE_EPS, Projection, _filter_weights, _meshes_of, _rest, camera_velocity, mesh_edges
+from pyclpt.gradients.parameters import SceneParameters, traverse
+from pyclpt.scene.model import PointLight, Scene, SpotLight
+
+#: Relative offsets of the host's shadow-outline rays: the lit test stops this far short of the edge point, the
+#: receiver ray starts this far beyond it, and the camera's view of the receiver point may end this far short.
+RAY_EPS = 1e-4
+
+
+@dataclass
+class ShadowSamples:
+    """Points of the shadow outlines in the image and what each contributes (see the module)."""
+
+    pixels: np.ndarray  # (N, K) flat pixel indices the point's filter reaches (-1: none)
+    weights: np.ndarray  # (N, K) the filter's normalised weights there
+    jump: np.ndarray  # (N, 3) (L- - L+) x the outline's image length per sample
+    mesh: np.ndarray  # (N,) index in scene.meshes of the occluder
+    v0: np.ndarray  # (N,) the occluder edge's vertices
+    v1: np.ndarray
+    t: np.ndarray  # (N,) the edge point's parameter on v0 -> v1
+    light: np.ndarray  # (N,) index in scene.lights
+    velocity: np.ndarray  # (N, 3) n . d(film position)/d(edge point)
+    light_velocity: np.ndarray  # (N, 3) n . d(film position)/d(light position)
+    point: np.ndarray  # (N, 3) the receiver point (on the outline)
+    normal: np.ndarray  # (N, 2) the outline's unit normal in the film plane (towards the "+" side)
+
+
+def delta_lights(scene: Scene) -> list[tuple[int, np.ndarray]]:
+    """(index in scene.lights, position) of the point and spot lights."""
+    return [(k, np.asarray(light.position, np.float64)) for k, light in enumerate(scene.lights)
+            if isinstance(light, (PointLight, SpotLight))]
+
+
+class _HostTracer:
+    """Closest hits of the scene's triangles (world space) on the host, with Embree through embreex."""
+
+    def __init__(self, scene: Scene) -> None:
+        from embreex import mesh_construction, rtcore_scene
+
+        if scene.instances:
+            raise ValueError(f"scene {scene.name!r}: the shadow boundary term does not handle instanced shapes "
+                             f"({len(scene.instances)} instances)")
+        positions, indices = [], []
+        offset = 0
+        for mesh in scene.meshes:
+            positions.append(mesh.positions.astype(np.float32))
+            indices.append(mesh.indices.astype(np.int32) + offset)
+            offset += len(mesh.positions)
+        self.scene = rtcore_scene.EmbreeScene()
+        mesh_construction.TriangleMesh(self.scene, np.ascontiguousarray(np.concatenate(positions)),
+                                       np.ascontiguousarray(np.concatenate(indices)))
+
+    def hit(self, org: np.ndarray, dirs: np.ndarray, tmax: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
+        """Distance (inf: no hit) and geometric normal (N, 3) of the first hit of each ray (unit dirs)."""
+        if not len(org):
+            return np.zeros(0), np.zeros((0, 3))
+        dists = None if tmax is None else np.ascontiguousarray(tmax, np.float32)
+        out = self.scene.run(np.ascontiguousarray(org, np.float32), np.ascontiguousarray(dirs, np.float32),
+                             dists, output=1)
+        hit = out["primID"] >= 0
+        return np.where(hit, out["tfar"].astype(np.float64), np.inf), out["Ng"].astype(np.float64)
+
+
+def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = np.linalg.norm(v, axis=-1)
+    return v / np.maximum(n, 1e-300)[..., None], n
+
+
+def receiver_motion(p: np.ndarray, q: np.ndarray, light: np.ndarray, n_r: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """How the receiver point p = l + sigma (q - l) (on a plane of normal n_r) moves with the edge point q and the
+    light l: dp = P ((1 - sigma) dl + sigma dq), P = I - d n_r^T / (d . n_r) projecting along the ray d onto the
+    plane. Returns sigma (N,) and P (N, 3, 3)."""
+    d, dist = _unit(q - light)
+    sigma = np.linalg.norm(p - light, axis=1) / np.maximum(dist, 1e-300)
+    dn = np.einsum("nc,nc->n", d, n_r)
+    return sigma, np.eye(3)[None] - d[:, :, None] * n_r[:, None, :] / dn[:, None, None]
+
+
+def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, samples: int, seed: int,
+                        max_depth: int | None = None, device: Device | str | None = None,
+                        stratified: bool = True) -> ShadowSamples:
+    """``samples`` points on the edges of ``scene.meshes[i]`` (i in ``meshes``) that the scene's point and spot
+    lights see as silhouettes, stratified along their total length in the world, mapped to the shadow outline
+    they cast in the image (the points that cast none are dropped), with the radiance on both sides there."""
+    cols: dict[str, list[np.ndarray]] = {k: [] for k in ("light", "mesh", "v0", "v1")}
+    for k, pos in delta_lights(scene):
+        for i in meshes:
+            pairs, _ = mesh_edges(scene.meshes[i], pos)
+            for key, v in (("light", np.full(len(pairs), k)), ("mesh", np.full(len(pairs), i)),
+                           ("v0", pairs[:, 0]), ("v1", pairs[:, 1])):
+                cols[key].append(v)
+    edges = {k: np.concatenate(v) if v else np.zeros(0, np.int64) for k, v in cols.items()}
+    a = np.zeros((len(edges["v0"]), 3))
+    b = np.zeros_like(a)
+    for i in set(edges["mesh"].tolist()):
+        m = edges["mesh"] == i
+        p = scene.meshes[i].positions.astype(np.float64)
+        a[m], b[m] = p[edges["v0"][m]], p[edges["v1"][m]]
+    lengths = np.linalg.norm(b - a, axis=1)
+    total = float(lengths.sum())
+    empty = ShadowSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), np.zeros((0, 3)),
+                          *(np.zeros(0, np.int64) for _ in range(3)), np.zeros(0), np.zeros(0, np.int64),
+                          np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)))
+    if samples <= 0 or total <= 0:
+        return empty
+    rng = np.random.default_rng([seed, 0x736861646F77])  # "shadow"
+    u = ((np.arange(samples) if stratified else 0) + rng.random(samples)) / (samples if stratified else 1) * total
+    cdf = np.cumsum(lengths)
+    e = np.minimum(np.searchsorted(cdf, u, side="right"), len(lengths) - 1)
+    t = np.clip((u - (cdf[e] - lengths[e])) / np.maximum(lengths[e], 1e-300), 0.0, 1.0)
+    point_on_edge = a[e] + t[:, None] * (b[e] - a[e])
+    light_pos = np.stack([dict(delta_lights(scene))[k] for k in edges["light"][e]]) if len(e) else np.zeros((0, 3))
+    d, dist = _unit(point_on_edge - light_pos)
+    tracer = _HostTracer(scene)
+    # lit through the edge: nothing between the light and the edge point
+    before, _ = tracer.hit(light_pos, d, dist * (1 - RAY_EPS))
+    # the receiver: the first surface behind the edge point, along the light's ray
+    start = point_on_edge + (RAY_EPS * dist)[:, None] * d
+    beyond, ng = tracer.hit(start, d)
+    keep = np.isinf(before) & np.isfinite(beyond) & (dist > 0)
+    receiver = start + np.where(np.isfinite(beyond), beyond, 0.0)[:, None] * d
+    # seen by the camera
+    proj = Projection.of(scene, width, height)
+    view, view_dist = _unit(receiver - proj.origin)
+    seen, _ = tracer.hit(np.broadcast_to(proj.origin, receiver.shape), view)
+    keep &= (proj.depth(receiver) > 0) & (seen >= view_dist * (1 - 1e-3))
+    x = proj.film(receiver)
+    keep &= np.all(np.isfinite(x), axis=1) & (x[:, 0] >= 0) & (x[:, 0] <= width) & (x[:, 1] >= 0) & (x[:, 1] <= height)
+    n_r, _ = _unit(ng)
+    dn = np.einsum("nc,nc->n", d, n_r)
+    keep &= np.abs(dn) > 1e-6
+    idx = np.flatnonzero(keep)
+    if not len(idx):
+        return empty
+    e, t, d, dn, n_r, x = e[idx], t[idx], d[idx], dn[idx], n_r[idx], x[idx]
+    p, q, lp = receiver[idx], point_on_edge[idx], light_pos[idx]
+    sigma, proj_along = receiver_motion(p, q, lp, n_r)
+    jac = np.stack([proj.normal_velocity(p, np.tile([1.0, 0.0], (len(p), 1))),
+                    proj.normal_velocity(p, np.tile([0.0, 1.0], (len(p), 1)))], axis=1)  # (N, 2, 3) d film / dp
+    edge_vec = b[e] - a[e]
+    tangent = np.einsum("nij,njk,nk->ni", jac, proj_along, edge_vec) * sigma[:, None]  # d film / dt
+    normal, speed = _unit(np.stack([-tangent[:, 1], tangent[:, 0]], axis=1))
+    ok = speed > 1e-12
+    through = np.einsum("ni,nij,njk->nk", normal, jac, proj_along)  # n . d film / d(receiver point, pre-P)
+    replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
+    points = np.concatenate([x, normal], axis=1).astype(np.float32)
+    radiance = replay.edge_radiance(points, seed, SIDE_EPS).astype(np.float64)  # (N, 2, 3): minus, plus
+    # the outline's image length per sample: |d film/dt| / (density of t: the edge's share of the total length)
+    measure = np.where(ok, speed * total / (lengths[e] * samples), 0.0)
+    pix, w, _ = _filter_weights(scene.film.rfilter, x, width, height)
+    return ShadowSamples(pix, w, (radiance[:, 0] - radiance[:, 1]) * measure[:, None], edges["mesh"][e],
+                         edges["v0"][e], edges["v1"][e], t, edges["light"][e], through * sigma[:, None],
+                         through * (1 - sigma)[:, None], p, normal)
+
+
+def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, samples: int = 65536,
+                    seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
+                    device: Device | str | None = None, stratified: bool = True) -> dict[str, np.ndarray]:
+    """Reverse mode: the boundary term of hard shadows of dLoss/dparameter for ``names`` (``SHAPE.vertex_positions``
+    and ``SHAPE.to_world`` of occluders, ``SENSOR.to_world``, ``LIGHT.position`` of point lights), given dLoss/dImage
+    ``image_grad`` (H, W, 3); add it to :func:`pyclpt.gradients.edges.primary_boundary`'s for the same names.
+    ``parameters``: the SceneParameters whose poses the ``to_world`` gradients are for (default: a new traverse)."""
+    g = np.asarray(image_grad, np.float64)
+    if g.ndim != 3 or g.shape[2] != 3:
+        raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
+    height, width = g.shape[:2]
+    params = parameters if parameters is not None else traverse(scene)
+    sensor = f"{scene.ids.get('camera', 'sensor')}.to_world"
+    light_names = {f"{scene.ids.get(f'light:{k}', f'light_{k}')}.position": k
+                   for k, light in enumerate(scene.lights) if isinstance(light, PointLight)}
+    wanted = _meshes_of(scene, [n for n in names if n not in light_names])
+    moving_all = sensor in names or any(n in light_names for n in names)
+    meshes = range(len(scene.meshes)) if moving_all else sorted(wanted)
+    ss = sample_shadow_edges(scene, meshes, width, height, samples=samples, seed=seed, max_depth=max_depth,
+                             device=device, stratified=stratified)
+    gflat = g.reshape(-1, 3)
+    gw = np.einsum("nk,nkc->nc", ss.weights, gflat[np.maximum(ss.pixels, 0)] * (ss.pixels >= 0)[..., None])
+    weight = np.einsum("nc,nc->n", gw, ss.jump)
+    out: dict[str, np.ndarray] = {}
+    if sensor in names:
+        out[sensor] = np.einsum("n,nij->ij", weight, camera_velocity(scene, width, height, ss.point,
+                                                                      ss.normal)).astype(np.float32)
+    for name, k in light_names.items():
+        if name in names:
+            m = ss.light == k
+            out[name] = (weight[m, None] * ss.light_velocity[m]).sum(0).astype(np.float32)
+    for i, mesh_names in wanted.items():
+        m = ss.mesh == i
+        gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
+        q = ss.velocity[m] * weight[m][:, None]
+        np.add.at(gv, ss.v0[m], (1 - ss.t[m])[:, None] * q)
+        np.add.at(gv, ss.v1[m], ss.t[m][:, None] * q)
+        for name in mesh_names:
+            if name.endswith(".vertex_positions"):
+                out[name] = gv.reshape(-1).astype(np.float32)
+            else:
+                _, rest = _rest(params, name, scene.meshes[i])
+                gm = np.zeros((4, 4))
+                gm[:3, :3] = gv.T @ rest
+                gm[:3, 3] = gv.sum(0)
+                out[name] = gm.astype(np.float32)
+    return out

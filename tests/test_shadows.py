@@ -1,0 +1,111 @@
+"""The boundary term of hard shadows (pyclpt/gradients/shadows.py) against exact answers: a square occluder out
+of the camera's view casts its shadow from a point light onto a floor parallel to the film, so the image sum's
+derivative is an integral over the shadow of the floor's radiance gradient; moving the occluder, the light and
+the camera move that shadow at known rates. A mutant (the receiver's distance ratio dropped) must fail."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import pyclpt
+from pyclpt.gradients import edges, shadows
+from pyclpt.scene import transform as tf
+
+W = H = 48
+FOV, CAM_Z = 40.0, 3.0
+LIGHT, INTENSITY, ALBEDO = np.array([-4.0, 0.0, 3.0]), 20.0, 0.5
+OCC_Z, OCC_HALF, OCC_ANGLE = 1.5, 0.3, 25.0
+NAMES = ["occluder.to_world", "occluder.vertex_positions", "sensor.to_world", "light.position"]
+
+
+def _scene(**extra) -> pyclpt.Scene:
+    return pyclpt.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": FOV, "fov_axis": "x",
+                   "to_world": tf.look_at([0, 0, CAM_Z], [0, 0, 0], [0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"}}},
+        "light": {"type": "point", "position": LIGHT.tolist(), "intensity": {"type": "rgb", "value": [INTENSITY] * 3}},
+        "floor": {"type": "rectangle", "to_world": tf.scale(6.0),
+                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [ALBEDO] * 3}}},
+        # out of the camera's view (x < -1.7 at depth 1.5, where the view is 0.55 wide on either side)
+        "occluder": {"type": "rectangle",
+                     "to_world": tf.translate([-2, 0, OCC_Z]) @ tf.rotate([0, 0, 1], OCC_ANGLE) @ tf.scale(OCC_HALF),
+                     "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0] * 3}}},
+        **extra,
+    })
+
+
+def _exact_occluder_x() -> float:
+    """d(image sum)/d(occluder x): the light projects the occluder onto the floor scaled by 2 about the light (it
+    is half-way down), so the shadow S is the square of half-side 0.6 at the origin and moves 2 per unit; the floor
+    is parallel to the film at the camera's depth 3, k pixels per unit, so the sum is k^2 x the integral of the
+    radiance L(q) = albedo I z_light / (pi r^3) over the lit floor, and its derivative -2 k^2 integral over S of
+    dL/dq_x (per channel; 3 channels)."""
+    k = (W / 2) / (CAM_Z * math.tan(math.radians(FOV / 2)))
+    n = 1500
+    u = (np.arange(n) + 0.5) / n * 2 - 1
+    uu, vv = np.meshgrid(u, u)
+    c, s = math.cos(math.radians(OCC_ANGLE)), math.sin(math.radians(OCC_ANGLE))
+    half = 2 * OCC_HALF
+    qx, qy = half * (c * uu - s * vv), half * (s * uu + c * vv)
+    r = np.sqrt((qx - LIGHT[0]) ** 2 + (qy - LIGHT[1]) ** 2 + LIGHT[2] ** 2)
+    dl_dx = -3 * ALBEDO * INTENSITY * LIGHT[2] * (qx - LIGHT[0]) / (math.pi * r ** 5)
+    return -2 * k * k * float(dl_dx.sum()) * (2 * half / n) ** 2 * 3
+
+
+@pytest.mark.parametrize("mutant", [False, True])
+def test_hard_shadow_of_a_square_moving(mutant, monkeypatch):
+    """The occluder's x move: the exact derivative; its y move: 0 (the shadow and the light's falloff are
+    symmetric about the shadow's centre line); the light's x move and the camera's move the shadow at -1/2 the
+    occluder's rate (q = 2 o - l on the floor; the image shifts against the camera), so -exact/2 for both; the
+    vertices' gradients sum to the pose's translation. The primary term is 0: the occluder is out of view."""
+    if mutant:  # the receiver's distance ratio sigma dropped (1), as a mistaken chain rule would
+        real = shadows.receiver_motion
+        monkeypatch.setattr(shadows, "receiver_motion", lambda *a: (np.ones(len(a[0])), real(*a)[1]))
+    scene = _scene()
+    g = shadows.shadow_boundary(scene, np.ones((H, W, 3), np.float32), NAMES, samples=1 << 14, seed=1, max_depth=2)
+    exact = _exact_occluder_x()
+    dx = g["occluder.to_world"][0, 3]
+    if mutant:
+        assert abs(dx - exact) > 0.05 * abs(exact)
+        return
+    assert dx == pytest.approx(exact, rel=2e-3)
+    assert abs(g["occluder.to_world"][1, 3]) < 2e-3 * abs(exact)
+    assert g["occluder.vertex_positions"].reshape(-1, 3)[:, 0].sum() == pytest.approx(dx, rel=1e-5)
+    assert g["light.position"][0] == pytest.approx(-exact / 2, rel=2e-3)
+    assert g["sensor.to_world"][0, 3] == pytest.approx(-exact / 2, rel=2e-3)
+    primary = edges.primary_boundary(scene, np.ones((H, W, 3), np.float32), ["occluder.to_world"], samples=4096,
+                                     seed=1, max_depth=2)
+    assert np.all(primary["occluder.to_world"] == 0)
+
+
+def test_weighted_pixels_follow_the_outline():
+    """Only pixels on the shadow's outline carry the term: a gradient image that is 0 there gives 0, and the two
+    halves of the image add up to the whole; moving the shadow right lights its left edge (+) and darkens its right
+    edge (-), the left one brighter (nearer the light)."""
+    scene = _scene()
+    ones = np.ones((H, W, 3), np.float32)
+    kw = dict(samples=1 << 13, seed=4, max_depth=2)
+    whole = shadows.shadow_boundary(scene, ones, ["occluder.to_world"], **kw)["occluder.to_world"][0, 3]
+    left = ones.copy()
+    left[:, W // 2:] = 0
+    lx = shadows.shadow_boundary(scene, left, ["occluder.to_world"], **kw)["occluder.to_world"][0, 3]
+    rx = shadows.shadow_boundary(scene, ones - left, ["occluder.to_world"], **kw)["occluder.to_world"][0, 3]
+    assert lx > 0 > rx and lx + rx == pytest.approx(whole, rel=1e-4)
+    ring = np.zeros((H, W, 3), np.float32)
+    ring[:4], ring[-4:], ring[:, :4], ring[:, -4:] = 1, 1, 1, 1  # the image's border: no outline there
+    assert shadows.shadow_boundary(scene, ring, ["occluder.to_world"], **kw)["occluder.to_world"][0, 3] == 0
+
+
+def test_no_delta_light_no_term_and_instances_refused():
+    scene = _scene()
+    scene.lights.clear()
+    g = shadows.shadow_boundary(scene, np.ones((H, W, 3), np.float32), ["occluder.to_world"], samples=256, seed=0,
+                                max_depth=2)
+    assert np.all(g["occluder.to_world"] == 0)
+    scene = _scene()
+    scene.instances.append(object())  # any instance: the host ray caster does not handle them
+    with pytest.raises(ValueError, match="instanced"):
+        shadows.sample_shadow_edges(scene, [0], W, H, samples=16, seed=0)
