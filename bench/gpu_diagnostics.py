@@ -8,14 +8,18 @@ registers NVIDIA's OpenCL driver), also runnable on any OpenCL device:
   driver 580: 9-15 us an enqueue, 14-21 us a blocking read, against 1.3-1.8 us and 46-62 us on PoCL.
 - ``variants SCENE...``: ms per 1-spp frame (wall and device time) of the megakernel and the wavefront
   with several tail and wave sizes, at --size (default 1280x720).
+- ``regcap SCENE...``: the same frames with NVIDIA's register cap (``-cl-nv-maxrregcount``) on the shading
+  stages (``process_hit``, ``sample_bsdf``) or on the megakernel and ``finish_paths``: whether fewer registers
+  (more resident warps, some spilling) make them faster on the GPU; the images must not change.
 - ``ptx SCENE...``: the PTX NVIDIA's OpenCL compiler makes of each kernel (clGetProgramInfo's binaries),
   written to --out, with ``ptxas -arch=sm_90 -v``'s registers and stack per kernel where ptxas is on the
   PATH (or run it later where it is: ``ptxas -arch=sm_90 -v K.ptx -o /dev/null``).
 
-Usage: python -m bench.gpu_diagnostics {launch,variants,ptx} [SCENE ...] [--size WxH] [--out DIR]."""
+Usage: python -m bench.gpu_diagnostics {launch,variants,regcap,ptx} [SCENE ...] [--size WxH] [--out DIR]."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import shutil
 import subprocess
@@ -96,6 +100,65 @@ def variants(scene_name: str, width: int, height: int, depths=(3, 64), frames: i
     return rows
 
 
+#: (label, register cap, the programs it applies to: a substring of their first cl/ file)
+REGCAPS = (("as built", 0, ()), ("shading stages <= 64", 64, ("process_hit", "sample_bsdf")),
+           ("shading stages <= 80", 80, ("process_hit", "sample_bsdf")),
+           ("megakernel, finish_paths <= 96", 96, ("megakernel", "finish_paths")),
+           ("megakernel, finish_paths <= 64", 64, ("megakernel", "finish_paths")))
+
+
+@contextlib.contextmanager
+def _register_cap(cap: int, targets: tuple[str, ...]):
+    """Add ``-cl-nv-maxrregcount=cap`` to the builds of the integrators' programs whose first file names one of
+    ``targets`` (0: no cap), for the renderers made inside the block."""
+    from pyclpt.integrators import megakernel, wavefront
+
+    real = megakernel.build_program
+
+    def capped(device, files=(), **kw):
+        if cap and any(t in (files[0] if files else "") for t in targets):
+            kw["options"] = (*kw.get("options", ()), f"-cl-nv-maxrregcount={cap}")
+        return real(device, files, **kw)
+
+    megakernel.build_program = wavefront.build_program = capped
+    try:
+        yield
+    finally:
+        megakernel.build_program = wavefront.build_program = real
+
+
+def register_caps(scene_name: str, width: int, height: int, depths=(3, 64), frames: int = 5) -> list[dict]:
+    """Median wall and device ms per 1-spp frame of the megakernel and the wavefront SoA under each of REGCAPS,
+    and whether the image equals the uncapped one."""
+    scene = pyclpt.load(scene_name)
+    rows, images = [], {}
+    for label, cap, targets in REGCAPS:
+        for depth in depths:
+            for integrator in ("megakernel", "wavefront"):
+                try:
+                    with _register_cap(cap, targets):
+                        r = pyclpt.Renderer(scene, integrator=integrator, max_depth=depth, width=width,
+                                            height=height)
+                except pyclpt.KernelBuildError as exc:  # a driver without cl_nv_compiler_options
+                    rows.append({"scene": scene_name, "cap": label, "depth": depth, "integrator": integrator,
+                                 "error": str(exc).splitlines()[0]})
+                    continue
+                first = r.render(1, seed=1, progress=False)
+                walls, devices = [], []
+                for i in range(frames):
+                    r.integrator.profile.clear()
+                    t = time.perf_counter()
+                    r.render(1, seed=10 + i, progress=False)
+                    r.device.queue.finish()
+                    walls.append(time.perf_counter() - t)
+                    devices.append(sum(row["total_ms"] for row in r.integrator.profile.table()))
+                same = images.setdefault((depth, integrator), first)
+                rows.append({"scene": scene_name, "cap": label, "depth": depth, "integrator": integrator,
+                             "wall_ms": 1e3 * float(np.median(walls)), "device_ms": float(np.median(devices)),
+                             "same_image": bool(np.array_equal(same, first))})
+    return rows
+
+
 PTXAS_LINE = re.compile(r"Used (\d+) registers|(\d+) bytes stack frame, (\d+) bytes spill stores")
 
 
@@ -128,7 +191,7 @@ def driver_ptx(scene_name: str, out: Path) -> list[dict]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("launch", "variants", "ptx"))
+    ap.add_argument("what", choices=("launch", "variants", "regcap", "ptx"))
     ap.add_argument("scenes", nargs="*", default=["cornell-box"])
     ap.add_argument("--size", default="1280x720", help="WxH of the variants' frames")
     ap.add_argument("--out", default="gpu-ptx", help="folder for the PTX files")
@@ -147,6 +210,15 @@ def main() -> None:
                 print(f"{name} depth {row['depth']} {row['integrator']} {row['options']} (wave {row['wave']}): "
                       f"wall {row['wall_ms']:.2f} ms, device {row['device_ms']:.2f} ms, "
                       f"speed-up {base / row['wall_ms']:.2f}x")
+    elif args.what == "regcap":
+        width, height = (int(v) for v in args.size.lower().split("x"))
+        for name in args.scenes:
+            for row in register_caps(name, width, height):
+                if "error" in row:
+                    print(f"{name} depth {row['depth']} {row['integrator']} [{row['cap']}]: {row['error']}")
+                    continue
+                print(f"{name} depth {row['depth']} {row['integrator']} [{row['cap']}]: wall {row['wall_ms']:.2f} ms, "
+                      f"device {row['device_ms']:.2f} ms, same image {row['same_image']}", flush=True)
     else:
         for name in args.scenes:
             for row in driver_ptx(name, Path(args.out)):

@@ -220,3 +220,22 @@ def test_gpu_diagnostics_run_on_any_device(device, tmp_path):
     ptx = gd.driver_ptx("cornell-box", tmp_path)
     assert {r["kernel"] for r in ptx} == {"megakernel", *STAGES}
     assert all((tmp_path / "cornell-box" / f"{r['kernel']}.ptx").stat().st_size > 0 for r in ptx)
+
+
+def test_register_cap_only_where_nvidia_takes_it(device):
+    """-cl-nv-maxrregcount=64 for the megakernel, finish_paths and the two shading stages on a driver with
+    cl_nv_compiler_options (docs/gpu.md, "Register caps"); nothing for other programs, CPUs or other GPUs, so
+    CPU programs keep their options (and PoCL's kernel cache its entries)."""
+    from types import SimpleNamespace
+
+    from pyclpt.device.program import NV_REGISTER_CAP, REGISTER_CAPPED, register_cap_options
+
+    nvidia = SimpleNamespace(is_cpu=False, has_nv_compiler_options=True)
+    other_gpu = SimpleNamespace(is_cpu=False, has_nv_compiler_options=False)
+    assert set(REGISTER_CAPPED) == {"megakernel", "finish_paths", "process_hit", "sample_bsdf"}
+    for name in REGISTER_CAPPED:
+        assert register_cap_options(nvidia, name) == [f"-cl-nv-maxrregcount={NV_REGISTER_CAP}"]
+        assert register_cap_options(other_gpu, name) == [] and register_cap_options(device, name) == []
+    for name in ("intersect", "shadow_test", "path_init", "compact_scatter", "accumulate_frame"):
+        assert register_cap_options(nvidia, name) == []
+    assert not device.has_nv_compiler_options

@@ -150,6 +150,11 @@ class Device:
         """Whether the device supports double precision (``cl_khr_fp64``)."""
         return "cl_khr_fp64" in self.device.extensions
 
+    @property
+    def has_nv_compiler_options(self) -> bool:
+        """Whether the driver takes NVIDIA's build options (``cl_nv_compiler_options``: ``-cl-nv-maxrregcount``)."""
+        return "cl_nv_compiler_options" in self.device.extensions
+
     def describe(self) -> dict[str, str]:
         """Platform, device and driver names and versions, for reports and logs."""
         d = self.device

@@ -164,6 +164,22 @@ def device_options(device: Device) -> list[str]:
     return []
 
 
+#: NVIDIA's register cap for the programs that hold a whole path (the megakernel, ``finish_paths``) or the BSDF
+#: switch (``process_hit``, ``sample_bsdf``): measured on an H200 (docs/gpu.md, "Register caps"), 64 registers made
+#: the megakernel 10-17% faster (device time; more resident warps for a few spills) and the shading stages no
+#: slower, with the same images.
+NV_REGISTER_CAP = 64
+REGISTER_CAPPED = ("megakernel", "finish_paths", "process_hit", "sample_bsdf")
+
+
+def register_cap_options(device: Device, program: str) -> list[str]:
+    """``-cl-nv-maxrregcount=NV_REGISTER_CAP`` for the programs of REGISTER_CAPPED (by name) on a driver that takes
+    NVIDIA's build options (``cl_nv_compiler_options``); nothing elsewhere."""
+    if program not in REGISTER_CAPPED or device.is_cpu or not getattr(device, "has_nv_compiler_options", False):
+        return []
+    return [f"-cl-nv-maxrregcount={NV_REGISTER_CAP}"]
+
+
 @dataclass(frozen=True)
 class ProgramSource:
     """One program as :func:`build_program` assembled it: its label (the .cl file's stem), the text and

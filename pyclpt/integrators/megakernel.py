@@ -11,7 +11,7 @@ import pyopencl as cl
 from pyclpt.buffers.scene import SceneBuffers
 from pyclpt.device.context import Device
 from pyclpt.device.profile import KernelProfile
-from pyclpt.device.program import build_program
+from pyclpt.device.program import build_program, register_cap_options
 from pyclpt.film.film import Film
 
 MEGAKERNEL_LAUNCH = 1 << 20  # default wave_size: paths (film slots) per launch
@@ -26,7 +26,8 @@ class Megakernel:
         self.max_depth = max_depth
         self.wave_size = wave_size
         self.local_size = local_size
-        program = build_program(device, ["integrators/megakernel.cl"], defines={**scene.defines, **film.defines})
+        program = build_program(device, ["integrators/megakernel.cl"], defines={**scene.defines, **film.defines},
+                                options=register_cap_options(device, "megakernel"))
         self.kernel = cl.Kernel(program, "megakernel")
         self.profile = KernelProfile()
 

@@ -28,7 +28,7 @@ import pyopencl as cl
 from pyclpt.buffers.scene import SceneBuffers
 from pyclpt.device.context import Device, alloc, fill_buffer
 from pyclpt.device.profile import KernelProfile
-from pyclpt.device.program import build_program
+from pyclpt.device.program import build_program, register_cap_options
 from pyclpt.film.film import Film
 from pyclpt.integrators.path_state import PathStorage, bytes_per_path, opencl_header
 
@@ -104,7 +104,8 @@ class Wavefront:
         defines = {**scene.defines, **film.defines, "COMPACT_BLOCK": COMPACT_BLOCK,
                    "COMPACT_GROUP": self.compact_group or None}
         self.kernels = {s: cl.Kernel(build_program(device, [f"integrators/wavefront/{s}.cl"], generated=generated,
-                                                   defines=defines), s) for s in STAGES}
+                                                   defines=defines, options=register_cap_options(device, s)), s)
+                        for s in STAGES}
         self.profile = KernelProfile()
         self._bounce_totals = np.zeros((max_depth + 2, Q_COUNT), np.int64)
         self._tail_totals = np.zeros(max_depth + 2, np.int64)  # paths finish_paths took at each bounce
