@@ -57,9 +57,11 @@ NOT_DIFFERENTIABLE = {
     "conductor": "complex IOR of a conductor: not differentiated yet",
     "transmission": "dielectric reflectance and transmittance: not differentiated yet",
     "checkerboard": "checkerboard colours: not differentiated (only bitmap texels are)",
-    "geometry": "where a surface, the sensor or a light is: update() moves it (the BVH rebuilt, no kernel "
-                "compiled again), but its gradient needs the boundary term of visibility (silhouettes, shadow "
-                "edges), not implemented yet (docs/differentiable.md)",
+    "geometry": "where a surface, the sensor or a light is: update() moves it (the BVH refitted or rebuilt, no "
+                "kernel compiled again); render_backward does not differentiate it: the boundary terms of camera "
+                "silhouettes and hard shadows are pyclpt.gradients.edges.primary_boundary and "
+                "pyclpt.gradients.shadows.shadow_boundary, the interior term (shading that follows the moving "
+                "surface) and soft-shadow and indirect boundaries are not implemented yet (docs/differentiable.md)",
     "point": "point light intensity: not differentiated yet",
     "spot": "spot light intensity: not differentiated yet",
     "directional": "directional light irradiance: not differentiated yet",
