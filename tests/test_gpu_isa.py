@@ -29,7 +29,8 @@ EXTRA_SCENES = ("delta-emitters", "emitter-textures", "instances", "orthographic
 KERNELS = {"megakernel", "path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution",
            "sample_bsdf", "compact_count", "compact_scatter", "finish_paths", "accumulate_frame", "accumulate_batch",
            "resolve", "aov_accumulate", "count_dropped", "demodulate", "reproject", "clip_history", "variance",
-           "atrous", "modulate", "blend", "backward", "forward", "edge_radiance"}
+           "atrous", "modulate", "blend", "backward", "forward", "edge_radiance",
+           "incident_radiance"}
 
 
 @pytest.fixture(scope="module")

@@ -53,6 +53,7 @@ def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wav
     for name in ("backward", "forward"):
         replay.kernel(name, GRAD_DEFINES)
     replay.kernel("edge_radiance")  # the boundary term of primary visibility (pyclpt.gradients.edges)
+    replay.kernel("incident_radiance")  # ... of soft shadows (pyclpt.gradients.shadows)
 
 
 def collect_programs(scenes: Iterable[Scene | str], *, device_class: str | None = "gpu",

@@ -17,8 +17,12 @@ the ``edge_radiance`` kernel, as for silhouettes.
 
 Parameters: ``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders, ``SENSOR.to_world`` (the
 outline is fixed in the world and moves in the image), ``LIGHT.position`` of point lights. Left out (zero):
-the outline's motion when the receiver itself moves, soft shadows of area lights (an outline per shading
-point), shadows seen through specular bounces, instanced shapes (refused).
+the outline's motion when the receiver itself moves, shadows seen through specular bounces, instanced shapes
+(refused).
+
+Soft shadows (area lights, the environment, any incident light an occluder's silhouette cuts at the first
+bounce) are :func:`soft_shadow_boundary`'s: an outline per shading point, on the sphere of directions, sampled
+from each pixel's shading points with the ``incident_radiance`` kernel.
 """
 from __future__ import annotations
 
@@ -77,6 +81,7 @@ class _HostTracer:
             positions.append(mesh.positions.astype(np.float32))
             indices.append(mesh.indices.astype(np.int32) + offset)
             offset += len(mesh.positions)
+        self.first_triangle = np.cumsum([0] + [len(m.indices) for m in scene.meshes[:-1]])
         self.scene = rtcore_scene.EmbreeScene()
         mesh_construction.TriangleMesh(self.scene, np.ascontiguousarray(np.concatenate(positions)),
                                        np.ascontiguousarray(np.concatenate(indices)))
@@ -84,13 +89,20 @@ class _HostTracer:
     def hit(self, org: np.ndarray, dirs: np.ndarray, tmax: np.ndarray | None = None
             ) -> tuple[np.ndarray, np.ndarray]:
         """Distance (inf: no hit) and geometric normal (N, 3) of the first hit of each ray (unit dirs)."""
+        t, ng, _ = self.hit_mesh(org, dirs, tmax)
+        return t, ng
+
+    def hit_mesh(self, org: np.ndarray, dirs: np.ndarray, tmax: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`hit`, and the index in scene.meshes of the mesh hit (-1: none)."""
         if not len(org):
-            return np.zeros(0), np.zeros((0, 3))
+            return np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64)
         dists = None if tmax is None else np.ascontiguousarray(tmax, np.float32)
         out = self.scene.run(np.ascontiguousarray(org, np.float32), np.ascontiguousarray(dirs, np.float32),
                              dists, output=1)
         hit = out["primID"] >= 0
-        return np.where(hit, out["tfar"].astype(np.float64), np.inf), out["Ng"].astype(np.float64)
+        mesh = np.where(hit, np.searchsorted(self.first_triangle, out["primID"], side="right") - 1, -1)
+        return np.where(hit, out["tfar"].astype(np.float64), np.inf), out["Ng"].astype(np.float64), mesh
 
 
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -228,6 +240,165 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
                 out[name] = gv.reshape(-1).astype(np.float32)
             else:
                 _, rest = _rest(params, name, scene.meshes[i])
+                gm = np.zeros((4, 4))
+                gm[:3, :3] = gv.T @ rest
+                gm[:3, 3] = gv.sum(0)
+                out[name] = gm.astype(np.float32)
+    return out
+
+
+#: Angular offset (radians) of the two directions either side of a soft-shadow edge point.
+SOFT_SIDE_EPS = 1e-4
+#: Shading points a time whose silhouettes are found together (points x edges booleans).
+POINT_CHUNK = 4096
+
+
+@dataclass
+class MeshEdges:
+    """Every edge of a mesh once, with the one or two triangles it bounds (for silhouettes seen from points)."""
+
+    v0: np.ndarray  # (E,) vertex indices
+    v1: np.ndarray
+    face_a: np.ndarray  # (E,) a triangle of the edge
+    face_b: np.ndarray  # (E,) the other (-1: a boundary edge; an edge of more than two counts as a boundary)
+
+    @classmethod
+    def of(cls, mesh) -> MeshEdges:
+        f = mesh.indices.astype(np.int64)
+        pairs = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        face = np.tile(np.arange(len(f)), 3)
+        key = np.sort(pairs, axis=1)
+        order = np.lexsort((key[:, 1], key[:, 0]))
+        key, face = key[order], face[order]
+        new = np.ones(len(key), bool)
+        new[1:] = np.any(key[1:] != key[:-1], axis=1)
+        first = np.flatnonzero(new)
+        count = np.diff(np.append(first, len(key)))
+        face_b = np.where(count == 2, face[np.minimum(first + 1, len(key) - 1)], -1)
+        return cls(key[first, 0], key[first, 1], face[first], face_b)
+
+
+def _camera_rays(scene: Scene, film: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Origins and unit directions of the perspective camera's rays through film positions (N, 2), as the
+    kernels' camera_ray makes them."""
+    o, f, r, u = (np.asarray(v, np.float64) for v in scene.camera.basis(width, height))
+    sx = 2.0 * film[:, 0] / width - 1.0
+    sy = 1.0 - 2.0 * film[:, 1] / height
+    d, _ = _unit(f[None] + sx[:, None] * r[None] + sy[:, None] * u[None])
+    return np.broadcast_to(o, d.shape).copy(), d
+
+
+def _incident_radiance(replay, samples: np.ndarray, seed: int, eps: float) -> np.ndarray:
+    """(N, 2, 3) from the incident_radiance kernel (cl/gradients/incident_radiance.cl) for (N, 8) samples."""
+    import pyopencl as cl
+
+    from pyclpt.device.context import alloc, fill_buffer, upload
+    from pyclpt.gradients.replay import LAUNCH, LOCAL_SIZE
+
+    kernel = replay.kernel("incident_radiance")
+    pts = np.ascontiguousarray(samples, np.float32).reshape(-1, 8)
+    out = np.zeros((len(pts), 2, 3), np.float32)
+    args = replay.scene.args(replay.width, replay.height)
+    for start in range(0, len(pts), LAUNCH):
+        count = min(LAUNCH, len(pts) - start)
+        p_buf = upload(replay.device, pts[start:start + count], "soft-shadow samples")
+        r_buf = alloc(replay.device, 4 * 6 * count, "incident radiance")
+        marks = np.zeros(2 * count, np.uint8)
+        m_buf = alloc(replay.device, marks.nbytes, "incident radiance drop marks")
+        fill_buffer(replay.device.queue, m_buf, np.uint8(0), 0, marks.nbytes)
+        g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
+        ev = kernel(replay.device.queue, (g,), (LOCAL_SIZE,), *args, p_buf, r_buf, m_buf, np.uint32(seed),
+                    np.int32(count), np.int32(replay.max_depth), np.float32(eps))
+        replay.profile.record("incident_radiance", ev)
+        cl.enqueue_copy(replay.device.queue, out[start:start + count], r_buf)
+    return out
+
+
+def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
+                         seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
+                         device: Device | str | None = None) -> dict[str, np.ndarray]:
+    """Reverse mode: the boundary term of what the surfaces the camera sees receive, at their first bounce, for
+    ``names`` (``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders), given dLoss/dImage
+    ``image_grad`` (H, W, 3): soft shadows of area lights and the environment, and every occluder's outline in
+    the incident light (secondary visibility, Li et al. 2018). ``spp`` shading points per pixel (stratified),
+    each with one point on the occluders' edges that are silhouettes from it, chosen in proportion to the angle
+    they subtend; the radiance either side of it from the ``incident_radiance`` kernel. Not included: shading
+    points on the moving mesh itself (their motion is the interior term), later bounces' outlines, delta lights
+    (:func:`shadow_boundary`)."""
+    g = np.asarray(image_grad, np.float64)
+    if g.ndim != 3 or g.shape[2] != 3:
+        raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
+    height, width = g.shape[:2]
+    params = parameters if parameters is not None else traverse(scene)
+    wanted = _meshes_of(scene, names)
+    Projection.of(scene, width, height)  # perspective cameras only (the others are refused by name)
+    out = {name: np.zeros_like(np.asarray(params[name], np.float32)) for ns in wanted.values() for name in ns}
+    if not wanted:
+        return out
+    rng = np.random.default_rng([seed, 0x736F6674])  # "soft"
+    pix = np.repeat(np.arange(width * height), spp)
+    film = np.stack([pix % width, pix // width], axis=1) + rng.random((len(pix), 2))
+    org, dirs = _camera_rays(scene, film, width, height)
+    tracer = _HostTracer(scene)
+    t_hit, _, mesh_hit = tracer.hit_mesh(org, dirs)
+    x = org + np.where(np.isfinite(t_hit), t_hit, 0.0)[:, None] * dirs
+    for i, mesh_names in wanted.items():
+        mesh = scene.meshes[i]
+        p = mesh.positions.astype(np.float64)
+        tri = mesh.indices.astype(np.int64)
+        face_n = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+        edges = MeshEdges.of(mesh)
+        a, b = p[edges.v0], p[edges.v1]
+        live = np.flatnonzero(np.isfinite(t_hit) & (mesh_hit != i))
+        chosen_e = np.full(len(x), -1)
+        chosen_w = np.zeros(len(x))  # 1 / the edge's probability
+        for c0 in range(0, len(live), POINT_CHUNK):
+            idx = live[c0:c0 + POINT_CHUNK]
+            xs = x[idx]
+            side_a = np.einsum("ec,nec->ne", face_n[edges.face_a], xs[:, None] - p[tri[edges.face_a, 0]][None]) > 0
+            fb = np.maximum(edges.face_b, 0)
+            side_b = np.einsum("ec,nec->ne", face_n[fb], xs[:, None] - p[tri[fb, 0]][None]) > 0
+            silhouette = (edges.face_b[None] < 0) | (side_a != side_b)
+            wa, _ = _unit(a[None] - xs[:, None])
+            wb, _ = _unit(b[None] - xs[:, None])
+            angle = np.arccos(np.clip(np.einsum("nec,nec->ne", wa, wb), -1.0, 1.0)) * silhouette
+            total = angle.sum(1)
+            ok = total > 0
+            cdf = np.cumsum(angle, axis=1)
+            u = rng.random(len(idx)) * total
+            k = np.minimum((cdf < u[:, None]).sum(1), len(edges.v0) - 1)
+            chosen_e[idx[ok]] = k[ok]
+            chosen_w[idx[ok]] = total[ok] / np.maximum(angle[np.arange(len(idx)), k][ok], 1e-300)
+        sel = np.flatnonzero(chosen_e >= 0)
+        if not len(sel):
+            continue
+        k = chosen_e[sel]
+        t = rng.random(len(sel))
+        e = a[k] + t[:, None] * (b[k] - a[k])
+        w, dist = _unit(e - x[sel])
+        dw_dt = (b[k] - a[k]) - w * np.einsum("nc,nc->n", w, b[k] - a[k])[:, None]
+        dw_dt /= dist[:, None]
+        n, speed = _unit(np.cross(w, dw_dt))
+        keep = speed > 1e-12
+        sel, k, t, e, w, dist, n, speed = (v[keep] for v in (sel, k, t, e, w, dist, n, speed))
+        samples = np.concatenate([film[sel], w, n], axis=1)
+        replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
+        radiance = _incident_radiance(replay, samples, seed, SOFT_SIDE_EPS).astype(np.float64)
+        # the curve integral per shading point: jump x |d w/dt| / p(edge), one shading point per 1/spp pixel
+        jump = (radiance[:, 0] - radiance[:, 1]) * (speed * chosen_w[sel] / spp)[:, None]
+        pixels_f, weights_f, _ = _filter_weights(scene.film.rfilter, film[sel], width, height)
+        gflat = g.reshape(-1, 3)
+        gw = np.einsum("nk,nkc->nc", weights_f, gflat[np.maximum(pixels_f, 0)] * (pixels_f >= 0)[..., None])
+        weight = np.einsum("nc,nc->n", gw, jump)
+        q = (n / dist[:, None]) * weight[:, None]  # n . d(w)/d(edge point) = n / |e - x| (n is normal to w)
+        gv = np.zeros((len(p), 3))
+        np.add.at(gv, edges.v0[k], (1 - t)[:, None] * q)
+        np.add.at(gv, edges.v1[k], t[:, None] * q)
+        for name in mesh_names:
+            if name.endswith(".vertex_positions"):
+                out[name] = gv.reshape(-1).astype(np.float32)
+            else:
+                _, rest = _rest(params, name, mesh)
                 gm = np.zeros((4, 4))
                 gm[:3, :3] = gv.T @ rest
                 gm[:3, 3] = gv.sum(0)
