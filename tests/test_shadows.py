@@ -161,3 +161,31 @@ def test_mesh_edges_once_with_their_triangles():
     e = shadows.MeshEdges.of(scene.meshes[[m.name for m in scene.meshes].index("occluder")])
     assert len(e.v0) == 5
     assert (e.face_b >= 0).sum() == 1 and np.all(e.face_a >= 0)
+
+
+def test_forward_mode_agrees_with_reverse_mode():
+    """For the same seed and size, sum(forward image x image gradient) = sum(reverse gradient x tangent), for each
+    parameter kind of both shadow terms (the soft one under the area light)."""
+    rng = np.random.default_rng(7)
+    scene = _scene()
+    grad = rng.random((H, W, 3)).astype(np.float32)
+    kw = dict(samples=2048, seed=3, max_depth=2)
+    for name in NAMES:  # one name a call: the edges sampled are those that name moves (all for the sensor, a light)
+        back = shadows.shadow_boundary(scene, grad, [name], **kw)
+        tangent = rng.normal(size=np.shape(back[name]))
+        if name.endswith("to_world"):
+            tangent[3] = 0  # the last row of a pose stays (0, 0, 0, 1)
+        image = shadows.shadow_boundary_forward(scene, name, tangent, width=W, height=H, **kw)
+        want = float((back[name] * tangent).sum())
+        assert float((image * grad).sum()) == pytest.approx(want, rel=1e-4, abs=1e-3), name
+    soft = _soft_scene(size=16)
+    grad = rng.random((16, 16, 3)).astype(np.float32)
+    names = ["occluder.vertex_positions", "occluder.to_world"]
+    back = shadows.soft_shadow_boundary(soft, grad, names, spp=8, seed=2, max_depth=2)
+    assert np.any(back["occluder.vertex_positions"] != 0)
+    for name in names:
+        tangent = rng.normal(size=np.shape(back[name]))
+        image = shadows.soft_shadow_boundary_forward(soft, name, tangent, width=16, height=16, spp=8, seed=2,
+                                                     max_depth=2)
+        want = float((back[name] * tangent).sum())
+        assert float((image * grad).sum()) == pytest.approx(want, rel=1e-4, abs=1e-3), name

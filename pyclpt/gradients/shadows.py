@@ -231,19 +231,8 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
             out[name] = (weight[m, None] * ss.light_velocity[m]).sum(0).astype(np.float32)
     for i, mesh_names in wanted.items():
         m = ss.mesh == i
-        gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
-        q = ss.velocity[m] * weight[m][:, None]
-        np.add.at(gv, ss.v0[m], (1 - ss.t[m])[:, None] * q)
-        np.add.at(gv, ss.v1[m], ss.t[m][:, None] * q)
-        for name in mesh_names:
-            if name.endswith(".vertex_positions"):
-                out[name] = gv.reshape(-1).astype(np.float32)
-            else:
-                _, rest = _rest(params, name, scene.meshes[i])
-                gm = np.zeros((4, 4))
-                gm[:3, :3] = gv.T @ rest
-                gm[:3, 3] = gv.sum(0)
-                out[name] = gm.astype(np.float32)
+        _scatter_to_vertices(params, scene, i, mesh_names, ss.v0[m], ss.v1[m], ss.t[m],
+                             ss.velocity[m] * weight[m][:, None], out)
     return out
 
 
@@ -314,27 +303,26 @@ def _incident_radiance(replay, samples: np.ndarray, seed: int, eps: float) -> np
     return out
 
 
-def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
-                         seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
-                         device: Device | str | None = None) -> dict[str, np.ndarray]:
-    """Reverse mode: the boundary term of what the surfaces the camera sees receive, at their first bounce, for
-    ``names`` (``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders), given dLoss/dImage
-    ``image_grad`` (H, W, 3): soft shadows of area lights and the environment, and every occluder's outline in
-    the incident light (secondary visibility, Li et al. 2018). ``spp`` shading points per pixel (stratified),
-    each with one point on the occluders' edges that are silhouettes from it, chosen in proportion to the angle
-    they subtend; the radiance either side of it from the ``incident_radiance`` kernel. Not included: shading
-    points on the moving mesh itself (their motion is the interior term), later bounces' outlines, delta lights
-    (:func:`shadow_boundary`)."""
-    g = np.asarray(image_grad, np.float64)
-    if g.ndim != 3 or g.shape[2] != 3:
-        raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
-    height, width = g.shape[:2]
-    params = parameters if parameters is not None else traverse(scene)
-    wanted = _meshes_of(scene, names)
+@dataclass
+class SoftSamples:
+    """Points on the occluders' silhouettes seen from the shading points, and what each contributes."""
+
+    pixels: np.ndarray  # (N, K) flat pixel indices the shading point's filter reaches (-1: none)
+    weights: np.ndarray  # (N, K) the filter's normalised weights there
+    jump: np.ndarray  # (N, 3) f |cos| (L_i- - L_i+) x the curve's measure per sample
+    mesh: np.ndarray  # (N,) index in scene.meshes of the occluder
+    v0: np.ndarray  # (N,) the edge's vertices
+    v1: np.ndarray
+    t: np.ndarray  # (N,) the edge point's parameter on v0 -> v1
+    velocity: np.ndarray  # (N, 3) n . d(direction)/d(edge point) = n / |e - x|
+
+
+def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
+                      max_depth: int | None = None, device: Device | str | None = None) -> SoftSamples:
+    """``spp`` shading points a pixel (stratified), each with one point on an edge of ``scene.meshes[i]`` (i in
+    ``meshes``) that is a silhouette from it, chosen in proportion to the angle the edges subtend, and the
+    radiance either side from the ``incident_radiance`` kernel (see :func:`soft_shadow_boundary`)."""
     Projection.of(scene, width, height)  # perspective cameras only (the others are refused by name)
-    out = {name: np.zeros_like(np.asarray(params[name], np.float32)) for ns in wanted.values() for name in ns}
-    if not wanted:
-        return out
     rng = np.random.default_rng([seed, 0x736F6674])  # "soft"
     pix = np.repeat(np.arange(width * height), spp)
     film = np.stack([pix % width, pix // width], axis=1) + rng.random((len(pix), 2))
@@ -342,7 +330,8 @@ def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[s
     tracer = _HostTracer(scene)
     t_hit, _, mesh_hit = tracer.hit_mesh(org, dirs)
     x = org + np.where(np.isfinite(t_hit), t_hit, 0.0)[:, None] * dirs
-    for i, mesh_names in wanted.items():
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("film", "jump", "mesh", "v0", "v1", "t", "velocity")}
+    for i in meshes:
         mesh = scene.meshes[i]
         p = mesh.positions.astype(np.float64)
         tri = mesh.indices.astype(np.int64)
@@ -376,31 +365,139 @@ def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[s
         t = rng.random(len(sel))
         e = a[k] + t[:, None] * (b[k] - a[k])
         w, dist = _unit(e - x[sel])
-        dw_dt = (b[k] - a[k]) - w * np.einsum("nc,nc->n", w, b[k] - a[k])[:, None]
-        dw_dt /= dist[:, None]
+        dw_dt = ((b[k] - a[k]) - w * np.einsum("nc,nc->n", w, b[k] - a[k])[:, None]) / dist[:, None]
         n, speed = _unit(np.cross(w, dw_dt))
         keep = speed > 1e-12
-        sel, k, t, e, w, dist, n, speed = (v[keep] for v in (sel, k, t, e, w, dist, n, speed))
-        samples = np.concatenate([film[sel], w, n], axis=1)
+        sel, k, t, w, dist, n, speed = (v[keep] for v in (sel, k, t, w, dist, n, speed))
         replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
+        samples = np.concatenate([film[sel], w, n], axis=1)
         radiance = _incident_radiance(replay, samples, seed, SOFT_SIDE_EPS).astype(np.float64)
-        # the curve integral per shading point: jump x |d w/dt| / p(edge), one shading point per 1/spp pixel
-        jump = (radiance[:, 0] - radiance[:, 1]) * (speed * chosen_w[sel] / spp)[:, None]
-        pixels_f, weights_f, _ = _filter_weights(scene.film.rfilter, film[sel], width, height)
-        gflat = g.reshape(-1, 3)
-        gw = np.einsum("nk,nkc->nc", weights_f, gflat[np.maximum(pixels_f, 0)] * (pixels_f >= 0)[..., None])
-        weight = np.einsum("nc,nc->n", gw, jump)
-        q = (n / dist[:, None]) * weight[:, None]  # n . d(w)/d(edge point) = n / |e - x| (n is normal to w)
-        gv = np.zeros((len(p), 3))
-        np.add.at(gv, edges.v0[k], (1 - t)[:, None] * q)
-        np.add.at(gv, edges.v1[k], t[:, None] * q)
-        for name in mesh_names:
-            if name.endswith(".vertex_positions"):
-                out[name] = gv.reshape(-1).astype(np.float32)
-            else:
-                _, rest = _rest(params, name, mesh)
-                gm = np.zeros((4, 4))
-                gm[:3, :3] = gv.T @ rest
-                gm[:3, 3] = gv.sum(0)
-                out[name] = gm.astype(np.float32)
+        # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel
+        parts["jump"].append((radiance[:, 0] - radiance[:, 1]) * (speed * chosen_w[sel] / spp)[:, None])
+        parts["film"].append(film[sel])
+        parts["mesh"].append(np.full(len(sel), i))
+        parts["v0"].append(edges.v0[k])
+        parts["v1"].append(edges.v1[k])
+        parts["t"].append(t)
+        parts["velocity"].append(n / dist[:, None])  # n is normal to w: n . (I - w w^T) / |e - x| = n / |e - x|
+    if not parts["film"]:
+        z = np.zeros(0)
+        return SoftSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), np.zeros((0, 3)), z.astype(np.int64),
+                           z.astype(np.int64), z.astype(np.int64), z, np.zeros((0, 3)))
+    cat = {k: np.concatenate(v) for k, v in parts.items()}
+    pixels, weights, _ = _filter_weights(scene.film.rfilter, cat.pop("film"), width, height)
+    return SoftSamples(pixels, weights, **cat)
+
+
+def _scatter_to_vertices(params: SceneParameters, scene: Scene, i: int, names: Sequence[str], v0: np.ndarray,
+                         v1: np.ndarray, t: np.ndarray, q: np.ndarray, out: dict[str, np.ndarray]) -> None:
+    """Mesh i's gradients for ``names`` (vertex_positions, to_world) from per-sample vectors q (N, 3) at the points
+    (1 - t) v0 + t v1 of its edges."""
+    gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
+    np.add.at(gv, v0, (1 - t)[:, None] * q)
+    np.add.at(gv, v1, t[:, None] * q)
+    for name in names:
+        if name.endswith(".vertex_positions"):
+            out[name] = gv.reshape(-1).astype(np.float32)
+        else:  # positions = M rest: dL/dM = sum over vertices of dL/dp (rest, 1)^T
+            _, rest = _rest(params, name, scene.meshes[i])
+            gm = np.zeros((4, 4))
+            gm[:3, :3] = gv.T @ rest
+            gm[:3, 3] = gv.sum(0)
+            out[name] = gm.astype(np.float32)
+
+
+def _vertex_motion(params: SceneParameters, scene: Scene, name: str, tangent: np.ndarray) -> tuple[int, np.ndarray]:
+    """(mesh index, (V, 3) vertex velocities) of a tangent of ``SHAPE.vertex_positions`` or ``SHAPE.to_world``."""
+    (i, _), = _meshes_of(scene, [name]).items()
+    mesh = scene.meshes[i]
+    tan = np.asarray(tangent, np.float64)
+    if name.endswith(".vertex_positions"):
+        return i, tan.reshape(mesh.positions.shape)
+    _, rest = _rest(params, name, mesh)
+    tm = tan.reshape(4, 4)
+    return i, rest @ tm[:3, :3].T + tm[:3, 3]
+
+
+def _splat_image(pixels: np.ndarray, weights: np.ndarray, values: np.ndarray, width: int, height: int
+                 ) -> np.ndarray:
+    """(H, W, 3) image of per-sample values (N, 3) through their filter weights."""
+    contrib = weights[..., None] * values[:, None, :]
+    image = np.zeros((width * height, 3))
+    ok = pixels >= 0
+    np.add.at(image, pixels[ok], contrib[ok])
+    return image.reshape(height, width, 3).astype(np.float32)
+
+
+def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
+                         seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
+                         device: Device | str | None = None) -> dict[str, np.ndarray]:
+    """Reverse mode: the boundary term of what the surfaces the camera sees receive, at their first bounce, for
+    ``names`` (``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders), given dLoss/dImage
+    ``image_grad`` (H, W, 3): soft shadows of area lights and the environment, and every occluder's outline in
+    the incident light (secondary visibility, Li et al. 2018). ``spp`` shading points per pixel (stratified),
+    each with one point on the occluders' edges that are silhouettes from it, chosen in proportion to the angle
+    they subtend; the radiance either side of it from the ``incident_radiance`` kernel. Not included: shading
+    points on the moving mesh itself (their motion is the interior term), later bounces' outlines, delta lights
+    (:func:`shadow_boundary`)."""
+    g = np.asarray(image_grad, np.float64)
+    if g.ndim != 3 or g.shape[2] != 3:
+        raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
+    height, width = g.shape[:2]
+    params = parameters if parameters is not None else traverse(scene)
+    wanted = _meshes_of(scene, names)
+    out = {name: np.zeros_like(np.asarray(params[name], np.float32)) for ns in wanted.values() for name in ns}
+    ss = sample_soft_edges(scene, sorted(wanted), width, height, spp=spp, seed=seed, max_depth=max_depth,
+                           device=device)
+    gflat = g.reshape(-1, 3)
+    gw = np.einsum("nk,nkc->nc", ss.weights, gflat[np.maximum(ss.pixels, 0)] * (ss.pixels >= 0)[..., None])
+    weight = np.einsum("nc,nc->n", gw, ss.jump)
+    for i, mesh_names in wanted.items():
+        m = ss.mesh == i
+        _scatter_to_vertices(params, scene, i, mesh_names, ss.v0[m], ss.v1[m], ss.t[m],
+                             ss.velocity[m] * weight[m][:, None], out)
     return out
+
+
+def soft_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
+                                 height: int | None = None, spp: int = 4, seed: int = 0,
+                                 max_depth: int | None = None, parameters: SceneParameters | None = None,
+                                 device: Device | str | None = None) -> np.ndarray:
+    """Forward mode of :func:`soft_shadow_boundary`: d image (H, W, 3) along ``tangent`` (shaped as ``name``'s
+    value), from the same samples for the same seed and size."""
+    width, height = width or scene.film.width, height or scene.film.height
+    params = parameters if parameters is not None else traverse(scene)
+    i, dp = _vertex_motion(params, scene, name, tangent)
+    ss = sample_soft_edges(scene, [i], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device)
+    dx = (1 - ss.t) * np.einsum("nc,nc->n", ss.velocity, dp[ss.v0]) + \
+        ss.t * np.einsum("nc,nc->n", ss.velocity, dp[ss.v1])
+    return _splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
+
+
+def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
+                            height: int | None = None, samples: int = 65536, seed: int = 0,
+                            max_depth: int | None = None, parameters: SceneParameters | None = None,
+                            device: Device | str | None = None) -> np.ndarray:
+    """Forward mode of :func:`shadow_boundary`: d image (H, W, 3) along ``tangent`` (shaped as ``name``'s value:
+    (3 V,) or (4, 4) for a shape, (4, 4) for the sensor's to_world, (3,) for a point light's position), from the
+    same edge points for the same seed and size."""
+    width, height = width or scene.film.width, height or scene.film.height
+    params = parameters if parameters is not None else traverse(scene)
+    tan = np.asarray(tangent, np.float64)
+    sensor = f"{scene.ids.get('camera', 'sensor')}.to_world"
+    light_names = {f"{scene.ids.get(f'light:{k}', f'light_{k}')}.position": k
+                   for k, light in enumerate(scene.lights) if isinstance(light, PointLight)}
+    if name == sensor or name in light_names:
+        ss = sample_shadow_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
+                                 max_depth=max_depth, device=device)
+        if name == sensor:
+            dx = np.einsum("nij,ij->n", camera_velocity(scene, width, height, ss.point, ss.normal), tan.reshape(4, 4))
+        else:
+            dx = np.where(ss.light == light_names[name], ss.light_velocity @ tan.reshape(3), 0.0)
+    else:
+        i, dp = _vertex_motion(params, scene, name, tan)
+        ss = sample_shadow_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,
+                                 device=device)
+        dx = (1 - ss.t) * np.einsum("nc,nc->n", ss.velocity, dp[ss.v0]) + \
+            ss.t * np.einsum("nc,nc->n", ss.velocity, dp[ss.v1])
+    return _splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
