@@ -6,11 +6,14 @@ filters"). Two halves, one per Python:
     # pyclpt's side: the same renders, then the table
     python -m bench.rfilter_noise /tmp/rfilter-mitsuba.npz [--spp 64 --seeds 8]
 
-Noise is the per-pixel variance across seeds (relative: its mean over the mean squared pixel), so the
-two renderers' path sampling (pyclpt picks lights by power, Mitsuba uniformly) is compared through the
-box filter's ratio, and the filter's own effect is the ratio of ratios. Agreement: pixel relative MSE of
-the mean of the seeds against Mitsuba's 16384-spp reference (tests/data/rfilter-*-mitsuba.npy), and of
-Mitsuba's own sample_border = false render against the reference (edge pixels only differ).
+pyclpt renders the tent and the gaussian with both estimators (ReconstructionFilter.estimator:
+"importance", filter importance sampling, and "splat", the splatting film). Noise is the per-pixel variance
+across seeds (relative: its mean over the mean squared pixel), so the two renderers' path sampling (pyclpt
+picks lights by power, Mitsuba uniformly) is compared through the box filter's ratio, and the filter's own
+effect is the ratio of ratios. relMSE: each seed's image against Mitsuba's 16384-spp reference
+(tests/data/rfilter-*-mitsuba.npy), the mean over the seeds, pyclpt's over Mitsuba's; and of the mean of
+the seeds. Last line: Mitsuba's own sample_border = false render against the reference (edge pixels only
+differ; pyclpt's splatting film has no samples beyond the image, as sample_border = false).
 """
 from __future__ import annotations
 
@@ -46,26 +49,36 @@ def rel_mse(img: np.ndarray, ref: np.ndarray) -> float:
     return float(np.mean((img - ref) ** 2) / np.mean(ref ** 2))
 
 
+RUNS = (("box", "importance"), ("tent", "importance"), ("tent", "splat"), ("gaussian", "importance"),
+        ("gaussian", "splat"))
+
+
 def pyclpt_side(mitsuba: Path, spp: int, seeds: int) -> None:
     import pyclpt
 
     mi = np.load(mitsuba)
     ours = {}
-    for f in FILTERS:
+    for f, est in RUNS:
         scene = pyclpt.load(DATA / "rfilter.xml", filter=f)
-        ours[f] = np.stack([pyclpt.render(scene, spp=spp, seed=s, progress=False) for s in range(1, seeds + 1)])
-    print(f"{spp} spp, {seeds} seeds, 64x48: relative per-pixel variance")
-    print("filter    pyclpt     Mitsuba    ratio   | relMSE of the seeds' mean vs Mitsuba 16384 spp (pyclpt, Mitsuba)")
-    base = rel_var(ours["box"]) / rel_var(mi["box"])
-    for f in FILTERS:
-        ratio = rel_var(ours[f]) / rel_var(mi[f])
+        scene.film.rfilter = pyclpt.ReconstructionFilter(f, estimator=est) if f != "box" else scene.film.rfilter
+        ours[f, est] = np.stack([pyclpt.render(scene, spp=spp, seed=s, progress=False)
+                                 for s in range(1, seeds + 1)])
+    print(f"{spp} spp, {seeds} seeds, 64x48: relative per-pixel variance | relMSE vs Mitsuba 16384 spp")
+    print("filter   estimator   pyclpt     Mitsuba    ratio (of box's) | per image: pyclpt   Mitsuba   ratio | "
+          "seeds' mean: pyclpt, Mitsuba; mean")
+    base = rel_var(ours["box", "importance"]) / rel_var(mi["box"])
+    for f, est in RUNS:
+        img = ours[f, est]
+        ratio = rel_var(img) / rel_var(mi[f])
         ref_path = DATA / f"rfilter-{f}-mitsuba.npy"
         agree = ""
         if ref_path.exists():
             ref = np.load(ref_path)
-            agree = (f"{rel_mse(ours[f].mean(0), ref):.2e}, {rel_mse(mi[f].mean(0), ref):.2e}; mean "
-                     f"{ours[f].mean() / ref.mean() - 1:+.2%}")
-        print(f"{f:9s} {rel_var(ours[f]):.3e}  {rel_var(mi[f]):.3e}  {ratio:.2f} ({ratio / base:.2f} of box's) | "
+            ours_mse = np.mean([rel_mse(x, ref) for x in img])
+            mi_mse = np.mean([rel_mse(x, ref) for x in mi[f]])
+            agree = (f"{ours_mse:.3e}  {mi_mse:.3e}  {ours_mse / mi_mse:.2f} | {rel_mse(img.mean(0), ref):.2e}, "
+                     f"{rel_mse(mi[f].mean(0), ref):.2e}; {img.mean() / ref.mean() - 1:+.2%}")
+        print(f"{f:8s} {est:10s}  {rel_var(img):.3e}  {rel_var(mi[f]):.3e}  {ratio:.2f} ({ratio / base:.2f})   | "
               f"{agree}")
     ref = np.load(DATA / "rfilter-gaussian-mitsuba.npy")
     nb = mi["gaussian-no-border"]

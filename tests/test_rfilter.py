@@ -1,7 +1,9 @@
 """Reconstruction filters (Mitsuba's ``rfilter``: box, tent, gaussian): the pixel offsets the device draws
 (cl/film/rfilter.h) against Mitsuba's filter definitions by chi-square, images against Mitsuba 3's render
 of tests/data/rfilter.xml, the megakernel equal to the wavefront and the gradient renderer's primal for
-every filter, the box unchanged, and the loaders' defaults and errors."""
+every filter, the box unchanged, and the loaders' defaults and errors; the splatting film (estimator="splat"):
+its gather's weights against numpy, a constant image kept, its weights' mean, the seed contract, crops, lower
+variance than filter importance sampling, gradients, the progressive renderer."""
 from __future__ import annotations
 
 import logging
@@ -237,3 +239,187 @@ def test_progressive_renderer_follows_a_filter_change(size):
     pr.step(2)
     np.testing.assert_array_equal(pr.image(), pyclpt.render(scene, spp=2, seed=4, max_depth=2, width=8, height=6,
                                                             progress=False))
+
+
+# ---- the splatting estimator (estimator="splat", pyclpt/film/splat.py) --------------------------------
+
+SPLATS = [ReconstructionFilter("tent", estimator="splat"), ReconstructionFilter("tent", radius=1.7, estimator="splat"),
+          ReconstructionFilter("gaussian", estimator="splat"),
+          ReconstructionFilter("gaussian", stddev=0.3, estimator="splat")]
+
+
+def _ids(f: ReconstructionFilter) -> str:
+    return f"{f.kind}-{f.radius if f.kind == 'tent' else f.stddev}"
+
+
+def _positions(seed: int, width: int, height: int, sample: int, padded_width: int, x0: int = 0,
+               y0: int = 0) -> np.ndarray:
+    """(H, W, 2): the camera ray's place in its pixel (rng_2d of bounce 0, DIM_CAMERA_X = 7) by the Philox
+    reference of tests/test_sampling.py, for the pixels keyed (y0 + y) padded_width + x0 + x."""
+    from test_sampling import philox_ref
+
+    out = np.empty((height, width, 2))
+    for y in range(height):
+        for x in range(width):
+            r = philox_ref((sample, 0, 7, 0), (seed, (y0 + y) * padded_width + x0 + x))
+            out[y, x] = [(r[0] >> 8) * 2.0 ** -24, (r[1] >> 8) * 2.0 ** -24]
+    return out
+
+
+@pytest.mark.parametrize("rfilter", SPLATS, ids=_ids)
+def test_splat_gather_weights(device, rfilter):
+    """The gather kernel against numpy (Mitsuba's w at each neighbour sample's film position, recomputed
+    from the Philox reference): a window (x0, y0) = (3, 2) of an image 20 pixels wide, its frames with the
+    margin of reach pixels; random radiance over two frames, and one bright sample, whose spread is the
+    filter's footprint around it (nothing beyond the reach, w at the offsets inside)."""
+    from pyclpt.film.splat import SplatFilm, gather_reference, reach, weight
+
+    w, h, seed, first, x0, y0 = 11, 9, 77, 5, 3, 2
+    k = reach(rfilter)
+    assert k == rfilter.splat_reach == (2 if rfilter.extent > 1.5 else 1)
+    sp = SplatFilm(device, rfilter, w, h, 2, 20, x0, y0)
+    tw, th = w + 2 * k, h + 2 * k
+    frames = np.random.default_rng(3).random((2, th, tw, 3)).astype(np.float32)
+    frames[1] = 0.0
+    frames[1, 4 + k, 5 + k] = 100.0  # the bright sample, in window pixel (5, 4)
+    mf = cl.mem_flags
+    buf = cl.Buffer(device.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=frames)
+    sp.gather(buf, 2, seed, first)
+    out = np.empty((2, h, w, 3), np.float32)
+    wts = np.empty((2, h, w), np.float32)
+    cl.enqueue_copy(device.queue, out, sp.out)
+    cl.enqueue_copy(device.queue, wts, sp.weights)
+    for j in range(2):
+        pos = _positions(seed, tw, th, first + j, 20 + 2 * k, x0, y0)
+        num, den = gather_reference(rfilter, frames[j].astype(np.float64), pos)
+        np.testing.assert_allclose(out[j], num * sp.inv_norm, rtol=2e-5, atol=1e-6)
+        np.testing.assert_allclose(wts[j], den * sp.inv_norm, rtol=2e-5, atol=1e-7)
+    ys, xs = np.nonzero(out[1, ..., 0] > 0)
+    assert ys.min() >= 4 - k and ys.max() <= 4 + k and xs.min() >= 5 - k and xs.max() <= 5 + k
+    pos = _positions(seed, tw, th, first + 1, 20 + 2 * k, x0, y0)[4 + k, 5 + k]
+    py, px = np.mgrid[0:h, 0:w]
+    want = 100.0 * weight(rfilter, 5 + pos[0] - px - 0.5) * weight(rfilter, 4 + pos[1] - py - 0.5)
+    np.testing.assert_allclose(out[1, ..., 0] / sp.inv_norm, want, rtol=2e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("rfilter", SPLATS[::2], ids=_ids)
+def test_splat_keeps_a_constant_image_constant(rfilter):
+    """Only a constant sky: every pixel is its radiance, edges and corners too (the weights cancel)."""
+    scene = pyclpt.load_dict({"type": "scene", "sensor": sensor(FRONT_CAMERA), "sky": {"type": "constant",
+                              "radiance": 0.75}, "behind": {"type": "sphere", "center": [0, 0, 9], "radius": 0.1}})
+    scene.film.rfilter = rfilter
+    img = pyclpt.render(scene, spp=3, seed=2, width=13, height=7, max_depth=2, progress=False)
+    np.testing.assert_allclose(img, 0.75, rtol=2e-6)
+
+
+@pytest.mark.parametrize("rfilter", SPLATS[::2], ids=_ids)
+def test_splat_weights_average_to_the_filters_integral(device, rfilter):
+    """A pixel's weights per frame average to the integral of w squared (the product of its column's and
+    row's, pyclpt.film.splat.expected_weights: the margin gives the edge pixels all of it, as Mitsuba's
+    sample_border), within the noise of 4096 frames."""
+    from pyclpt.film.splat import SplatFilm, expected_weights, integral
+
+    w, h = 12, 8
+    sp = SplatFilm(device, rfilter, w, h, 64, image_width=w)
+    k = sp.reach
+    frame = cl.Buffer(device.context, cl.mem_flags.READ_WRITE, 4 * 3 * (w + 2 * k) * (h + 2 * k) * 64)
+    mean = sp.mean_weights(frame, 4096, seed=9)
+    want = np.outer(expected_weights(rfilter, h), expected_weights(rfilter, w))
+    np.testing.assert_allclose(want, integral(rfilter) ** 2, rtol=1e-6)
+    np.testing.assert_allclose(mean, want, rtol=0.03)
+    assert expected_weights(rfilter, w, pad=0)[0] < 0.9 * integral(rfilter)  # without the margin: cut
+
+
+@pytest.mark.parametrize("kind", ["tent", "gaussian"])
+def test_splat_megakernel_equals_wavefront_and_gradient_primal(kind, each_device):
+    """The seed contract with splatting: megakernel, wavefront SoA and AoS, and the gradient renderer's
+    primal give the same image bit for bit, and it is the frame's gather, not the box."""
+    scene = pyclpt.load(DATA / "rfilter.xml", filter=kind)
+    scene.film.rfilter = ReconstructionFilter(kind, estimator="splat")
+    opts = dict(spp=3, seed=5, width=16, height=12, max_depth=3, progress=False, device=each_device)
+    mega = pyclpt.render(scene, **opts)
+    np.testing.assert_array_equal(mega, pyclpt.render(scene, integrator="wavefront", **opts))
+    np.testing.assert_array_equal(mega, pyclpt.render(scene, integrator="wavefront", layout="aos", **opts))
+    replay = replay_for(scene, width=16, height=12, max_depth=3, device=each_device)
+    np.testing.assert_array_equal(replay.primal(3, 5), mega)
+    box = scene.film.rfilter = ReconstructionFilter()
+    assert box.kind == "box"
+    assert np.abs(pyclpt.render(scene, **opts) - mega).max() > 0.1
+
+
+def test_splat_has_less_variance_than_importance_sampling():
+    """tests/data/rfilter.xml at 32x24, 8 spp, 6 seeds: the per-pixel variance across seeds over the mean
+    squared pixel. Splatting lets each sample count in every pixel the filter reaches; expected ratios
+    ((integral of w)^2 / integral of w^2, 2D) 1/2.25 (tent) and 1/3.1 (gaussian); measured 0.45 and 0.29
+    (bench/rfilter_noise.py has the 64x48 figures)."""
+    def rel_var(rfilter):
+        scene = pyclpt.load(DATA / "rfilter.xml", filter=rfilter.kind)
+        scene.film.rfilter = rfilter
+        stack = np.stack([pyclpt.render(scene, spp=8, seed=s, width=32, height=24, progress=False)
+                          for s in range(1, 7)])
+        return stack.var(axis=0, ddof=1).mean() / np.mean(stack.mean(axis=0) ** 2)
+
+    for kind, bound in (("tent", 0.7), ("gaussian", 0.55)):
+        ratio = rel_var(ReconstructionFilter(kind, estimator="splat")) / rel_var(ReconstructionFilter(kind))
+        assert ratio < bound, (kind, ratio)
+
+
+def test_splat_gradients_match_finite_differences():
+    """Reverse mode through the splat's adjoint (backward.cl: the filter-weighted image gradient over the
+    pixels a sample reaches, over their sums of weights) equals forward mode (the film's gather of the
+    paths' derivatives) and central differences of the splatted image."""
+    scene = object_under_sky({"type": "diffuse", "reflectance": [0.6, 0.4, 0.3]})
+    scene.film.rfilter = ReconstructionFilter("gaussian", estimator="splat")
+    params = pyclpt.traverse(scene)
+    name = "sky.radiance.value"
+    v0 = np.array(params[name])
+    d = np.array([0.7, 1.1, 0.9], np.float32)
+    h = 0.01 * float(np.abs(v0).max())
+    w = np.random.default_rng(1).random((16, 16, 3)).astype(np.float32)
+    opts = dict(spp=8, seed=11, max_depth=3, width=16, height=16)
+
+    def loss(v):
+        params.update({name: v})
+        return float((w * pyclpt.render(scene, progress=False, **opts)).sum(dtype=np.float64))
+
+    fd = (loss(v0 + h * d) - loss(v0 - h * d)) / (2 * h)
+    params.update({name: v0})
+    grad = pyclpt.render_backward(scene, w, params=[name], **opts)[name]
+    backward = float((grad.astype(np.float64) * d).sum())
+    forward = float((w * pyclpt.render_forward(scene, name, d, **opts)).sum(dtype=np.float64))
+    assert abs(fd) > 1e-3
+    assert backward == pytest.approx(fd, rel=0.02), (backward, fd)
+    assert forward == pytest.approx(backward, rel=1e-3)
+
+
+@pytest.mark.parametrize("integrator", ["megakernel", "wavefront"])
+def test_splat_crop_is_the_image_window(device, integrator):
+    """A splatting film renders its window with a margin (beyond the image too): a crop window's pixels are
+    the whole image's bit for bit, edges and corners included."""
+    from pyclpt.film.crop import Crop
+    from pyclpt.rendering.renderer import Renderer
+
+    scene = pyclpt.load(DATA / "rfilter.xml", filter="gaussian")
+    scene.film.rfilter = ReconstructionFilter("gaussian", estimator="splat")
+    r = Renderer(scene, integrator=integrator, width=20, height=14, max_depth=3, device=device)
+    full = r.render(3, seed=4, first_sample=1)
+    for crop in [(0, 0, 20, 14), (3, 2, 9, 7), (19, 13, 1, 1), (0, 5, 20, 3)]:
+        rows, cols = Crop(*crop).slices()
+        np.testing.assert_array_equal(r.cropped(crop).render(3, seed=4, first_sample=1), full[rows, cols],
+                                      err_msg=str(crop))
+
+
+def test_progressive_renderer_splats():
+    """The progressive renderer's frames go through the gather (seed and sample index passed on): its
+    image is pyclpt.render's; a splatting film refuses a G-buffer by name."""
+    scene = object_under_sky({"type": "diffuse"}, radiance=1.0)
+    scene.film = pyclpt.Film(10, 8, ReconstructionFilter("tent", radius=1.3, estimator="splat"))
+    pr = pyclpt.ProgressiveRenderer(scene, seed=4, max_depth=2)
+    pr.step(3)
+    np.testing.assert_array_equal(pr.image(), pyclpt.render(scene, spp=3, seed=4, max_depth=2, progress=False))
+    one = pyclpt.ProgressiveRenderer(scene, seed=4, max_depth=2)
+    one.step(1)
+    assert one.frame_image().shape == (8, 10, 3)  # the frame's splatted image of the window
+    np.testing.assert_array_equal(one.frame_image(), one.image())
+    with pytest.raises(ValueError, match="splatting film .* no G-buffer"):
+        pyclpt.render(scene, spp=1, max_depth=2, aovs=["albedo"], progress=False)

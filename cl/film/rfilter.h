@@ -2,7 +2,8 @@
  * its pixel is drawn from the normalised filter w(x) w(y) (Mitsuba's rfilter definitions, x and y in pixels
  * from the pixel's centre), with sample weight 1, so a pixel's plain average converges to what Mitsuba's
  * film gives when it splats samples with weights w and divides by their sum. pyclpt/buffers/rfilter.py
- * writes the constants and holds the same mapping in numpy.
+ * writes the constants and holds the same mapping in numpy. (A filter with estimator "splat" compiles the
+ * box here and its film splats: film/splat.h.)
  *
  *   box (the default, no -D): uniform in the pixel, u itself;
  *   tent (radius r): the inverse of its CDF, r (sqrt(2u) - 1) or r (1 - sqrt(2 - 2u));

@@ -8,7 +8,8 @@
  *           float atomics); drop_marks[f] = 1 for a path whose radiance was NaN or inf (dropped, its
  *           gradient too; counted by the host).
  *
- * One work-item per path; dL = image_grad[pixel] / spp. The path's contributions and what they
+ * One work-item per path; dL = image_grad[pixel] / spp (-DFILM_SPLAT, a splatting film: the filter-weighted
+ * sum of image_grad over the pixels the sample reaches, splat_adjoint). The path's contributions and what they
  * differentiate into, with G the radiance the path gathered up to and including a vertex and L its
  * total:
  *   emission at a hit, C = beta Le w:   dLe += dL beta w
@@ -25,6 +26,33 @@
  * bits for the replay. A path's adjoints are summed privately per slot and added to the buffers when it
  * ends (params.h: grad_put3, grad_flush). Memory: nothing per path, sample or bounce in device memory. */
 #include "gradients/bsdf_derivative.h"
+#ifdef FILM_SPLAT
+#include "film/splat.h"
+
+/* A splatting film's (film/splat.h; -DSPLAT_FILTER, the filter's extent in CONST_FILTER_RADIUS): the adjoint
+ * of a sample of pixel `pixel` (film_pixel's index, in the image padded by the reach, CONST_FILM_PAD) at `pos`
+ * in it, sum over the image's pixels p it reaches of image_grad[p] w_p,
+ * image_grad scaled by the host by 1 / p's expected sum of weights per frame (pyclpt/gradients/replay.py),
+ * so that times inv_spp it is dLoss/dL of the ratio sum w L / sum w with the sum of the weights at its mean. */
+static inline vec3 splat_adjoint(const Scene* sc, __global const float* image_grad, int pixel, vec2 pos) {
+    __global const float* c = sc->consts;
+    int width = (int)c[CONST_WIDTH], height = (int)c[CONST_HEIGHT], reach = (int)c[CONST_FILM_PAD];
+    float extent = c[CONST_FILTER_RADIUS];
+    int qx = pixel % (width + 2 * reach) - reach, qy = pixel / (width + 2 * reach) - reach; /* film_pixel's */
+    vec3 sum = v3_splat(0.0f);
+    for (int dy = -reach; dy <= reach; ++dy) {
+        int py = qy - dy;
+        if (py < 0 || py >= height) continue;
+        for (int dx = -reach; dx <= reach; ++dx) {
+            int px = qx - dx;
+            if (px < 0 || px >= width) continue;
+            float w = splat_pair_weight(extent, dx, dy, pos);
+            sum = v3_add(sum, v3_scale(load3(image_grad, py * width + px), w));
+        }
+    }
+    return sum;
+}
+#endif
 
 #define VIS_BITS 32
 /* Vertices whose BSDF-sample term the primal pass keeps for the end of the path (the later ones are
@@ -138,9 +166,13 @@ __kernel SCALAR_KERNEL void backward(SCENE_PARAMS, __global const float* image_g
     Grads gr = GRAD_INIT;
     int f = offset + i;
     int pixel = film_pixel(&sc, f);
-    vec3 dL = v3_scale(load3(image_grad, f % film_pixels(&sc)), inv_spp); /* the film's pixel */
-    if (v3_is_zero(dL)) return;
     RngKey key = rng_key(seed, (uint)pixel, film_sample(&sc, first_sample, f));
+#ifdef FILM_SPLAT
+    vec3 dL = v3_scale(splat_adjoint(&sc, image_grad, pixel, splat_position(seed, (uint)pixel, key.sample)), inv_spp);
+#else
+    vec3 dL = v3_scale(load3(image_grad, f % film_pixels(&sc)), inv_spp); /* the film's pixel */
+#endif
+    if (v3_is_zero(dL)) return;
     uint visible = 0;
     Deferred deferred[DEFERRED_SLOTS];
     int n_deferred = 0;

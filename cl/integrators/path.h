@@ -56,13 +56,14 @@ static inline bool depth_allows(int depth, int max_depth) { return max_depth < 0
  * commits to frame j of the film's frame buffer (frames stacked: film_commit writes frame[3 f],
  * drop_marks[f]). film_pixel is that pixel's index in the image, which keys its random numbers and
  * places its camera ray: p itself, or with -DFILM_CROP p's place in the crop window, so a cropped film's
- * pixels are exactly the image's. */
+ * pixels are exactly the image's. A splatting film's window reaches CONST_FILM_PAD pixels beyond the
+ * image (its margin): its index is then in the image padded by that much on each side (camera_path). */
 static inline int film_pixel(const Scene* sc, int f) {
     int p = f % film_pixels(sc);
 #ifdef FILM_CROP
     __global const float* c = sc->consts;
-    int w = (int)c[CONST_CROP_WIDTH];
-    p = ((int)c[CONST_CROP_Y] + p / w) * (int)c[CONST_WIDTH] + (int)c[CONST_CROP_X] + p % w;
+    int w = (int)c[CONST_CROP_WIDTH], pad = (int)c[CONST_FILM_PAD];
+    p = ((int)c[CONST_CROP_Y] + pad + p / w) * ((int)c[CONST_WIDTH] + 2 * pad) + (int)c[CONST_CROP_X] + pad + p % w;
 #endif
     return p;
 }
@@ -106,12 +107,15 @@ static inline void camera_ray(const Scene* sc, RngKey key, float x, float y, Pat
 }
 
 /* The camera ray of (pixel, sample) through a position drawn from the film's reconstruction filter around
- * the pixel's centre (film/rfilter.h; the box: uniform in the pixel). */
+ * the pixel's centre (film/rfilter.h; the box and a splatting film: uniform in the pixel). `pixel`: the
+ * index of film_pixel, in the image padded by CONST_FILM_PAD pixels on each side (0 but for a splatting
+ * film: the image's index). */
 static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
     __global const float* c = sc->consts;
-    int width = (int)c[CONST_WIDTH];
+    int pad = (int)c[CONST_FILM_PAD];
+    int width = (int)c[CONST_WIDTH] + 2 * pad;
     vec2 j = rng_2d(key, 0, DIM_CAMERA_X);
-    camera_ray(sc, key, (float)(pixel % width) + rfilter_position(c, j.x), (float)(pixel / width) +
+    camera_ray(sc, key, (float)(pixel % width - pad) + rfilter_position(c, j.x), (float)(pixel / width - pad) +
                rfilter_position(c, j.y), ps);
 }
 

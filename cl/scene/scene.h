@@ -53,7 +53,11 @@
 #define CONST_CROP_Y 165
 #define CONST_CROP_WIDTH 166
 #define CONST_CROP_HEIGHT 167
-#define CONST_COUNT 168
+/* a splatting film's margin (pyclpt/film/splat.py): its pixels are keyed in the image padded by CONST_FILM_PAD
+ * pixels on each side (index (y + pad) (width + 2 pad) + x + pad; 0, the same index, otherwise), and its crop
+ * window may reach that far beyond the image */
+#define CONST_FILM_PAD 168
+#define CONST_COUNT 169
 
 /* Reconstruction filters (pyclpt.scene.model.ReconstructionFilter.kind): -DSCENE_FILTER=kind compiles the
  * tent's or the gaussian's sampling of the pixel offset in (pyclpt/buffers/rfilter.py); without it, the

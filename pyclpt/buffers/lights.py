@@ -32,8 +32,9 @@ from pyclpt.buffers.rfilter import CONST_FILTER_RADIUS, FILTER_CONSTS, filter_co
 from pyclpt.scene.model import Bitmap, Camera, Checkerboard, DirectionalLight, Envmap, Scene, SpotLight
 
 LIGHT_STRIDE = 12
-CONST_COUNT = 168  # CONST_COUNT of cl/scene/scene.h
+CONST_COUNT = 169  # CONST_COUNT of cl/scene/scene.h
 CONST_CROP = 164  # CONST_CROP_X, _Y, _WIDTH, _HEIGHT
+CONST_FILM_PAD = 168  # a splatting film's margin (ReconstructionFilter.splat_reach)
 CAMERA_KINDS = {"perspective": 0, "thinlens": 1, "orthographic": 2}  # CAMERA_* of cl/scene/scene.h
 
 
@@ -303,4 +304,5 @@ def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int,
     c[19] = 1.0  # CONST_UNIT: the stride of record reads, opaque to the compiler (rgb_at, cl/core/common.h)
     c[CONST_FILTER_RADIUS:CONST_FILTER_RADIUS + FILTER_CONSTS] = filter_consts(scene.film.rfilter)
     c[CONST_CROP:CONST_CROP + 4] = crop or (0, 0, width, height)
+    c[CONST_FILM_PAD] = scene.film.rfilter.splat_reach
     return c

@@ -4,7 +4,8 @@
 Filter importance sampling: each camera ray's offset from its pixel's centre is drawn, per axis, from the
 normalised filter w(x) / integral(w), and its sample weight is 1, so the plain average of a pixel's samples
 estimates integral(w L) / integral(w), what Mitsuba's film converges to when it splats every sample
-with weight w(x) w(y) and divides by the sum of the weights.
+with weight w(x) w(y) and divides by the sum of the weights. (``estimator="splat"``: that splatting film
+itself, pyclpt/film/splat.py; the camera ray then gets the box's jitter.)
 
 - ``box``: uniform in [-0.5, 0.5) (the jitter as it always was; no -D, the same code);
 - ``tent`` (radius r): the inverse of its CDF, closed form;
@@ -31,8 +32,10 @@ FILTER_CONSTS = 1 + FILTER_TABLE + 1
 
 
 def filter_kind(rfilter: ReconstructionFilter) -> int:
-    """The FILTER_* the kernels compile for (-DSCENE_FILTER; 0, the box, is the default)."""
-    return FILTER_KINDS[rfilter.kind]
+    """The FILTER_* the kernels compile for (-DSCENE_FILTER; 0, the box, is the default). A splatting filter
+    (``estimator="splat"``) compiles the box's uniform jitter: the film applies the filter
+    (pyclpt/film/splat.py)."""
+    return 0 if rfilter.estimator == "splat" else FILTER_KINDS[rfilter.kind]
 
 
 def filter_eval(rfilter: ReconstructionFilter, x: np.ndarray) -> np.ndarray:

@@ -252,6 +252,7 @@ class SceneBuffers:
         self._buffers = [upload(device, a, f"scene {scene.name!r} {n}") for n, a in arrays.device_arrays()]
         self._consts: dict[tuple, cl.Buffer] = {}
         self.previous_camera: Camera | None = None  # the previous frame's, for motion vectors (None: no motion)
+        self.film_pad = scene.film.rfilter.splat_reach  # a splatting film's margin (CONST_FILM_PAD)
 
     @property
     def defines(self) -> dict:
@@ -332,7 +333,7 @@ class SceneBuffers:
                              f"aperture {self.scene.camera.aperture_radius}); the kernels are compiled for one kind: "
                              f"render it with a new renderer")
         rfilter = filter_kind(self.scene.film.rfilter) or None
-        if rfilter != self.arrays.defines.get("SCENE_FILTER"):
+        if rfilter != self.arrays.defines.get("SCENE_FILTER") or self.scene.film.rfilter.splat_reach != self.film_pad:
             raise ValueError(f"scene {self.scene.name!r}: the film's reconstruction filter changed kind (now "
                              f"{self.scene.film.rfilter.kind!r}); the kernels are compiled for one: render it with "
                              f"a new renderer")
@@ -342,7 +343,7 @@ class SceneBuffers:
     def args(self, width: int, height: int, crop: tuple[int, int, int, int] | None = None) -> tuple[cl.Buffer, ...]:
         """The SCENE_PARAMS kernel arguments for an image of width x height (``crop``: the film's window
         of it, x, y, width, height; None: all of it)."""
-        key = (width, height, None if crop is None else tuple(crop))
+        key = (width, height, None if crop is None else tuple(crop), self.scene.film.rfilter.splat_reach)
         if key not in self._consts:
             consts = camera_consts(self.scene, self.arrays.lights, width, height, self.previous_camera, key[2])
             self._consts[key] = upload(self.device, consts, "camera constants")

@@ -10,6 +10,7 @@ GPU gets), and deduplicated by text and options across scenes.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Iterable
 
@@ -20,7 +21,7 @@ from pyclpt.gradients.replay import GRAD_DEFINES, PathReplay
 from pyclpt.rendering.progressive import ProgressiveRenderer
 from pyclpt.rendering.renderer import Renderer
 from pyclpt.scene.library import load
-from pyclpt.scene.model import Scene
+from pyclpt.scene.model import ReconstructionFilter, Scene
 
 log = logging.getLogger("pyclpt.gpu.collect")
 
@@ -46,6 +47,9 @@ def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wav
             Renderer(scene, integrator=integrator, layout=layout, aovs=aovs, **kw)
     for precision in PRECISIONS if every_variant else ():
         Renderer(scene, precision=precision, **kw)
+    for kind in ("tent", "gaussian") if every_variant else ():  # the splatting film's kernels (film/splat.cl)
+        splat = ReconstructionFilter(kind, estimator="splat")
+        Renderer(dataclasses.replace(scene, film=dataclasses.replace(scene.film, rfilter=splat)), **kw)
     for denoiser in ("svgf", "blend") if every_variant else ():
         ProgressiveRenderer(scene, denoiser=denoiser, **kw)
     r = Renderer(scene, **kw)

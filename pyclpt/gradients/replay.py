@@ -23,6 +23,7 @@ from pyclpt.device.context import Device, alloc, fill_buffer, upload
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program
 from pyclpt.film.film import Film, frames_per_batch
+from pyclpt.film.splat import SPLAT_FILTERS
 from pyclpt.gradients.layout import BUFFERS, buffer_sizes
 from pyclpt.gradients.parameters import KINDS
 from pyclpt.integrators.megakernel import Megakernel
@@ -69,7 +70,7 @@ class PathReplay:
         self.width, self.height = width, height
         self.max_depth = max_depth
         self.film = Film(device, width, height, precision="double",
-                         batch=frames_per_batch(width * height, LAUNCH))
+                         batch=frames_per_batch(width * height, LAUNCH), rfilter=scene.scene.film.rfilter)
         self.profile = KernelProfile()
         self.dropped = 0  # paths dropped by the last pass (NaN or inf radiance)
         self._programs: dict[tuple[str, ...], cl.Kernel] = {}
@@ -85,9 +86,11 @@ class PathReplay:
         key = (name, *kinds)
         if key not in self._programs:
             start = time.perf_counter()
-            defines = {**self.scene.defines, **{GRAD_DEFINES[k]: 1 for k in kinds}}
+            defines = {**self.scene.defines, **self.film.defines, **{GRAD_DEFINES[k]: 1 for k in kinds}}
             if self.deferred_vertices is not None:
                 defines["DEFERRED_VERTICES"] = self.deferred_vertices
+            if name == "backward" and self.film.splat is not None:  # the splat's adjoint (backward.cl)
+                defines.update(FILM_SPLAT=1, SPLAT_FILTER=SPLAT_FILTERS[self.film.splat.rfilter.kind])
             program = build_program(self.device, [f"gradients/{name}.cl"], defines=defines)
             self._programs[key] = cl.Kernel(program, name)
             self.compile_seconds += time.perf_counter() - start
@@ -122,7 +125,7 @@ class PathReplay:
 
     def _launch(self, kernel: cl.Kernel, name: str, spp: int, seed: int, head: tuple, tail: tuple) -> None:
         """Launch ``kernel`` over samples [0, spp) of every pixel, a film batch of frames at a time."""
-        args = self.scene.args(self.width, self.height)
+        args = self.scene.args(*self.film.view)
         self.dropped = 0
         s = 0
         while s < spp:
@@ -135,7 +138,7 @@ class PathReplay:
                             np.int32(offset), np.int32(count), np.int32(self.max_depth), *tail)
                 self.profile.record(name, ev)
             if name == "forward":
-                self.film.add_frames(frames)
+                self.film.add_frames(frames, seed, s)
             self.film.count_dropped(frames)
             s += frames
 
@@ -149,7 +152,7 @@ class PathReplay:
         while s < spp:
             frames = min(self.film.batch, spp - s)
             self._primal.render_frames(seed, s, frames)
-            self.film.add_frames(frames)
+            self.film.add_frames(frames, seed, s)
             s += frames
         self.dropped = self.film.dropped_samples()
         return self.film.image()
@@ -160,6 +163,12 @@ class PathReplay:
         kinds = [k for k in kinds if k in KINDS]
         kernel = self.kernel("backward", kinds)
         grads = self._buffers()
+        if self.film.splat is not None:  # per pixel, over its mean sum of weights per frame (backward.cl)
+            self.film.clear()
+            norm = self.film.splat.mean_weights(self.film.frame, spp, seed)
+            image_grad = np.asarray(image_grad, np.float64).reshape(self.height, self.width, 3)
+            image_grad = np.divide(image_grad, norm[..., None], out=np.zeros_like(image_grad),
+                                   where=norm[..., None] > 0)
         arr = np.ascontiguousarray(image_grad, np.float32).reshape(-1)
         if self._image_grad is None or self._image_grad.size != arr.nbytes:
             self._image_grad = upload(self.device, arr, "image gradient")

@@ -246,7 +246,7 @@ class ProgressiveRenderer:
             return changed
         keep = not self.auto_reset and "resolution" not in changed
         if keep:  # accumulate on: the old sum continues under the new scene
-            self.renderer.film.accumulator = old.film.accumulator
+            self.renderer.film.keep_accumulation(old.film)
         log.info("scene change (%s): device side rebuilt in %.3f s%s", ", ".join(changed),
                  time.perf_counter() - t, "" if keep else ", accumulation reset")
         if "resolution" in changed and self.denoiser is not None:
@@ -363,7 +363,7 @@ class ProgressiveRenderer:
         if film.aov is not None and self.denoiser_mode in ("svgf", "blend"):
             film.aov.restart()  # the G-buffer of this frame alone: the real-time denoisers' guides
         self.renderer.integrator.render_frame(self.seed, self.sample_index)
-        film.add_frame()
+        film.add_frame(self.seed, self.sample_index)
         if self.denoiser is not None:
             if self.denoiser_mode == "oidn":  # the offline anchor: the plain average and its averaged guides
                 guides = self.renderer.aovs(["albedo", "normal"])

@@ -152,7 +152,8 @@ class Renderer:
         with compile_notice(scene.name):
             # small images: a batch of frames (samples) per wave or launch (rendering/memory.py: batch_frames)
             self.film = Film(self.device, self.width, self.height, precision=precision,
-                             batch=batch_frames(film_w * film_h, wave_size), aovs=bool(self.aov_names), crop=self.crop)
+                             batch=batch_frames(film_w * film_h, wave_size), aovs=bool(self.aov_names), crop=self.crop,
+                             rfilter=scene.film.rfilter)
             options: dict = {"wave_size": launch_size} if launch_size else {}
             if local_size:
                 options["local_size"] = int(local_size)
@@ -198,7 +199,7 @@ class Renderer:
         order in double). Partial sums of a split sample range add up to :meth:`render`'s sum up to the
         rounding of double (:mod:`pyclpt.distributed` merges them)."""
         start = self._render_samples(spp, seed, progress, first_sample)
-        total = self.film.accumulator.sum()
+        total = self.film.sum()
         self.collect_stats(spp, time.perf_counter() - start)
         return total
 
@@ -219,7 +220,7 @@ class Renderer:
             while s < end:  # batches of frames (samples s, s + 1, ...), added in sample order
                 frames = min(self.film.batch, end - s)
                 self.integrator.render_frames(int(seed), s, frames)
-                self.film.add_frames(frames)
+                self.film.add_frames(frames, seed, s)
                 bar.update(self.pacer.frame(self.device.queue, frames))
                 s += frames
         return start

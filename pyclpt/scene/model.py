@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import abc
 import hashlib
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, get_args
@@ -66,6 +67,7 @@ DISTRIBUTIONS = ("ggx", "beckmann")
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 CAMERA_KINDS = ("perspective", "thinlens", "orthographic")
 FILTER_KINDS = ("box", "tent", "gaussian")
+FILTER_ESTIMATORS = ("importance", "splat")  # ReconstructionFilter.estimator
 
 
 def _uv(value: object, what: str) -> tuple[float, float]:
@@ -833,15 +835,21 @@ class ReconstructionFilter(Checked):
     pixel's centre. ``box`` (w = 1 on [-0.5, 0.5)), ``tent`` (``w = max(0, 1 - |x| / radius)``, ``radius``
     default 1) or ``gaussian`` (w = max(0, exp(-x^2 / (2 stddev^2)) - exp(-8)), cut off at 4 stddev,
     ``stddev`` default 0.5: Mitsuba's default filter). ``radius`` is read by the tent only and
-    ``stddev`` by the gaussian only."""
+    ``stddev`` by the gaussian only. ``estimator`` (tent and gaussian; the box has one): ``importance``
+    draws each camera ray's offset from the filter (cl/film/rfilter.h), ``splat`` draws it uniformly in its
+    pixel and lets it count in every pixel the filter reaches, as Mitsuba's film (pyclpt/film/splat.py)."""
 
     kind: str = "box"
     radius: float = 1.0
     stddev: float = 0.5
+    estimator: str = "importance"
 
     def _check(self) -> None:
         if self.kind not in FILTER_KINDS:
             raise ValueError(f"reconstruction filter kind must be one of {FILTER_KINDS}, got {self.kind!r}")
+        if self.estimator not in FILTER_ESTIMATORS:
+            raise ValueError(f"reconstruction filter estimator must be one of {FILTER_ESTIMATORS}, got "
+                             f"{self.estimator!r}")
         self.radius = check_float(self.radius, "tent filter radius", lo=0.0)
         self.stddev = check_float(self.stddev, "gaussian filter stddev", lo=0.0)
         if not self.radius > 0:
@@ -853,6 +861,14 @@ class ReconstructionFilter(Checked):
     def extent(self) -> float:
         """The filter's support radius in pixels (Mitsuba's ``radius()``)."""
         return {"box": 0.5, "tent": self.radius, "gaussian": 4.0 * self.stddev}[self.kind]
+
+    @property
+    def splat_reach(self) -> int:
+        """Pixels on each side that a splatting film's samples reach, ceil(extent + 1/2) - 1: the margin it
+        renders beyond its window (Mitsuba's ``sample_border``; 0 unless ``estimator="splat"``, the box's)."""
+        if self.estimator != "splat" or self.kind == "box":
+            return 0
+        return max(0, math.ceil(self.extent + 0.5) - 1)
 
 
 @dataclass
