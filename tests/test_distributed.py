@@ -22,6 +22,7 @@ from pyclpt.rendering.renderer import Renderer
 from pyclpt.scene.camera_path import CameraPath
 
 distributed = pytest.importorskip("distributed")
+dask = pytest.importorskip("dask")  # distributed's own dependency: its config
 
 W, H = 16, 12
 # The documented bound (docs/distributed.md): the merged mean against one machine's double sum.
@@ -431,6 +432,11 @@ def test_lost_scheduler_is_a_clear_error_at_once():
         error = result.get("error")
         assert isinstance(error, ConnectionError), repr(error)
         assert f"lost the connection to the Dask scheduler at {address}" in str(error)
+        # Cleanup, after the checks: the cluster's close asks the closed scheduler to terminate, retrying its
+        # address for Dask's whole connect timeout (30 s) before giving up; a closed port refuses at once.
+        with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+            c.close()
+            cluster.close()
 
 
 def _quad_obj(path, x0: float) -> None:

@@ -5,7 +5,11 @@
  * pixels on each side, inside the image or beyond it (Mitsuba's sample_border): in_width = width + 2 reach
  * columns a frame, in_pixels = in_width (height + 2 reach). A sample's film position is recomputed from its
  * random numbers: splat_position of its pixel's index in the image padded by `reach` (padded_width pixels a
- * row, as film_pixel gives it) and sample first_sample + j for frame j. */
+ * row, as film_pixel gives it) and sample first_sample + j for frame j.
+ *
+ * Consumes: the frame buffer of a batch (the integrators' radiance per film slot of the margined window).
+ * Produces: per frame, the filter-weighted sums of its samples' radiance and of their weights per pixel of the
+ *           window (what the two accumulators sum; the image is their ratio). Each kernel says its own below. */
 #include "core/common.h"
 #include "film/splat.h"
 

@@ -212,6 +212,32 @@ class PathReplay:
             self.dropped += int(marks.astype(np.int64).sum())
         return out
 
+    def incident_radiance(self, samples: np.ndarray, seed: int, eps: float) -> np.ndarray:
+        """f |cos| L_i (N, 2, 3) at the first hits of the camera rays through film points ``samples[:, :2]``, from
+        directions ``samples[:, 2:5]`` minus and plus ``eps`` times ``samples[:, 5:8]`` (the incident_radiance
+        kernel; N, 8 float32), both with the random numbers of (seed, sample). NaN or inf ones give 0 and are
+        counted in :attr:`dropped`."""
+        kernel = self.kernel("incident_radiance")
+        pts = np.ascontiguousarray(samples, np.float32).reshape(-1, 8)
+        out = np.zeros((len(pts), 2, 3), np.float32)
+        args = self.scene.args(self.width, self.height)
+        self.dropped = 0
+        for start in range(0, len(pts), LAUNCH):
+            count = min(LAUNCH, len(pts) - start)
+            p_buf = upload(self.device, pts[start:start + count], "incident-radiance samples")
+            r_buf = alloc(self.device, 4 * 6 * count, "incident radiance")
+            marks = np.zeros(2 * count, np.uint8)
+            m_buf = alloc(self.device, marks.nbytes, "incident radiance drop marks")
+            fill_buffer(self.device.queue, m_buf, np.uint8(0), 0, marks.nbytes)
+            g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
+            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, p_buf, r_buf, m_buf, np.uint32(seed),
+                        np.int32(count), np.int32(self.max_depth), np.float32(eps))
+            self.profile.record("incident_radiance", ev)
+            cl.enqueue_copy(self.device.queue, out[start:start + count], r_buf)
+            cl.enqueue_copy(self.device.queue, marks, m_buf)
+            self.dropped += int(marks.astype(np.int64).sum())
+        return out
+
     def forward(self, tangent: dict[str, np.ndarray], spp: int, seed: int) -> np.ndarray:
         """Forward mode: the derivative of the image (H, W, 3) along ``tangent`` (host arrays by buffer
         name, layout.py)."""

@@ -277,32 +277,6 @@ def _camera_rays(scene: Scene, film: np.ndarray, width: int, height: int) -> tup
     return np.broadcast_to(o, d.shape).copy(), d
 
 
-def _incident_radiance(replay, samples: np.ndarray, seed: int, eps: float) -> np.ndarray:
-    """(N, 2, 3) from the incident_radiance kernel (cl/gradients/incident_radiance.cl) for (N, 8) samples."""
-    import pyopencl as cl
-
-    from pyclpt.device.context import alloc, fill_buffer, upload
-    from pyclpt.gradients.replay import LAUNCH, LOCAL_SIZE
-
-    kernel = replay.kernel("incident_radiance")
-    pts = np.ascontiguousarray(samples, np.float32).reshape(-1, 8)
-    out = np.zeros((len(pts), 2, 3), np.float32)
-    args = replay.scene.args(replay.width, replay.height)
-    for start in range(0, len(pts), LAUNCH):
-        count = min(LAUNCH, len(pts) - start)
-        p_buf = upload(replay.device, pts[start:start + count], "soft-shadow samples")
-        r_buf = alloc(replay.device, 4 * 6 * count, "incident radiance")
-        marks = np.zeros(2 * count, np.uint8)
-        m_buf = alloc(replay.device, marks.nbytes, "incident radiance drop marks")
-        fill_buffer(replay.device.queue, m_buf, np.uint8(0), 0, marks.nbytes)
-        g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
-        ev = kernel(replay.device.queue, (g,), (LOCAL_SIZE,), *args, p_buf, r_buf, m_buf, np.uint32(seed),
-                    np.int32(count), np.int32(replay.max_depth), np.float32(eps))
-        replay.profile.record("incident_radiance", ev)
-        cl.enqueue_copy(replay.device.queue, out[start:start + count], r_buf)
-    return out
-
-
 @dataclass
 class SoftSamples:
     """Points on the occluders' silhouettes seen from the shading points, and what each contributes."""
@@ -371,7 +345,7 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         sel, k, t, w, dist, n, speed = (v[keep] for v in (sel, k, t, w, dist, n, speed))
         replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
         samples = np.concatenate([film[sel], w, n], axis=1)
-        radiance = _incident_radiance(replay, samples, seed, SOFT_SIDE_EPS).astype(np.float64)
+        radiance = replay.incident_radiance(samples, seed, SOFT_SIDE_EPS).astype(np.float64)
         # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel
         parts["jump"].append((radiance[:, 0] - radiance[:, 1]) * (speed * chosen_w[sel] / spp)[:, None])
         parts["film"].append(film[sel])
