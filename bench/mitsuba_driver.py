@@ -21,9 +21,13 @@ Protocol (one JSON object per line on stdout; Mitsuba's own log lines may come b
 ``--probe`` only imports Mitsuba and prints the ready line; after loading and ``--warmup`` untimed renders
 (which include Dr.Jit's kernel compilation) it prints ``{"event": "ready", "mitsuba_version",
 "variant", "load_s", "warmup_s": [...]}``. Without ``--repeats`` it then reads commands from
-stdin: ``render SEED`` answers ``{"event": "render", "seed", "seconds", "mean": [r, g, b]}``
-(``seconds``: ``mi.render`` and evaluation of the image, the wall time a user waits), ``quit``
-ends. With ``--repeats N`` it renders seeds 1..N itself and exits (``--save NPY``: the last image
+stdin: ``render SEED [NPY]`` answers ``{"event": "render", "seed", "seconds", "mean": [r, g, b]}``
+(``seconds``: ``mi.render`` and evaluation of the image, the wall time a user waits; with ``NPY``
+the image, (H, W, 3) float32, is then written to that .npy file, untimed), ``reference PASSES SEED
+NPY`` renders ``PASSES`` passes of ``--spp`` samples (seeds SEED, SEED + 1, ...: the compiled
+kernels are reused), writes their average to ``NPY`` and answers ``{"event": "reference",
+"passes", "spp", "seconds", "mean"}`` (a converged image for ``pyclpt bench --versus mitsuba``'s
+relMSE), ``quit`` ends. With ``--repeats N`` it renders seeds 1..N itself and exits (``--save NPY``: the last image
 as an .npy file, for bench/mitsuba_agreement.py). Errors: ``{"event": "error",
 "message"}`` and exit status 1.
 """
@@ -40,6 +44,20 @@ from pathlib import Path
 def _emit(obj: dict) -> None:
     sys.stdout.write(json.dumps(obj) + "\n")
     sys.stdout.flush()
+
+
+def _image(img):
+    """A Mitsuba image tensor as an (H, W, 3) float32 numpy array."""
+    import numpy as np
+
+    return np.array(img, dtype=np.float32)[..., :3]
+
+
+def _save(path: str, img) -> None:
+    """Write an image (Mitsuba tensor or numpy array) to ``path`` as (H, W, 3) float32 .npy."""
+    import numpy as np
+
+    np.save(path, _image(img) if not isinstance(img, np.ndarray) else img)
 
 
 def _transform(mi, spec):
@@ -202,9 +220,7 @@ def main(argv: list[str] | None = None) -> int:
                 s, m = render(seed)
                 _emit({"event": "render", "seed": seed, "seconds": s, "mean": m})
             if a.save and last:
-                import numpy as np
-
-                np.save(a.save, np.array(last[0], dtype=np.float32)[..., :3])
+                _save(a.save, last[0])
             return 0
         for line in sys.stdin:
             words = line.split()
@@ -215,7 +231,22 @@ def main(argv: list[str] | None = None) -> int:
             if words[0] == "render":
                 seed = int(words[1])
                 s, m = render(seed)
+                if len(words) > 2:
+                    _save(words[2], last[0])
                 _emit({"event": "render", "seed": seed, "seconds": s, "mean": m})
+            elif words[0] == "reference":
+                passes, seed0, out = int(words[1]), int(words[2]), words[3]
+                t = time.perf_counter()
+                total = None
+                for i in range(passes):
+                    render(seed0 + i)
+                    img = _image(last[0])
+                    total = img.astype("float64") if total is None else total + img
+                mean_img = (total / passes).astype("float32")
+                _save(out, mean_img)
+                _emit({"event": "reference", "passes": passes, "spp": passes * a.spp,
+                       "seconds": time.perf_counter() - t,
+                       "mean": [float(mean_img[..., c].mean()) for c in range(3)]})
             else:
                 _emit({"event": "error", "message": f"unknown command {line.strip()!r}"})
                 return 1
