@@ -73,6 +73,19 @@ def launch_costs(device: pyclpt.Device, n: int = 2000) -> dict[str, dict[str, fl
     return result
 
 
+def _frame_times(r: pyclpt.Renderer, frames: int) -> dict[str, float]:
+    """Median wall-clock and device ms of ``frames`` 1-spp frames of renderer r (seeds 10, 11, ...)."""
+    walls, devices = [], []
+    for i in range(frames):
+        r.integrator.profile.clear()
+        t = time.perf_counter()
+        r.render(1, seed=10 + i, progress=False)
+        r.device.queue.finish()
+        walls.append(time.perf_counter() - t)
+        devices.append(sum(row["total_ms"] for row in r.integrator.profile.table()))
+    return {"wall_ms": 1e3 * float(np.median(walls)), "device_ms": float(np.median(devices))}
+
+
 VARIANTS = (("megakernel", {}), ("wavefront", {}), ("wavefront", {"tail_paths": 1 << 16}),
             ("wavefront", {"tail_paths": 1 << 13}), ("wavefront", {"tail_paths": 0}),
             ("wavefront", {"layout": "aos"}), ("wavefront", {"wave_size": 1 << 18}))
@@ -86,17 +99,8 @@ def variants(scene_name: str, width: int, height: int, depths=(3, 64), frames: i
         for integrator, options in VARIANTS:
             r = pyclpt.Renderer(scene, integrator=integrator, max_depth=depth, width=width, height=height, **options)
             r.render(1, seed=1, progress=False)
-            walls, devices = [], []
-            for i in range(frames):
-                r.integrator.profile.clear()
-                t = time.perf_counter()
-                r.render(1, seed=10 + i, progress=False)
-                r.device.queue.finish()
-                walls.append(time.perf_counter() - t)
-                devices.append(sum(row["total_ms"] for row in r.integrator.profile.table()))
             rows.append({"scene": scene_name, "depth": depth, "integrator": integrator, "options": options,
-                         "wave": getattr(r.integrator, "capacity", None), "wall_ms": 1e3 * float(np.median(walls)),
-                         "device_ms": float(np.median(devices))})
+                         "wave": getattr(r.integrator, "capacity", None), **_frame_times(r, frames)})
     return rows
 
 
@@ -144,18 +148,9 @@ def register_caps(scene_name: str, width: int, height: int, depths=(3, 64), fram
                                  "error": str(exc).splitlines()[0]})
                     continue
                 first = r.render(1, seed=1, progress=False)
-                walls, devices = [], []
-                for i in range(frames):
-                    r.integrator.profile.clear()
-                    t = time.perf_counter()
-                    r.render(1, seed=10 + i, progress=False)
-                    r.device.queue.finish()
-                    walls.append(time.perf_counter() - t)
-                    devices.append(sum(row["total_ms"] for row in r.integrator.profile.table()))
                 same = images.setdefault((depth, integrator), first)
                 rows.append({"scene": scene_name, "cap": label, "depth": depth, "integrator": integrator,
-                             "wall_ms": 1e3 * float(np.median(walls)), "device_ms": float(np.median(devices)),
-                             "same_image": bool(np.array_equal(same, first))})
+                             **_frame_times(r, frames), "same_image": bool(np.array_equal(same, first))})
     return rows
 
 

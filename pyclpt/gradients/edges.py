@@ -298,6 +298,59 @@ def _rest(params: SceneParameters, name: str, mesh: Mesh) -> tuple[np.ndarray, n
     return m4, (p - m4[:3, 3]) @ np.linalg.inv(m4[:3, :3]).T
 
 
+def sample_weights(pixels: np.ndarray, weights: np.ndarray, image_grad: np.ndarray, jump: np.ndarray) -> np.ndarray:
+    """(N,) dLoss/dImage at each sample's pixels through its filter weights, dotted with its jump (N, 3): what
+    a unit normal motion of the sample's point adds to the loss."""
+    gflat = np.asarray(image_grad, np.float64).reshape(-1, 3)
+    gw = np.einsum("nk,nkc->nc", weights, gflat[np.maximum(pixels, 0)] * (pixels >= 0)[..., None])
+    return np.einsum("nc,nc->n", gw, jump)
+
+
+def scatter_to_vertices(params: SceneParameters, scene: Scene, i: int, names: Sequence[str], v0: np.ndarray,
+                        v1: np.ndarray, t: np.ndarray, q: np.ndarray, out: dict[str, np.ndarray]) -> None:
+    """Mesh i's gradients for ``names`` (``vertex_positions``, ``to_world``) into ``out``, from per-sample vectors
+    q (N, 3) at the points (1 - t) v0 + t v1 of its edges."""
+    gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
+    np.add.at(gv, v0, (1 - t)[:, None] * q)
+    np.add.at(gv, v1, t[:, None] * q)
+    for name in names:
+        if name.endswith(".vertex_positions"):
+            out[name] = gv.reshape(-1).astype(np.float32)
+        else:  # positions = M rest: dL/dM = sum over vertices of dL/dp (rest, 1)^T
+            _, rest = _rest(params, name, scene.meshes[i])
+            gm = np.zeros((4, 4))
+            gm[:3, :3] = gv.T @ rest
+            gm[:3, 3] = gv.sum(0)
+            out[name] = gm.astype(np.float32)
+
+
+def vertex_motion(params: SceneParameters, scene: Scene, name: str, tangent: np.ndarray) -> tuple[int, np.ndarray]:
+    """(mesh index, (V, 3) vertex velocities) of a tangent of ``SHAPE.vertex_positions`` or ``SHAPE.to_world``."""
+    (i, _), = _meshes_of(scene, [name]).items()
+    mesh = scene.meshes[i]
+    tan = np.asarray(tangent, np.float64)
+    if name.endswith(".vertex_positions"):
+        return i, tan.reshape(mesh.positions.shape)
+    _, rest = _rest(params, name, mesh)
+    tm = tan.reshape(4, 4)
+    return i, rest @ tm[:3, :3].T + tm[:3, 3]
+
+
+def edge_point_motion(velocity: np.ndarray, v0: np.ndarray, v1: np.ndarray, t: np.ndarray, dp: np.ndarray
+                      ) -> np.ndarray:
+    """(N,) the normal motion velocity . dp of the edge points (1 - t) v0 + t v1 for vertex velocities dp."""
+    return (1 - t) * np.einsum("nc,nc->n", velocity, dp[v0]) + t * np.einsum("nc,nc->n", velocity, dp[v1])
+
+
+def splat_image(pixels: np.ndarray, weights: np.ndarray, values: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(H, W, 3) image of per-sample values (N, 3) through their filter weights."""
+    contrib = weights[..., None] * values[:, None, :]
+    image = np.zeros((width * height, 3))
+    ok = pixels >= 0
+    np.add.at(image, pixels[ok], contrib[ok])
+    return image.reshape(height, width, 3).astype(np.float32)
+
+
 def primary_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, samples: int = 65536,
                      seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
                      device: Device | str | None = None, stratified: bool = True) -> dict[str, np.ndarray]:
@@ -317,28 +370,15 @@ def primary_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str],
     meshes = range(len(scene.meshes)) if sensor in names else sorted(wanted)  # the camera moves every edge
     es = sample_edges(scene, meshes, width, height, samples=samples, seed=seed, max_depth=max_depth,
                       device=device, stratified=stratified)
-    gflat = g.reshape(-1, 3)
-    gw = np.einsum("nk,nkc->nc", es.weights, gflat[np.maximum(es.pixels, 0)] * (es.pixels >= 0)[..., None])
-    weight = np.einsum("nc,nc->n", gw, es.jump)
+    weight = sample_weights(es.pixels, es.weights, g, es.jump)
     out: dict[str, np.ndarray] = {}
     if sensor in names:
         out[sensor] = np.einsum("n,nij->ij", weight, camera_velocity(scene, width, height, es.point,
                                                                       es.normal)).astype(np.float32)
     for i, mesh_names in wanted.items():
         m = es.mesh == i
-        gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
-        q = es.velocity[m] * weight[m][:, None]
-        np.add.at(gv, es.v0[m], (1 - es.t[m])[:, None] * q)
-        np.add.at(gv, es.v1[m], es.t[m][:, None] * q)
-        for name in mesh_names:
-            if name.endswith(".vertex_positions"):
-                out[name] = gv.reshape(-1).astype(np.float32)
-            else:  # positions = M rest: dL/dM = sum over vertices of dL/dp (rest, 1)^T
-                _, rest = _rest(params, name, scene.meshes[i])
-                gm = np.zeros((4, 4))
-                gm[:3, :3] = gv.T @ rest
-                gm[:3, 3] = gv.sum(0)
-                out[name] = gm.astype(np.float32)
+        scatter_to_vertices(params, scene, i, mesh_names, es.v0[m], es.v1[m], es.t[m],
+                            es.velocity[m] * weight[m][:, None], out)
     return out
 
 
@@ -360,20 +400,8 @@ def primary_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wi
                           max_depth=max_depth, device=device)
         dx = np.einsum("nij,ij->n", camera_velocity(scene, width, height, es.point, es.normal), tan.reshape(4, 4))
     else:
-        (i, _), = _meshes_of(scene, [name]).items()
-        mesh = scene.meshes[i]
-        if name.endswith(".vertex_positions"):
-            dp = tan.reshape(mesh.positions.shape)
-        else:
-            _, rest = _rest(params, name, mesh)
-            tm = tan.reshape(4, 4)
-            dp = rest @ tm[:3, :3].T + tm[:3, 3]
+        i, dp = vertex_motion(params, scene, name, tan)
         es = sample_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,
                           device=device)
-        dx = (1 - es.t) * np.einsum("nc,nc->n", es.velocity, dp[es.v0]) + \
-            es.t * np.einsum("nc,nc->n", es.velocity, dp[es.v1])
-    contrib = es.weights[..., None] * (es.jump * dx[:, None])[:, None, :]  # (N, K, 3)
-    image = np.zeros((width * height, 3))
-    ok = es.pixels >= 0
-    np.add.at(image, es.pixels[ok], contrib[ok])
-    return image.reshape(height, width, 3).astype(np.float32)
+        dx = edge_point_motion(es.velocity, es.v0, es.v1, es.t, dp)
+    return splat_image(es.pixels, es.weights, es.jump * dx[:, None], width, height)

@@ -33,7 +33,19 @@ import numpy as np
 
 from pyclpt.device.context import Device
 from pyclpt.gradients.differentiate import replay_for
-from pyclpt.gradients.edges import SIDE_EPS, Projection, _filter_weights, _meshes_of, _rest, camera_velocity, mesh_edges
+from pyclpt.gradients.edges import (
+    SIDE_EPS,
+    Projection,
+    _filter_weights,
+    _meshes_of,
+    camera_velocity,
+    edge_point_motion,
+    mesh_edges,
+    sample_weights,
+    scatter_to_vertices,
+    splat_image,
+    vertex_motion,
+)
 from pyclpt.gradients.parameters import SceneParameters, traverse
 from pyclpt.scene.model import PointLight, Scene, SpotLight
 
@@ -218,9 +230,7 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
     meshes = range(len(scene.meshes)) if moving_all else sorted(wanted)
     ss = sample_shadow_edges(scene, meshes, width, height, samples=samples, seed=seed, max_depth=max_depth,
                              device=device, stratified=stratified)
-    gflat = g.reshape(-1, 3)
-    gw = np.einsum("nk,nkc->nc", ss.weights, gflat[np.maximum(ss.pixels, 0)] * (ss.pixels >= 0)[..., None])
-    weight = np.einsum("nc,nc->n", gw, ss.jump)
+    weight = sample_weights(ss.pixels, ss.weights, g, ss.jump)
     out: dict[str, np.ndarray] = {}
     if sensor in names:
         out[sensor] = np.einsum("n,nij->ij", weight, camera_velocity(scene, width, height, ss.point,
@@ -231,7 +241,7 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
             out[name] = (weight[m, None] * ss.light_velocity[m]).sum(0).astype(np.float32)
     for i, mesh_names in wanted.items():
         m = ss.mesh == i
-        _scatter_to_vertices(params, scene, i, mesh_names, ss.v0[m], ss.v1[m], ss.t[m],
+        scatter_to_vertices(params, scene, i, mesh_names, ss.v0[m], ss.v1[m], ss.t[m],
                              ss.velocity[m] * weight[m][:, None], out)
     return out
 
@@ -363,46 +373,6 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
     return SoftSamples(pixels, weights, **cat)
 
 
-def _scatter_to_vertices(params: SceneParameters, scene: Scene, i: int, names: Sequence[str], v0: np.ndarray,
-                         v1: np.ndarray, t: np.ndarray, q: np.ndarray, out: dict[str, np.ndarray]) -> None:
-    """Mesh i's gradients for ``names`` (vertex_positions, to_world) from per-sample vectors q (N, 3) at the points
-    (1 - t) v0 + t v1 of its edges."""
-    gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
-    np.add.at(gv, v0, (1 - t)[:, None] * q)
-    np.add.at(gv, v1, t[:, None] * q)
-    for name in names:
-        if name.endswith(".vertex_positions"):
-            out[name] = gv.reshape(-1).astype(np.float32)
-        else:  # positions = M rest: dL/dM = sum over vertices of dL/dp (rest, 1)^T
-            _, rest = _rest(params, name, scene.meshes[i])
-            gm = np.zeros((4, 4))
-            gm[:3, :3] = gv.T @ rest
-            gm[:3, 3] = gv.sum(0)
-            out[name] = gm.astype(np.float32)
-
-
-def _vertex_motion(params: SceneParameters, scene: Scene, name: str, tangent: np.ndarray) -> tuple[int, np.ndarray]:
-    """(mesh index, (V, 3) vertex velocities) of a tangent of ``SHAPE.vertex_positions`` or ``SHAPE.to_world``."""
-    (i, _), = _meshes_of(scene, [name]).items()
-    mesh = scene.meshes[i]
-    tan = np.asarray(tangent, np.float64)
-    if name.endswith(".vertex_positions"):
-        return i, tan.reshape(mesh.positions.shape)
-    _, rest = _rest(params, name, mesh)
-    tm = tan.reshape(4, 4)
-    return i, rest @ tm[:3, :3].T + tm[:3, 3]
-
-
-def _splat_image(pixels: np.ndarray, weights: np.ndarray, values: np.ndarray, width: int, height: int
-                 ) -> np.ndarray:
-    """(H, W, 3) image of per-sample values (N, 3) through their filter weights."""
-    contrib = weights[..., None] * values[:, None, :]
-    image = np.zeros((width * height, 3))
-    ok = pixels >= 0
-    np.add.at(image, pixels[ok], contrib[ok])
-    return image.reshape(height, width, 3).astype(np.float32)
-
-
 def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
                          seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
                          device: Device | str | None = None) -> dict[str, np.ndarray]:
@@ -423,12 +393,10 @@ def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[s
     out = {name: np.zeros_like(np.asarray(params[name], np.float32)) for ns in wanted.values() for name in ns}
     ss = sample_soft_edges(scene, sorted(wanted), width, height, spp=spp, seed=seed, max_depth=max_depth,
                            device=device)
-    gflat = g.reshape(-1, 3)
-    gw = np.einsum("nk,nkc->nc", ss.weights, gflat[np.maximum(ss.pixels, 0)] * (ss.pixels >= 0)[..., None])
-    weight = np.einsum("nc,nc->n", gw, ss.jump)
+    weight = sample_weights(ss.pixels, ss.weights, g, ss.jump)
     for i, mesh_names in wanted.items():
         m = ss.mesh == i
-        _scatter_to_vertices(params, scene, i, mesh_names, ss.v0[m], ss.v1[m], ss.t[m],
+        scatter_to_vertices(params, scene, i, mesh_names, ss.v0[m], ss.v1[m], ss.t[m],
                              ss.velocity[m] * weight[m][:, None], out)
     return out
 
@@ -441,11 +409,10 @@ def soft_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *
     value), from the same samples for the same seed and size."""
     width, height = width or scene.film.width, height or scene.film.height
     params = parameters if parameters is not None else traverse(scene)
-    i, dp = _vertex_motion(params, scene, name, tangent)
+    i, dp = vertex_motion(params, scene, name, tangent)
     ss = sample_soft_edges(scene, [i], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device)
-    dx = (1 - ss.t) * np.einsum("nc,nc->n", ss.velocity, dp[ss.v0]) + \
-        ss.t * np.einsum("nc,nc->n", ss.velocity, dp[ss.v1])
-    return _splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
+    dx = edge_point_motion(ss.velocity, ss.v0, ss.v1, ss.t, dp)
+    return splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
 
 
 def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
@@ -469,9 +436,8 @@ def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wid
         else:
             dx = np.where(ss.light == light_names[name], ss.light_velocity @ tan.reshape(3), 0.0)
     else:
-        i, dp = _vertex_motion(params, scene, name, tan)
+        i, dp = vertex_motion(params, scene, name, tan)
         ss = sample_shadow_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,
                                  device=device)
-        dx = (1 - ss.t) * np.einsum("nc,nc->n", ss.velocity, dp[ss.v0]) + \
-            ss.t * np.einsum("nc,nc->n", ss.velocity, dp[ss.v1])
-    return _splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
+        dx = edge_point_motion(ss.velocity, ss.v0, ss.v1, ss.t, dp)
+    return splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
