@@ -13,11 +13,23 @@
  * not clipped. Then history =
  * lerp(clipped, sample, max(alpha_min, 1/N)); a non-finite result (an overflow) becomes the sample.
  *
+ * Anti-lag (NRD RELAX's idea, measured here as a test statistic): over the same box, restricted to
+ * the pixels that hold a history (N >= 2: their reprojected long history is not the 0 of a
+ * disocclusion), the mean of the fast histories and the mean of the long ones estimate the same
+ * value while the lighting holds still, and differ when it changes (the fast one follows within a
+ * few frames, the long one does not). Their difference over the standard error of the fast mean
+ * (the box's spread over sqrt(count), Bessel-corrected) is written per channel; spatial detail
+ * cancels, as both means are over the same pixels, and one outlier in the box cannot raise it above
+ * about 1. The next frame's reproject cuts the history length where it exceeds
+ * DenoiserSettings.antilag (cl/denoise/reproject.cl). 0 where clip_gamma < 0 (no clipping, no
+ * anti-lag) or fewer than 3 pixels hold a history.
+ *
  * Consumes: temporal[0..2] (the sample) and temporal[3..5] (the reprojected long history) from
  *           reproject; fast[c * pixels + p] (this frame's fast history); len[p] (N); all
  *           padded (svgf.h, PAD).
  * Produces: accum[c * pixels + p] (padded), c < 3: the long history of this frame (demodulated
- *           illumination). */
+ *           illumination); lag[c * pixels + p] (padded), c < 3: the anti-lag statistic above, read
+ *           by the next frame's reproject. */
 #include "denoise/svgf.h"
 
 #ifndef CLIP_RADIUS /* -DCLIP_RADIUS from pyclpt/denoise/svgf.py (DenoiserSettings.clip_radius) */
@@ -25,28 +37,43 @@
 #endif
 
 __kernel void clip_history(__global const float* temporal, __global const float* fast, __global const float* len,
-                           __global float* accum, int width, int height, float alpha_min, float clip_gamma) {
+                           __global const float* moments, __global float* accum, __global float* lag, int width,
+                           int height, float alpha_min, float clip_gamma, float fast_var) {
     int x = get_global_id(0), y = get_global_id(1), c = get_global_id(2);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;
     __global const float* f = fast + PAD + c * n;
     temporal += PAD + c * n;
     len += PAD;
+    moments += PAD;
     accum += PAD + c * n;
+    lag += PAD + c * n;
+    __global const float* hl = temporal + 3 * n; /* the reprojected long history, channel c */
 
     /* the statistics of the box about its centre's value, which keeps mean2 - mean^2 from cancelling
      * to garbage where the values are nearly equal (a converged smooth area: the centre would be
      * clipped by its rounding errors) */
     float centre = f[p];
     float sum = 0.0f, sum2 = 0.0f, count = 0.0f;
+    /* the anti-lag's sums over the pixels with a history; trel: their relative temporal variance (of
+     * the luminance, from the moments; scale-free, so it holds for every channel and any level) */
+    float hsum = 0.0f, fsum = 0.0f, fsum2 = 0.0f, hcount = 0.0f, trel = 0.0f;
     UNROLL for (int dy = -CLIP_RADIUS; dy <= CLIP_RADIUS; ++dy) {
         UNROLL for (int dx = -CLIP_RADIUS; dx <= CLIP_RADIUS; ++dx) {
             int tx = x + dx, ty = y + dy;
             float w = (tx >= 0 && tx < width && ty >= 0 && ty < height) ? 1.0f : 0.0f;
-            float v = w * (f[row_at(y, dy, width, height) + tx] - centre);
+            int q = row_at(y, dy, width, height) + tx;
+            float v = w * (f[q] - centre);
             sum += v;
             sum2 += v * v;
             count += w;
+            float wh = len[q] > 1.5f ? w : 0.0f;
+            fsum += wh * v;
+            fsum2 += wh * v * v;
+            float m1 = moments[q];
+            hsum += wh * (hl[q] - centre);
+            hcount += wh;
+            trel += wh * m_max(moments[n + q] - m1 * m1, 0.0f) / m_max(m1 * m1, 1e-30f);
         }
     }
     float dmean = sum / count;
@@ -64,4 +91,18 @@ __kernel void clip_history(__global const float* temporal, __global const float*
     h = clip_gamma >= 0.0f ? m_clamp(h, m_min(mean - spread, centre), m_max(mean + spread, centre)) : h;
     float out = lerpf(h, s, m_max(alpha_min, 1.0f / len[p]));
     accum[p] = m_isfinite(out) ? out : s;
+
+    /* the anti-lag statistic: |mean fast - mean long| / standard error of the mean fast, over the box's
+     * pixels with a history; the floor 1e-3 of the level keeps a flat (converged or black) box at 0 */
+    float hinv = 1.0f / m_max(hcount, 1.0f);
+    float fmean = fsum * hinv, hmean = hsum * hinv;
+    float fvar = m_max(fsum2 * hinv - fmean * fmean, 0.0f) * hcount / m_max(hcount - 1.0f, 1.0f);
+    /* the standard error of the fast mean: the larger of the box's spread (Bessel) and the temporal
+     * noise at the fast mean's level (the spread alone underestimates it in a box of skewed values
+     * that holds none of their rare bright ones) */
+    float level = centre + fmean;
+    float se = m_sqrt(m_max(fvar, fast_var * trel * hinv * level * level) * hinv)
+               + 1e-3f * (m_abs(centre + fmean) + m_abs(centre + hmean)) + 1e-20f;
+    float t = m_abs(fmean - hmean) / se;
+    lag[p] = (clip_gamma >= 0.0f && hcount > 2.5f && m_isfinite(t)) ? t : 0.0f;
 }

@@ -2,8 +2,9 @@
  *
  * The colour with NaN/inf replaced by 0 (all three channels; marked), less its emitted part (svgf.h,
  * emitted3: the emission AOV, written to `emission` for reproject's emission history), divided by the albedo per
- * channel where the albedo is > ALBEDO_MIN and finite (else by 1; a non-finite albedo is marked
- * too), clamped to +-MAX_RADIANCE: the illumination that the history accumulates, and its
+ * channel (svgf.h, albedo_divisors: a finite channel as at least ALBEDO_REL x the largest channel
+ * above ALBEDO_MIN; 1 where no channel is above it, or the channel is not finite; a non-finite
+ * albedo is marked too), clamped to +-MAX_RADIANCE: the illumination that the history accumulates, and its
  * luminance. The geometry record of this frame (svgf.h, GEO_*) but its depth gradient: depth
  * (non-finite or <= 0: 0, the background; +inf, the sky convention, too), the unit normal (0 where
  * unknown), the material id.

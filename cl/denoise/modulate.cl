@@ -1,8 +1,9 @@
 /* modulate: the denoised colour, the filtered illumination times the albedo. One work-item per
  * pixel, 2D range.
  *
- * The albedo divides as in reproject (svgf.h, albedo_divisor: channels <= ALBEDO_MIN or not finite
- * count as 1), so a pixel whose illumination came through unfiltered gets its colour back exactly.
+ * The albedo divides as in demodulate (svgf.h, albedo_divisors: floored at ALBEDO_REL x the largest
+ * channel; 1 where no channel is above ALBEDO_MIN, or the channel is not finite), so a pixel
+ * whose illumination came through unfiltered gets its colour back exactly.
  * Then the emission history (reproject: the emitted part of the colour, never filtered) is added back.
  * A non-finite product (an overflow) is written as 0: no NaN or inf ever leaves the denoiser.
  *

@@ -43,6 +43,15 @@
  * where it does not. */
 #define ALBEDO_MIN 1e-3f
 
+/* A channel of an albedo divides as at least this fraction of the albedo's largest channel. The
+ * G-buffer is one jittered sample a frame, so a strongly coloured texel's small channel (a blue of
+ * 0.0005 to 0.02 beside a red of 0.3) changes many times over from frame to frame: divided by it,
+ * the history accumulated c / a_k of one frame and was multiplied by another frame's a, which put
+ * blue blotches of 100x the reference into the living room (relMSE 14 at frame 8 against the plain
+ * average's 1.7). Floored, the divisor of such a channel is steady, and modulation still inverts
+ * demodulation exactly (both use this rule). */
+#define ALBEDO_REL 0.1f
+
 /* Colour channels beyond this magnitude are clamped to it, so that squares (the moments) stay finite. */
 #define MAX_RADIANCE 1e18f
 
@@ -56,9 +65,19 @@
 
 static inline int clampi(int v, int lo, int hi) { return m_imin(m_imax(v, lo), hi); }
 
-static inline float albedo_divisor(float a) { return (a > ALBEDO_MIN && a < INFINITY) ? a : 1.0f; }
+/* The divisors of an albedo: where some finite channel is above ALBEDO_MIN, each finite channel
+ * divides as the larger of it and ALBEDO_REL x the largest such channel (a small or zero channel
+ * included); a non-finite channel, or every channel of an albedo without one above ALBEDO_MIN, as 1. */
+static inline float divisor_with_floor(float a, float top) {
+    return (m_isfinite(a) && top > 0.0f) ? m_max(a, top) : 1.0f;
+}
 
-static inline vec3 albedo_divisors(vec3 a) { return v3(albedo_divisor(a.x), albedo_divisor(a.y), albedo_divisor(a.z)); }
+static inline float dividing_part(float a) { return (a > ALBEDO_MIN && a < INFINITY) ? a : 0.0f; }
+
+static inline vec3 albedo_divisors(vec3 a) {
+    float top = ALBEDO_REL * m_max(m_max(dividing_part(a.x), dividing_part(a.y)), dividing_part(a.z));
+    return v3(divisor_with_floor(a.x, top), divisor_with_floor(a.y, top), divisor_with_floor(a.z, top));
+}
 
 static inline vec3 planar3(__global const float* b, int n, int p) { return v3(b[p], b[n + p], b[2 * n + p]); }
 

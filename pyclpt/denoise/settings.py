@@ -47,6 +47,16 @@ class DenoiserSettings:
     clip_gamma: float = 2.5
     #: Half-size of the fast-history box: 1 (3x3) or 2 (5x5). Compiled in (-DCLIP_RADIUS).
     clip_radius: int = 2
+    #: Anti-lag (NRD RELAX's idea as a test statistic; cl/denoise/clip_history.cl): t, the distance
+    #: between the mean of the fast histories and the mean of the long ones over the clip box, in
+    #: standard errors of the fast mean. The next frame cuts the history length N to N (1 - a), a =
+    #: clamp(4 (t - antilag) / antilag, 0, 1): from t = 1.25 antilag on the history restarts from the
+    #: frame (a partial cut keeps most of the old light; with the ramp of antilag instead of a quarter
+    #: of it, the Cornell box's light change had no lag under 4 frames).
+    #: A change of the lighting moves the fast histories within a frame or two; clipping alone does not
+    #: catch a uniform 4x drop under 1-sample noise (its box is as wide as the noise). 0: off; off too
+    #: where clip_gamma < 0. Measured in docs/denoising-passes.md ("Anti-lag").
+    antilag: float = 4.0
     #: The firefly clamp (cl/denoise/reproject.cl): the frame's demodulated luminance is clamped to
     #: sqrt(N) x the larger of firefly_ratio x a spatial reference (the larger of its 3x3 neighbours'
     #: mean, centre excluded, and the history's luminance) and the pixel's own temporal moments, mean +
@@ -112,6 +122,7 @@ class DenoiserSettings:
             setattr(self, field, value)
         self.clip_gamma = check_float(self.clip_gamma, f"{name}.clip_gamma")
         self.clip_radius = check_int(self.clip_radius, f"{name}.clip_radius", lo=1, hi=2)
+        self.antilag = check_float(self.antilag, f"{name}.antilag", lo=0.0)
         self.firefly_ratio = check_float(self.firefly_ratio, f"{name}.firefly_ratio", lo=0.0)
         self.firefly_sigma = check_float(self.firefly_sigma, f"{name}.firefly_sigma", lo=0.0)
         if 0.0 < self.firefly_ratio < 1.0:

@@ -4,8 +4,9 @@ SVGFPass), with NRD RELAX's fast history clipping the long one.
 One frame is six passes, one kernel each in ``cl/denoise/`` and one method here of the same name:
 :meth:`Svgf.demodulate` (sanitize, divide by the albedo, this frame's geometry),
 :meth:`Svgf.reproject` (firefly clamp, reproject and accumulate the fast history, moments and
-history length), :meth:`Svgf.clip_history` (clip the long history into the fast one's
-neighbourhood and blend), :meth:`Svgf.variance` (temporal or, on a short history, spatial
+history length; the anti-lag cuts the history where the lighting changed),
+:meth:`Svgf.clip_history` (clip the long history into the fast one's neighbourhood and blend; the
+anti-lag statistic), :meth:`Svgf.variance` (temporal or, on a short history, spatial
 variance), :meth:`Svgf.atrous` (``iterations`` a-trous iterations) and :meth:`Svgf.modulate` (times
 the albedo, plus the emission's own temporal history: the emitted part of the colour is kept out of
 the filter). :meth:`Svgf.count_dropped` adds up the NaN/inf inputs (``cl/film/count_dropped.cl``).
@@ -96,7 +97,7 @@ class Svgf:
         n, f = self.pixels, 4
         size = f"{self.width}x{self.height}"
         needs = {"denoiser history": 2 * f * n * (GEO_COUNT + 4 + 3 + 2 + 1 + 3),
-                 "denoiser work buffers": f * n * (6 + 4 + 4 + 3 + 3) + n}
+                 "denoiser work buffers": f * n * (6 + 4 + 4 + 3 + 3 + 3) + n}
         check_memory(self.device, needs, hint="denoise a smaller image")
         self._padded: list[tuple[cl.Buffer, int]] = []
         self._geo = [self._alloc(GEO_COUNT, f"denoiser geometry {size}") for _ in range(2)]
@@ -106,6 +107,7 @@ class Svgf:
         self._len = [self._alloc(1, f"denoiser history length {size}") for _ in range(2)]
         self._emis = [self._alloc(3, f"denoiser emission history {size}") for _ in range(2)]
         self._emission = self._alloc(3, f"denoiser frame emission {size}")
+        self._lag = self._alloc(3, f"denoiser anti-lag statistic {size}")
         self._temporal = self._alloc(6, f"denoiser temporal {size}")
         self._ping = [self._alloc(4, f"denoiser a-trous {size}") for _ in range(2)]
         self.output = alloc(self.device, f * n * 3, f"denoised image {size}")
@@ -174,7 +176,7 @@ class Svgf:
         q = self.device.queue
         n = self.pixels
         for bufs, channels in ((self._geo, GEO_COUNT), (self._hist, 4), (self._fast, 3), (self._moments, 2),
-                               (self._len, 1), (self._emis, 3)):
+                               (self._len, 1), (self._emis, 3), ([self._lag], 3)):
             for buf in bufs:
                 fill_buffer(q, buf, np.float32(0), 4 * PAD, 4 * n * channels)
         self.frames = 0
@@ -236,15 +238,15 @@ class Svgf:
 
     def reproject(self, aovs: cl.Buffer) -> cl.Event:
         """Pass 2 (cl/denoise/reproject.cl): the firefly-clamped sample and the reprojected history; the
-        fast history, moments and history length of this frame."""
+        fast history, moments and history length of this frame (cut by the previous frame's anti-lag)."""
         s, c, p = self._settings, self._cur, self._prev
         ev = self._kernels["reproject"](
             self.device.queue, self.global_size, self.local, self._ping[0], self._emission, self._geo[c], aovs,
-            self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p],
+            self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p], self._lag,
             self._temporal, self._fast[c], self._moments[c], self._len[c], self._emis[c], *self._args2d(),
             np.float32(s.depth_threshold), np.float32(s.normal_threshold), np.float32(s.firefly_ratio),
             np.float32(s.firefly_sigma), np.float32(s.max_history), np.float32(s.alpha_min),
-            np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
+            np.float32(s.moments_alpha_min), np.float32(s.fast_alpha), np.float32(s.antilag))
         return self._record("reproject", ev)
 
     def count_dropped(self) -> cl.Event:
@@ -262,11 +264,12 @@ class Svgf:
 
     def clip_history(self) -> cl.Event:
         """Pass 3 (cl/denoise/clip_history.cl): the long history clipped and blended (one work-item per
-        pixel and channel)."""
+        pixel and channel); the anti-lag statistic that the next frame's reproject reads."""
         s = self._settings
         ev = self._kernels["clip_history"](
             self.device.queue, (*self.global_size, 3), (*self.local, 1), self._temporal, self._fast[self._cur],
-            self._len[self._cur], self._accum, *self._args2d(), np.float32(s.alpha_min), np.float32(s.clip_gamma))
+            self._len[self._cur], self._moments[self._cur], self._accum, self._lag, *self._args2d(),
+            np.float32(s.alpha_min), np.float32(s.clip_gamma), np.float32(s.fast_alpha / (2.0 - s.fast_alpha)))
         return self._record("clip_history", ev)
 
     def variance(self) -> cl.Event:
