@@ -175,7 +175,7 @@ REGISTER_CAPPED = ("megakernel", "finish_paths", "process_hit", "sample_bsdf")
 def register_cap_options(device: Device, program: str) -> list[str]:
     """``-cl-nv-maxrregcount=NV_REGISTER_CAP`` for the programs of REGISTER_CAPPED (by name) on a driver that takes
     NVIDIA's build options (``cl_nv_compiler_options``); nothing elsewhere."""
-    if program not in REGISTER_CAPPED or device.is_cpu or not getattr(device, "has_nv_compiler_options", False):
+    if program not in REGISTER_CAPPED or device.is_cpu or not device.has_nv_compiler_options:
         return []
     return [f"-cl-nv-maxrregcount={NV_REGISTER_CAP}"]
 

@@ -140,7 +140,8 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
     lights see as silhouettes, stratified along their total length in the world, mapped to the shadow outline
     they cast in the image (the points that cast none are dropped), with the radiance on both sides there."""
     cols: dict[str, list[np.ndarray]] = {k: [] for k in ("light", "mesh", "v0", "v1")}
-    for k, pos in delta_lights(scene):
+    lights = dict(delta_lights(scene))
+    for k, pos in lights.items():
         for i in meshes:
             pairs, _ = mesh_edges(scene.meshes[i], pos)
             for key, v in (("light", np.full(len(pairs), k)), ("mesh", np.full(len(pairs), i)),
@@ -166,7 +167,7 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
     e = np.minimum(np.searchsorted(cdf, u, side="right"), len(lengths) - 1)
     t = np.clip((u - (cdf[e] - lengths[e])) / np.maximum(lengths[e], 1e-300), 0.0, 1.0)
     point_on_edge = a[e] + t[:, None] * (b[e] - a[e])
-    light_pos = np.stack([dict(delta_lights(scene))[k] for k in edges["light"][e]]) if len(e) else np.zeros((0, 3))
+    light_pos = np.stack([lights[k] for k in edges["light"][e]]) if len(e) else np.zeros((0, 3))
     d, dist = _unit(point_on_edge - light_pos)
     tracer = _HostTracer(scene)
     # lit through the edge: nothing between the light and the edge point
@@ -314,6 +315,7 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
     tracer = _HostTracer(scene)
     t_hit, _, mesh_hit = tracer.hit_mesh(org, dirs)
     x = org + np.where(np.isfinite(t_hit), t_hit, 0.0)[:, None] * dirs
+    replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("film", "jump", "mesh", "v0", "v1", "t", "velocity")}
     for i in meshes:
         mesh = scene.meshes[i]
@@ -353,7 +355,6 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         n, speed = _unit(np.cross(w, dw_dt))
         keep = speed > 1e-12
         sel, k, t, w, dist, n, speed = (v[keep] for v in (sel, k, t, w, dist, n, speed))
-        replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
         samples = np.concatenate([film[sel], w, n], axis=1)
         radiance = replay.incident_radiance(samples, seed, SOFT_SIDE_EPS).astype(np.float64)
         # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel

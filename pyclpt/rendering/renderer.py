@@ -132,7 +132,7 @@ class Renderer:
         self.depth_limit = UNLIMITED_DEPTH if self.max_depth == -1 else self.max_depth
         # the wave (and film batch) size: the device's default unless given (GPUs take larger waves); the
         # megakernel's launch size only when given
-        from pyclpt.integrators.wavefront import default_wave_size
+        from pyclpt.integrators.wavefront import Wavefront, default_wave_size
 
         launch_size, wave_size = wave_size, wave_size or default_wave_size(self.device)
         # all the buffers below together, before any is made (alloc() checks each on its own)
@@ -160,8 +160,6 @@ class Renderer:
             if integrator == "megakernel":
                 self.integrator = Megakernel(self.device, self.scene_buffers, self.film, self.depth_limit, **options)
             else:
-                from pyclpt.integrators.wavefront import Wavefront
-
                 options["wave_size"] = wave_size
                 if schedule:
                     options["schedule"] = schedule
