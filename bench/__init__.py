@@ -1,23 +1,21 @@
-"""pyclpt's benchmarks; installed as the subpackage ``pyclpt.bench`` (``pyclpt bench`` runs
-:mod:`.report`).
+"""pyclpt's benchmarks, one folder per kind of question; installed as ``pyclpt.bench`` with only the
+report generator (``pyclpt bench``). Run from a checkout's root as ``python -m bench.<folder>.<name>``.
 
-- :mod:`.runner`: timing frames of a renderer (warm-up, repeats, median/min/max, device time from
-  profiling events) and counting the rays they trace;
-- :mod:`.embree_ceiling`: Embree's own ray throughput on the same scene, on the host;
-- :mod:`.scenes`: which scenes a report covers, loaded or skipped with the reason;
-- :mod:`.machine`: the machine, OpenCL device and software versions a report records;
-- :mod:`.analysis`: figures derived from raw results (FPS, speed-ups, rays/s);
-- :mod:`.plots`: the report's matplotlib figures;
-- :mod:`.document`: a report as blocks, written as Markdown and self-contained HTML;
-- :mod:`.report`: the ``pyclpt bench`` command (runs everything, writes the report folder);
-- :mod:`.versus`: ``pyclpt bench --versus mitsuba``, pyclpt against Mitsuba 3 on the same files,
-  whose Mitsuba side ``mitsuba_driver.py`` runs in Mitsuba's own environment (never imported here);
-- :mod:`.denoise_eval` (with :mod:`.denoise_metrics` and :mod:`.denoise_references`): the denoisers
-  against 4096-spp references (relMSE, SSIM, FLIP, flicker, lag, cost at 1280x720; docs/denoising-eval.md);
-  ``denoise_passes.py`` times and tunes the SVGF passes (docs/denoising-passes.md).
+- :mod:`.report`: the timing report generator, ``pyclpt bench`` (and ``--versus mitsuba``), the one
+  package installed (``pyclpt.bench.report``); the other folders import its runner and machine records;
+- ``peers/``: pyclpt against Mitsuba 3 scene by scene, and Mitsuba's sides of the evaluations (run by the
+  Python of Mitsuba's own environment, never imported by pyclpt);
+- ``evaluations/``: how good a feature is against exact answers, references or Mitsuba: gradients, the
+  boundary terms, inverse rendering, pixel filters, the denoisers (``denoise_*.py``);
+- ``cluster/``: distributed rendering on a local Dask cluster: speed-up, unequal workers, tiles;
+- ``timing/``: measurements to re-run on a new machine or after a change: frame times, devices, scene
+  loads, BVH builds, per-stage throughput, the viewer's overhead;
+- ``gpu/``: where a GPU's frame time goes, and the SIMT model of the streaming paper's claim;
+- ``studies/``: one-off studies that answered their question, kept runnable; each module's first lines
+  state the question, the answer and its figure, and the doc that quotes them;
+- ``tools/``: scripts that write files the repository ships (the sky tables, docs/gallery).
 
-The scripts ``frame_time.py``, ``variants.py``, ``bvh_build.py`` and ``inline_math.py`` run from a checkout
-(``python bench/frame_time.py``).
-
-The top layer beside the CLI: may import every layer of pyclpt; nothing in pyclpt imports it.
+The top layer beside the CLI: may import every layer of pyclpt; nothing in pyclpt imports it, and the
+report imports none of the other folders.
 """
+from __future__ import annotations

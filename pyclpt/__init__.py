@@ -32,11 +32,11 @@ _SOURCES: dict[str, tuple[str, ...]] = {
     "pyclpt.device.context": ("Device", "DeviceError", "DeviceMemoryError", "default_device", "get_device",
                               "list_devices", "open_device"),
     "pyclpt.device.program": ("KernelBuildError",),
-    "pyclpt.distributed": ("DistributedRenderer", "render"),  # render: local, or on a Dask cluster (client=)
+    "pyclpt.distributed": ("DistributedRenderer",),
     "pyclpt.film.accumulator": ("Accumulator", "AccumulatorError"),
     "pyclpt.gradients": ("SceneParameters", "optim", "render_backward", "render_forward", "traverse"),
     "pyclpt.rendering.progressive": ("ProgressiveRenderer",),
-    "pyclpt.rendering.renderer": ("Renderer", "RenderStats"),
+    "pyclpt.rendering.renderer": ("Renderer", "RenderStats", "render"),  # render: local, or on a cluster (client=)
     "pyclpt.scene.camera_path": ("CameraPath", "Keyframe"),
     "pyclpt.scene.library": ("builtin_scenes", "load"),
     "pyclpt.scene.mitsuba_dict": ("SceneDictError", "load_dict"),
@@ -63,11 +63,11 @@ if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
         open_device,
     )
     from pyclpt.device.program import KernelBuildError
-    from pyclpt.distributed import DistributedRenderer, render
+    from pyclpt.distributed import DistributedRenderer
     from pyclpt.film.accumulator import Accumulator, AccumulatorError
     from pyclpt.gradients import SceneParameters, optim, render_backward, render_forward, traverse
     from pyclpt.rendering.progressive import ProgressiveRenderer
-    from pyclpt.rendering.renderer import Renderer, RenderStats
+    from pyclpt.rendering.renderer import Renderer, RenderStats, render
     from pyclpt.scene.camera_path import CameraPath, Keyframe
     from pyclpt.scene.library import builtin_scenes, load
     from pyclpt.scene.mitsuba_dict import SceneDictError, load_dict

@@ -666,7 +666,7 @@ def _cmd_bench(argv: list[str]) -> int:
     except ModuleNotFoundError as exc:
         if exc.name != f"{__package__}.bench":
             raise
-        # a source checkout: bench/ sits beside pyclpt/ (installed, it is the subpackage pyclpt.bench)
+        # a source checkout: bench/report/ sits beside pyclpt/ (installed: the subpackage pyclpt.bench.report)
         root = str(Path(__file__).resolve().parent.parent)
         if root not in sys.path:
             sys.path.insert(0, root)

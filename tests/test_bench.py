@@ -17,14 +17,14 @@ import pyclpt
 from pyclpt.cli import main
 
 REPO = Path(__file__).resolve().parent.parent
-if str(REPO) not in sys.path:  # a source checkout: bench/ beside pyclpt/ (installed: pyclpt.bench)
+if str(REPO) not in sys.path:  # a source checkout: bench/report/ beside pyclpt/ (installed: pyclpt.bench.report)
     sys.path.insert(0, str(REPO))
 try:
-    from pyclpt.bench import analysis as A
-    from pyclpt.bench import document, embree_ceiling, report, runner
+    from pyclpt.bench.report import analysis as A
+    from pyclpt.bench.report import document, embree_ceiling, report, runner
 except ModuleNotFoundError:
-    from bench import analysis as A
-    from bench import document, embree_ceiling, report, runner
+    from bench.report import analysis as A
+    from bench.report import document, embree_ceiling, report, runner
 
 SECTIONS = ["Summary", "Machine and software", "Settings", "Scenes", "Table 1 analog: frames per second",
             "Fig. 6 analog: render time for many samples", "Fig. 7 analog: time against depth",
@@ -332,7 +332,7 @@ def test_isa_section_of_the_report(tmp_path):
 
 def plots_module():
     try:
-        from pyclpt.bench import plots
+        from pyclpt.bench.report import plots
     except ModuleNotFoundError:
-        from bench import plots
+        from bench.report import plots
     return plots

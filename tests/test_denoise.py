@@ -252,10 +252,17 @@ def test_firefly_is_confined_and_fades(device, disocclude):
     assert excess[0] < 1e-2 * 999 * pixel
     # fading: never more than a frame before (but for 2 % of the pixel's own luminance, as the
     # variance estimate changes from spatial to temporal after 3 frames), and below 5 % of the first
-    # frame's excess after 24 frames
-    for a, b in zip(excess, excess[1:]):
+    # frame's excess after 24 frames. A disoccluded firefly's first frame spreads least: its
+    # neighbours' variance blur takes at most 4 x their own variance from it (cl/denoise/atrous.cl,
+    # VARIANCE_CAP; 1.43 x the pixel's luminance before, 0.07 now); it peaks in the next frame, when
+    # its temporal variance loosens its own weights, and fades from there.
+    if disocclude:
+        assert excess[0] < 0.2 * pixel, (excess[0], pixel)
+        assert excess[1] < settings.firefly_ratio * pixel * 1.5, (excess[1], pixel)
+    fading = excess[1:] if disocclude else excess
+    for a, b in zip(fading, fading[1:]):
         assert b <= a + 0.02 * pixel, excess
-    assert excess[-1] < 0.05 * excess[0], excess
+    assert excess[-1] < 0.05 * max(excess[:2]), excess
 
 
 def test_jitter_does_not_reset_the_history(device):
@@ -385,12 +392,13 @@ def test_edges_stop_the_filter(device, edge):
 def test_variance_of_the_mean_keeps_converging(device):
     """Why variance_of_mean is on: plain SVGF steers its filter by the per-sample variance, which does
     not shrink as the history grows, so the spatial blur (and its bias) stays; divided by the
-    history's sample count it lets the output converge."""
+    history's sample count it lets the output converge. (With Falcor's 5 iterations, whose wide blur
+    shows it best; with the default 3 the gap at 24 frames is 0.70 instead of 0.6.)"""
     sc = scene()
     errors = {}
     for on in (True, False):
         rng = np.random.default_rng(9)
-        d = Denoiser(device, W, H, settings=DenoiserSettings(variance_of_mean=on, firefly_ratio=10.0))
+        d = Denoiser(device, W, H, settings=DenoiserSettings(variance_of_mean=on, firefly_ratio=10.0, iterations=5))
         for k in range(1, 25):
             out = d.denoise(noisy(sc["truth"], rng), **gbuf(sc))
             if k in (8, 24):
@@ -507,8 +515,8 @@ def test_profile_times_every_pass(device):
     d.denoise(sc["truth"], **gbuf(sc))
     d.denoise(sc["truth"], **gbuf(sc))
     launches = {row["kernel"]: row["launches"] for row in d.profile.table()}
-    assert launches == {"demodulate": 2, "count_dropped": 2, "reproject": 2, "clip_history": 2, "variance": 2,
-                        "atrous": 8, "modulate": 2}
+    assert launches == {"demodulate": 2, "count_dropped": 2, "reproject": 2, "clip_history": 2, "antilag": 2,
+                        "variance": 2, "atrous": 8, "modulate": 2}
     assert all(row["total_ms"] >= 0 for row in d.profile.table())
 
 
@@ -551,7 +559,7 @@ def test_settings_errors_name_the_setting(field, value, error):
 def test_settings_defaults_are_valid_and_documented():
     s = DenoiserSettings()
     assert s.validate() is s
-    assert s.feedback_tap == -1 and s.variance_of_mean and s.alpha_min == 0.05 and s.iterations == 5
+    assert s.feedback_tap == -1 and s.variance_of_mean and s.alpha_min == 0.05 and s.iterations == 3
     assert dataclasses.replace(s, phi_normal=100.0).phi_normal == 100.0
     import pyclpt.denoise.settings as module  # installed or in the checkout
 

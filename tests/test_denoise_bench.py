@@ -1,6 +1,6 @@
 """The denoising evaluation's pieces: the OIDN wrapper (pyclpt/denoise/oidn.py), the image metrics
-(bench/denoise_metrics.py) on inputs with known answers, and the evaluation driver
-(bench/denoise_eval.py) on small runs. Correctness only: no timing is checked.
+(bench/evaluations/denoise_metrics.py) on inputs with known answers, and the evaluation driver
+(bench/evaluations/denoise_eval.py) on small runs. Correctness only: no timing is checked.
 
 pyoidn, scikit-image and flip-evaluator are optional extras ([oidn], [bench]); the tests that need
 one skip with the reason when it is missing."""
@@ -17,18 +17,12 @@ import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
-if str(REPO) not in sys.path:  # a source checkout: bench/ beside pyclpt/ (installed: pyclpt.bench)
+if str(REPO) not in sys.path:  # a source checkout: bench/evaluations/ beside pyclpt/
     sys.path.insert(0, str(REPO))
-try:
-    from pyclpt.bench import denoise_eval as E
-    from pyclpt.bench import denoise_metrics as M
-    from pyclpt.bench import denoise_references as R
-except ModuleNotFoundError:
-    from bench import denoise_eval as E
-    from bench import denoise_metrics as M
-    from bench import denoise_references as R
-
 import pyclpt  # noqa: E402
+from bench.evaluations import denoise_eval as E  # noqa: E402
+from bench.evaluations import denoise_metrics as M  # noqa: E402
+from bench.evaluations import denoise_references as R  # noqa: E402
 from pyclpt.denoise import oidn as oidn_module  # noqa: E402
 
 

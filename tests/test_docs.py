@@ -14,7 +14,7 @@ What runs
   - ``sh`` / ``bash`` blocks run with ``bash -euo pipefail``; ``console`` blocks run their ``$ `` lines.
   - Every block of a file runs in one temporary working folder (output files land there), which
     holds a link ``bench`` to the checkout's ``bench/`` (for "from a checkout" commands such as
-    ``python bench/gallery.py``) and has ``../shared/scenes`` linked to the shared scene folder.
+    ``python -m bench.tools.gallery``) and has ``../shared/scenes`` linked to the shared scene folder.
     ``pyclpt``, ``python`` and ``python3`` on ``PATH`` are this Python's, ``PYCLPT_SCENES`` names the
     shared scene folder, and ``PYCLPT_CACHE_DIR`` is the test session's.
   - A block that needs the shared scene folder (it mentions ``shared/scenes`` or ``PYCLPT_SCENES``,

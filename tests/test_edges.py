@@ -15,11 +15,10 @@ from pyclpt.gradients import edges
 from pyclpt.scene import transform as tf
 from pyclpt.scene.shapes import sphere
 
-try:  # the examples of docs/differentiable.md (a source checkout: bench/ beside pyclpt/; installed: pyclpt.bench)
-    from pyclpt.bench import inverse_pose, inverse_shape
-except ModuleNotFoundError:
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-    from bench import inverse_pose, inverse_shape
+REPO = Path(__file__).resolve().parent.parent
+if str(REPO) not in sys.path:  # the examples of docs/differentiable.md: bench/evaluations/ beside pyclpt/
+    sys.path.insert(0, str(REPO))
+from bench.evaluations import inverse_pose, inverse_shape  # noqa: E402
 
 W = H = 48
 FOV = 40.0
@@ -142,8 +141,8 @@ def test_camera_translation_is_the_scene_moved_the_other_way():
 
 
 def test_recover_a_pose_and_the_camera_from_an_image():
-    """bench/inverse_pose.py: the L plate's translation within 0.02, its angle within 1 degree and the camera's
-    translation within 0.02 in 60 Adam steps (48x48, 16 spp), from errors of 0.35, 25 degrees and 0.3."""
+    """bench/evaluations/inverse_pose.py: the L plate's translation within 0.02, its angle within 1 degree and the
+    camera's translation within 0.02 in 60 Adam steps (48x48, 16 spp), from errors of 0.35, 25 degrees and 0.3."""
     h = inverse_pose.recover(steps=60)
     pose, truth = np.array(h["pose"]), np.array(h["truth_pose"])
     assert np.abs(pose[:2] - truth[:2]).max() < 0.02
@@ -153,8 +152,8 @@ def test_recover_a_pose_and_the_camera_from_an_image():
 
 
 def test_recover_a_shape_from_five_views():
-    """bench/inverse_shape.py at a tiny size: a sphere mesh moves towards the target ellipsoid's surface (the
-    mean relative radial distance down to 0.6 of the sphere's in 40 steps at 24x24, which bounds what its
+    """bench/evaluations/inverse_shape.py at a tiny size: a sphere mesh moves towards the target ellipsoid's surface
+    (the mean relative radial distance down to 0.6 of the sphere's in 40 steps at 24x24, which bounds what its
     silhouettes resolve; 0.19 of it at 40x40 in 150 steps, docs/differentiable.md) and the images' loss falls."""
     h = inverse_shape.recover(steps=40, width=24, height=24, samples=4096, rings=8, segments=16, lr=0.04)
     assert h["vertex_error"][-1] < 0.6 * h["vertex_error"][0], h["vertex_error"][::10]

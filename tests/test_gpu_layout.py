@@ -205,10 +205,10 @@ def test_gpu_compaction_gives_the_same_queues(device, monkeypatch):
 
 
 def test_gpu_diagnostics_run_on_any_device(device, tmp_path):
-    """bench/gpu_diagnostics.py (docs/gpu.md, "Measured on an NVIDIA H200") measures launch costs, the
+    """bench/gpu/diagnostics.py (docs/gpu.md, "Measured on an NVIDIA H200") measures launch costs, the
     wavefront's variants and the driver's program binaries on whatever device runs it; on PoCL its binaries are
     no PTX, so ptxas is not asked."""
-    from bench import gpu_diagnostics as gd
+    from bench.gpu import diagnostics as gd
 
     costs = gd.launch_costs(device, n=40)
     assert set(costs) == {"profiling", "plain"}

@@ -149,3 +149,24 @@ def test_ruff_is_clean():
     paths = [str(ROOT / p) for p in ("pyclpt", "bench", "tests") if (ROOT / p).is_dir()]
     proc = subprocess.run([ruff, "check", "--no-cache", *paths], cwd=ROOT, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_bench_is_organised_by_question():
+    """bench/ (issue 27, item 8): every script in a folder by kind of question, run as
+    ``python -m bench.<folder>.<name>`` (none changes ``sys.path``); every study states its question, the
+    answer and the doc that quotes its figure in its docstring's first paragraph; the report generator
+    imports no other folder (it is the one installed)."""
+    bench = ROOT / "bench"
+    if not bench.is_dir():
+        pytest.skip("no bench/ beside pyclpt/ (an installed package)")
+    folders = {"report", "peers", "evaluations", "cluster", "timing", "gpu", "studies", "tools"}
+    assert folders <= {p.name for p in bench.iterdir() if (p / "__init__.py").is_file()}
+    assert {p.stem for p in bench.glob("*.py")} <= {"__init__"}
+    for p in bench.rglob("*.py"):
+        if p.parent != bench:
+            assert "sys.path" not in p.read_text(), f"{p.relative_to(ROOT)} changes sys.path"
+    for p in (bench / "report").glob("*.py"):
+        assert not re.search(r"^\s*(from|import) bench\.(?!report)", p.read_text(), re.M), p
+    for p in (bench / "studies").glob("[!_]*.py"):
+        first = p.read_text().split('"""')[1].split("\n\n")[0]
+        assert "?" in first and "docs/" in first, f"{p.relative_to(ROOT)}: question, answer, figure first"

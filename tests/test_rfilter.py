@@ -351,7 +351,7 @@ def test_splat_has_less_variance_than_importance_sampling():
     """tests/data/rfilter.xml at 32x24, 8 spp, 6 seeds: the per-pixel variance across seeds over the mean
     squared pixel. Splatting lets each sample count in every pixel the filter reaches; expected ratios
     ((integral of w)^2 / integral of w^2, 2D) 1/2.25 (tent) and 1/3.1 (gaussian); measured 0.45 and 0.29
-    (bench/rfilter_noise.py has the 64x48 figures)."""
+    (bench/evaluations/rfilter_noise.py has the 64x48 figures)."""
     def rel_var(rfilter):
         scene = pyclpt.load(DATA / "rfilter.xml", filter=rfilter.kind)
         scene.film.rfilter = rfilter

@@ -23,11 +23,11 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 try:
-    from pyclpt.bench import mitsuba_driver, versus
+    from pyclpt.bench.report import mitsuba_driver, versus
 except ModuleNotFoundError:
-    from bench import mitsuba_driver, versus
+    from bench.report import mitsuba_driver, versus
 
-# A stand-in for bench/mitsuba_driver.py: its reference is the constant REF, its renders REF plus a
+# A stand-in for bench/report/mitsuba_driver.py: its reference is the constant REF, its renders REF plus a
 # checkerboard of +-NOISE (so their relMSE against the reference is NOISE^2 / (REF^2 + eps) exactly);
 # every command is appended to the file LOG.
 FAKE = """#!{python}
@@ -111,9 +111,9 @@ def test_a_missing_or_broken_mitsuba_python_is_a_clear_error(how, tmp_path, monk
 
 def test_plain_bench_is_unchanged_by_versus_options():
     try:
-        from pyclpt.bench import report
+        from pyclpt.bench.report import report
     except ModuleNotFoundError:
-        from bench import report
+        from bench.report import report
     a = report.build_parser().parse_args([])
     assert a.versus is None
 
@@ -152,7 +152,7 @@ def test_relmse_is_zero_against_itself_and_the_noise_variance_against_a_noisy_co
     sign = np.where(rng.random(ref.shape) < 0.5, -1.0, 1.0)
     noisy = ref + 0.1 * sign  # every pixel off by exactly 0.1
     assert versus.relmse(noisy, ref) == pytest.approx(np.mean(0.01 / (ref**2 + versus.RELMSE_EPS)))
-    assert versus.RELMSE_EPS == 1e-2  # bench/denoise_metrics.py's
+    assert versus.RELMSE_EPS == 1e-2  # as bench/evaluations/denoise_metrics.py's
     # Gaussian noise of variance v on a constant c: relMSE -> v / (c^2 + eps); at n spp the variance is v1 / n
     flat = np.full((256, 256, 3), 0.5)
     for spp in (1, 4):

@@ -20,8 +20,8 @@
  * few frames, the long one does not). Their difference over the standard error of the fast mean
  * (the box's spread over sqrt(count), Bessel-corrected) is written per channel; spatial detail
  * cancels, as both means are over the same pixels, and one outlier in the box cannot raise it above
- * about 1. The next frame's reproject cuts the history length where it exceeds
- * DenoiserSettings.antilag (cl/denoise/reproject.cl). 0 where clip_gamma < 0 (no clipping, no
+ * about 1. The antilag pass of the same frame cuts the histories where its 3x3 mean exceeds
+ * DenoiserSettings.antilag (cl/denoise/antilag.cl). 0 where clip_gamma < 0 (no clipping, no
  * anti-lag) or fewer than 3 pixels hold a history.
  *
  * Consumes: temporal[0..2] (the sample) and temporal[3..5] (the reprojected long history) from
@@ -29,7 +29,7 @@
  *           padded (svgf.h, PAD).
  * Produces: accum[c * pixels + p] (padded), c < 3: the long history of this frame (demodulated
  *           illumination); lag[c * pixels + p] (padded), c < 3: the anti-lag statistic above, read
- *           by the next frame's reproject. */
+ *           by the antilag pass. */
 #include "denoise/svgf.h"
 
 #ifndef CLIP_RADIUS /* -DCLIP_RADIUS from pyclpt/denoise/svgf.py (DenoiserSettings.clip_radius) */

@@ -26,15 +26,12 @@
  *    its box is tight inside it and spans [dark, bright] on its jittered edges; a light that changes
  *    leaves the box at once), then blended with weight max(alpha_min, 1/N), as the long history: a
  *    static emitter's edge converges to the plain average of its frames.
- * 4. History length N = min(N_prev (1 - a) + 1, max_history) (N_prev: the accepted taps' weighted mean,
- *    rounded), 1 at a disocclusion. a is the anti-lag: the previous frame's clip_history statistic
- *    at the same taps (the largest of its three channels, t: how many standard errors the fast
- *    histories' mean around the pixel stood from the long histories'), a = clamp(4 (t - antilag) /
- *    antilag, 0, 1) (antilag 0: off; a ramp of a quarter of antilag: a partial cut keeps most of the
- *    old light, and the next frames cut again, so the restart should be nearly all or nothing). A change of the lighting moves the fast history and not the
- *    long one, so t grows within a frame or two; a = 1 restarts the history from this frame's
- *    sample (colour, moments, fast and emission histories all blend with 1/N); moments of luminance blended with max(moments_alpha_min, 1/N),
- *    the fast history with max(fast_alpha, 1/N). The long history is blended by clip_history.
+ * 4. History length N = min(N_prev + 1, max_history) (N_prev: the accepted taps' weighted mean,
+ *    rounded), 1 at a disocclusion; moments of luminance blended with max(moments_alpha_min, 1/N),
+ *    the fast history with max(fast_alpha, 1/N). The long history is blended by clip_history. Where
+ *    the lighting changed, the antilag pass (cl/denoise/antilag.cl) cuts N, the moments and the
+ *    fast, long and emission histories in this same frame (it used to be done here, one frame
+ *    late, from the previous frame's statistic).
  * The depth gradient GEO_GRAD: |dz/dx| + |dz/dy|, each the smaller of the one-sided differences to
  * the surface neighbours (a depth edge on one side does not count).
  *
@@ -42,8 +39,7 @@
  *           depth, normal, material); aovs[c * pixels + p] (cl/film/aovs.h: the motion); the
  *           previous frame's geo_prev (GEO_*), hist_prev (long history colour, channels 0..2),
  *           fast_prev (3), moments_prev (2), len_prev (history length; 0 = none, after a reset),
- *           emis_prev (3, the emission history); lag_prev (3, the previous frame's anti-lag statistic
-           from clip_history, which overwrites it after this pass).
+ *           emis_prev (3, the emission history).
  *           All but aovs padded (svgf.h, PAD).
  * Produces: geo[GEO_GRAD]; temporal[0..2] the sample clamped, temporal[3..5] the long history
  *           reprojected (0 at a disocclusion); fast (the fast history accumulated), moments
@@ -69,20 +65,18 @@ static inline float depth_step(float z, float zn) { return zn > 0.0f ? m_abs(z -
 /* The previous frame's history, summed over accepted taps with their weights. */
 typedef struct {
     vec3 color, fast, emis;
-    float m1, m2, len, lag, weight;
+    float m1, m2, len, weight;
 } history_t;
 
 static inline void add_tap(history_t* h, __global const float* hist_prev, __global const float* fast_prev,
                            __global const float* moments_prev, __global const float* len_prev,
-                           __global const float* emis_prev, __global const float* lag_prev, int n, int q,
-                           float w) {
+                           __global const float* emis_prev, int n, int q, float w) {
     h->color = v3_add(h->color, v3_scale(planar3(hist_prev, n, q), w));
     h->fast = v3_add(h->fast, v3_scale(planar3(fast_prev, n, q), w));
     h->emis = v3_add(h->emis, v3_scale(planar3(emis_prev, n, q), w));
     h->m1 += w * moments_prev[q];
     h->m2 += w * moments_prev[n + q];
     h->len += w * len_prev[q];
-    h->lag += w * m_max(m_max(lag_prev[q], lag_prev[n + q]), lag_prev[2 * n + q]);
     h->weight += w;
 }
 
@@ -91,11 +85,11 @@ __kernel void reproject(__global const float* sample, __global const float* emis
                         __global const float* geo_prev, __global const float* hist_prev,
                         __global const float* fast_prev, __global const float* moments_prev,
                         __global const float* len_prev, __global const float* emis_prev,
-                        __global const float* lag_prev, __global float* temporal,
+                        __global float* temporal,
                         __global float* fast, __global float* moments, __global float* len, __global float* emis,
                         int width, int height, float depth_threshold, float normal_threshold, float firefly_ratio,
                         float firefly_sigma, float max_history, float alpha_min, float moments_alpha_min,
-                        float fast_alpha, float antilag) {
+                        float fast_alpha) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;
@@ -109,7 +103,6 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     fast_prev += PAD;
     moments_prev += PAD;
     len_prev += PAD;
-    lag_prev += PAD;
     temporal += PAD;
     fast += PAD;
     moments += PAD;
@@ -173,20 +166,20 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     float fx0 = m_floor(px), fy0 = m_floor(py);
     float fx = px - fx0, fy = py - fy0;
     int x0 = (int)fx0, y0 = (int)fy0;
-    history_t h = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+    history_t h = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
     UNROLL for (int t = 0; t < 4; ++t) {
         int tx = x0 + (t & 1), ty = y0 + (t >> 1);
         bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
         int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
         bool ok = inside & (len_prev[q] >= 1.0f) & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
         float bw = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
-        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, lag_prev, n, q, ok ? bw : 0.0f);
+        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, n, q, ok ? bw : 0.0f);
     }
     /* none (a weight below 0.01): Falcor's fallback, the 3x3 pixels around the rounded position,
      * equally weighted; a branch, taken at disocclusions only */
     if (!(h.weight > 0.01f)) {
         int rx = (int)m_floor(px + 0.5f), ry = (int)m_floor(py + 0.5f);
-        history_t f = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+        history_t f = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
         if (rx >= 0 && rx < width && ry >= 0 && ry < height) {
             for (int dy = -1; dy <= 1; ++dy) {
                 for (int dx = -1; dx <= 1; ++dx) {
@@ -195,8 +188,7 @@ __kernel void reproject(__global const float* sample, __global const float* emis
                     int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
                     bool ok = inside & (len_prev[q] >= 1.0f)
                               & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
-                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, lag_prev, n, q,
-                            ok ? 1.0f : 0.0f);
+                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, n, q, ok ? 1.0f : 0.0f);
                 }
             }
         }
@@ -205,8 +197,7 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     bool valid = h.weight > 0.01f;
     float inv = valid ? 1.0f / h.weight : 0.0f;
     vec3 hist = v3_scale(h.color, inv), hist_fast = v3_scale(h.fast, inv);
-    float a = antilag > 0.0f ? m_clamp(4.0f * (h.lag * inv - antilag) / antilag, 0.0f, 1.0f) : 0.0f;
-    float N = valid ? m_min(m_floor(h.len * inv * (1.0f - a) + 0.5f) + 1.0f, max_history) : 1.0f;
+    float N = valid ? m_min(m_floor(h.len * inv + 0.5f) + 1.0f, max_history) : 1.0f;
 
     /* firefly clamp */
     float l = luminance(s);

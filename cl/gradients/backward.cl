@@ -26,6 +26,9 @@
  * bits for the replay. A path's adjoints are summed privately per slot and added to the buffers when it
  * ends (params.h: grad_put3, grad_flush). Memory: nothing per path, sample or bounce in device memory. */
 #include "gradients/bsdf_derivative.h"
+#ifdef GRAD_GEOMETRY
+#include "gradients/geometry.h"
+#endif
 #ifdef FILM_SPLAT
 #include "film/splat.h"
 
@@ -70,6 +73,49 @@ typedef struct {
     int material;
 } Deferred;
 
+#ifdef GRAD_GEOMETRY
+/* The path ended at vertex gc: the last three vertices' adjoints to the buffers. */
+static inline void geo_end(const Scene* sc, Grads* gr, GeoVertex* ga, GeoVertex* gb, GeoVertex* gc) {
+    geo_scatter(sc, gr, ga);
+    geo_scatter(sc, gr, gb);
+    geo_scatter(sc, gr, gc);
+}
+
+/* The interior term of a visible light sample n at vertex gc (reached from gb, r_bc away): its BSDF factor's
+ * directions and frame, and the light's end: an emissive triangle's point attached to it (its cosine, 1 / r^2,
+ * area Jacobian), a point light's position, a spot light held still (its falloff not differentiated), a direction
+ * to the environment or a directional light fixed. */
+static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, const Surface* s, const Bsdf* b,
+                           const NeeSample* n, vec3 dL, vec3 dir_in, GeoVertex* gb, GeoVertex* gc, float r_bc) {
+    vec3 C = n->sr.contrib;
+    float a = m_dot(dL, C);
+    vec3 g_wi, g_wo;
+    geo_bsdf_adjoint(b, s->sh, v3_neg(dir_in), n->ls.wi, n->f, C, dL, gc, &g_wi, &g_wo);
+    if (gc->kind == GEO_ATTACHED && r_bc > 0.0f) geo_segment_adjoint(gc, gb, v3_neg(dir_in), r_bc, g_wi, 0.0f);
+    else if (gc->camera) gc->gwi = v3_add(gc->gwi, g_wi); /* the camera ray turns */
+    __global const float* l = sc->lights + LIGHT_STRIDE * n->ls.light;
+    int type = (int)l[LIGHT_TYPE];
+    float r = n->ls.dist;
+    if (type == LIGHT_TRIANGLE) {
+        int prim = as_int(l[LIGHT_PRIM]);
+        vec2 u = square_to_triangle(rng_2d(key, depth, DIM_LIGHT_U));
+        __global const float* t = sc->tris + 9 * prim;
+        vec3 y = v3_add(v3_add(rgb_at(t, sc->unit), v3_scale(rgb_at(t + 3, sc->unit), u.x)), v3_scale(rgb_at(t + 6, sc->unit), u.y));
+        GeoVertex gy = geo_on_triangle(sc, prim, u.x, u.y, y, GEO_ATTACHED, v3_splat(0.0f));
+        geo_area_segment(gc, &gy, n->ls.wi, r, a, g_wo);
+        geo_scatter(sc, gr, &gy);
+    } else if (type == LIGHT_POINT || type == LIGHT_SPOT) {
+        GeoVertex gy = geo_fixed(v3_add(gc->p, v3_scale(n->ls.wi, r)));
+        if (type == LIGHT_POINT) {
+            gy.kind = GEO_POINT;
+            gy.id = n->ls.light;
+        }
+        geo_segment_adjoint(gc, &gy, n->ls.wi, r, g_wo, -2.0f * a / r);
+        geo_scatter(sc, gr, &gy);
+    }
+}
+#endif
+
 /* One walk along the path (path_continue's loop). The primal pass (replay false) scatters the emission
  * and next-event terms, defers the BSDF-sample terms of vertices before DEFERRED_VERTICES (at most
  * that many, in deferred) and says in *more whether later vertices need a replay; it records
@@ -81,9 +127,24 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
     PathState ps;
     camera_path(sc, key, pixel, &ps);
     if (max_depth == 0) return ps.L;
+#ifdef GRAD_GEOMETRY
+    /* the replay's interior term of moving geometry (geometry.h): ga and gb the two vertices before the ray's
+       hit (gb made the ray; at first the camera), the ray's segment an area-form one (a non-delta BSDF sample,
+       whose factors wait for its far end: seg_a, seg_gw) or one its hit slides along */
+    GeoVertex ga = geo_fixed(ps.org), gb = ga, gc = ga;
+    bool seg_area = false;
+    float seg_a = 0.0f, r_bc = 0.0f;
+    vec3 seg_gw = v3_splat(0.0f);
+#endif
     for (;;) {
         Hit hit;
         if (!scene_closest(sc, key, ps.depth, ps.org, ps.dir, &hit)) {
+#ifdef GRAD_GEOMETRY
+            if (replay) { /* a direction to the environment: nothing moves it */
+                geo_scatter(sc, gr, &ga);
+                geo_scatter(sc, gr, &gb);
+            }
+#endif
 #ifdef GRAD_ENV
             if (!replay) {
                 bool mis = !(ps.flags & PATH_PREV_DELTA);
@@ -99,6 +160,18 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
             return ps.L;
         }
         Surface s = surface_hit(sc, hit.prim, hit.u, hit.v, ps.dir);
+#ifdef GRAD_GEOMETRY
+        if (replay) {
+            Bsdf bg = bsdf_at(sc, &s);
+            int kind = bsdf_is_delta(&bg) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
+            gc = geo_on_triangle(sc, hit.prim, hit.u, hit.v, s.p, kind, ps.dir);
+#ifdef GRAD_CAMERA
+            if (ps.depth == 0) geo_camera_hit(sc, &gc, camera_film_position(sc, key, pixel), gb.p);
+#endif
+            r_bc = m_length(v3_sub(gc.p, gb.p));
+            if (seg_area && r_bc > 0.0f) geo_area_segment(&gb, &gc, ps.dir, r_bc, seg_a, seg_gw);
+        }
+#endif
 #ifdef GRAD_EMISSION
         if (!replay && !v3_is_zero(light_emitted(sc, s.light, s.ng, ps.dir, s.uv))) {
             float w = 1.0f; /* path_hit_emission's MIS weight */
@@ -108,7 +181,12 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
         }
 #endif
         path_hit_emission(sc, &s, hit.t, &ps);
-        if (!depth_allows(ps.depth + 1, max_depth)) return ps.L;
+        if (!depth_allows(ps.depth + 1, max_depth)) {
+#ifdef GRAD_GEOMETRY
+            if (replay) geo_end(sc, gr, &ga, &gb, &gc);
+#endif
+            return ps.L;
+        }
         Bsdf b = bsdf_at(sc, &s);
         vec3 wi = to_local(s.sh, v3_neg(ps.dir));
         NeeSample n;
@@ -117,6 +195,9 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
                            ? ((*visible >> ps.depth) & 1u) != 0
                            : !scene_occluded(sc, key, ps.depth, n.sr.org, n.sr.dir, n.sr.tmax);
             if (vis) {
+#ifdef GRAD_GEOMETRY
+                if (replay) geo_nee(sc, gr, key, ps.depth, &s, &b, &n, dL, ps.dir, &gb, &gc, r_bc);
+#endif
                 ps.L = v3_add(ps.L, n.sr.contrib);
                 if (!replay) {
                     if (ps.depth < VIS_BITS) *visible |= 1u << ps.depth;
@@ -133,7 +214,35 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
         }
         int depth = ps.depth;
         vec3 gathered = ps.L;
-        if (!path_sample_bsdf(key, &s, &b, &ps, max_depth)) return ps.L;
+#ifdef GRAD_GEOMETRY
+        vec3 dir_in = ps.dir;
+#endif
+        if (!path_sample_bsdf(key, &s, &b, &ps, max_depth)) {
+#ifdef GRAD_GEOMETRY
+            if (replay) geo_end(sc, gr, &ga, &gb, &gc);
+#endif
+            return ps.L;
+        }
+#ifdef GRAD_GEOMETRY
+        if (replay) {
+            seg_area = !(ps.flags & PATH_PREV_DELTA);
+            seg_a = 0.0f;
+            seg_gw = v3_splat(0.0f);
+            if (seg_area) { /* everything gathered after this vertex flows through its BSDF and the new segment */
+                vec3 through = v3_sub(L_total, gathered);
+                float pdf;
+                vec3 f = bsdf_eval(&b, wi, to_local(s.sh, ps.dir), &pdf);
+                vec3 g_wi;
+                geo_bsdf_adjoint(&b, s.sh, v3_neg(dir_in), ps.dir, f, through, dL, &gc, &g_wi, &seg_gw);
+                if (gc.kind == GEO_ATTACHED && r_bc > 0.0f) geo_segment_adjoint(&gc, &gb, v3_neg(dir_in), r_bc, g_wi, 0.0f);
+                else if (gc.camera) gc.gwi = v3_add(gc.gwi, g_wi);
+                seg_a = m_dot(dL, through);
+            }
+            geo_scatter(sc, gr, &ga); /* no later factor needs it */
+            ga = gb;
+            gb = gc;
+        }
+#endif
 #ifdef GRAD_BSDF
         /* everything the rest of the path gathers went through f at this vertex */
         if (bsdf_differentiated(&b)) {
@@ -188,6 +297,11 @@ __kernel SCALAR_KERNEL void backward(SCENE_PARAMS, __global const float* image_g
         BsdfAdjoint g = bsdf_adjoint(&deferred[k].r, v3_mul(dL, v3_sub(L, deferred[k].gathered)));
         grad_bsdf(&sc, &gr, deferred[k].material, deferred[k].uv, &g);
     }
+#endif
+#ifdef GRAD_GEOMETRY
+    more = true; /* the interior term of moving geometry is the replay's (it needs the path's radiance) */
+#endif
+#if defined(GRAD_BSDF) || defined(GRAD_GEOMETRY)
     if (more) backward_walk(&sc, &gr, key, pixel, max_depth, dL, true, L, &visible, deferred, &n_deferred, &more);
 #endif
     grad_flush(&gr);

@@ -12,6 +12,43 @@
  * where d(factors) is the tangent of an emitter's radiance (params.h) or of a BSDF value (df / f,
  * bsdf_derivative.h). Sampling decisions (pdfs, MIS weights, Russian roulette) are held fixed. */
 #include "gradients/bsdf_derivative.h"
+#ifdef GRAD_GEOMETRY
+#include "gradients/geometry.h"
+
+/* The log-derivative (per channel) of a visible light sample's contribution at vertex gc (reached along
+ * dir_in from gb, r_bc away) from moving geometry (geometry.h; backward.cl's geo_nee in forward mode). */
+static inline vec3 geo_nee_tangent(const Scene* sc, const Grads* tg, RngKey key, int depth, const Surface* s,
+                                   const Bsdf* b, const NeeSample* n, vec3 dir_in, const GeoVertex* gb,
+                                   const GeoVertex* gc, float r_bc) {
+    vec3 wi_w = v3_neg(dir_in), dwi = v3_neg(gc->dd), dwo = v3_splat(0.0f); /* dd: the camera ray's turn */
+    if (gc->kind == GEO_ATTACHED && r_bc > 0.0f) dwi = geo_direction_tangent(gc, gb, wi_w, r_bc);
+    __global const float* l = sc->lights + LIGHT_STRIDE * n->ls.light;
+    int type = (int)l[LIGHT_TYPE];
+    float r = n->ls.dist, scalar = 0.0f;
+    if (type == LIGHT_TRIANGLE) {
+        int prim = as_int(l[LIGHT_PRIM]);
+        vec2 u = square_to_triangle(rng_2d(key, depth, DIM_LIGHT_U));
+        __global const float* t = sc->tris + 9 * prim;
+        vec3 y = v3_add(v3_add(rgb_at(t, sc->unit), v3_scale(rgb_at(t + 3, sc->unit), u.x)), v3_scale(rgb_at(t + 6, sc->unit), u.y));
+        GeoVertex gy = geo_on_triangle(sc, prim, u.x, u.y, y, GEO_ATTACHED, v3_splat(0.0f));
+        geo_motion(sc, tg, &gy);
+        dwo = geo_direction_tangent(gc, &gy, n->ls.wi, r);
+        scalar = geo_area_segment_tangent(gc, &gy, n->ls.wi, r, dwo);
+    } else if (type == LIGHT_POINT || type == LIGHT_SPOT) {
+        GeoVertex gy = geo_fixed(v3_add(gc->p, v3_scale(n->ls.wi, r)));
+        if (type == LIGHT_POINT) {
+            gy.kind = GEO_POINT;
+            gy.id = n->ls.light;
+            geo_motion(sc, tg, &gy);
+        }
+        dwo = geo_direction_tangent(gc, &gy, n->ls.wi, r);
+        scalar = -2.0f * m_dot(n->ls.wi, v3_sub(gy.dx, gc->dx)) / r;
+    }
+    vec3 df = geo_bsdf_tangent(b, to_local(s->sh, wi_w), n->wo, geo_local_tangent(s->sh, wi_w, dwi, gc->dn),
+                               geo_local_tangent(s->sh, n->ls.wi, dwo, gc->dn));
+    return v3_add(safe_div3(df, n->f), v3_splat(scalar));
+}
+#endif
 
 __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __global uchar* drop_marks, uint seed,
                                     uint first_sample, int offset, int count, int max_depth, GRAD_PARAMS) {
@@ -25,6 +62,15 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
     PathState ps;
     camera_path(&sc, key, pixel, &ps);
     vec3 dbeta = v3_splat(0.0f), dL = v3_splat(0.0f);
+#ifdef GRAD_GEOMETRY
+    /* gb: the vertex that made the ray (at first the camera); an area-form segment's BSDF Jacobian in wo's local
+       coordinates waits for its far end (seg_jac, in gb's frame seg_frame) */
+    GeoVertex gb = geo_fixed(ps.org), gc = gb;
+    bool seg_area = false;
+    float r_bc = 0.0f;
+    vec3 seg_jac[3];
+    Frame seg_frame = frame_from(v3(0.0f, 0.0f, 1.0f));
+#endif
     if (max_depth != 0) {
         for (;;) {
             Hit hit;
@@ -40,6 +86,28 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
                 break;
             }
             Surface s = surface_hit(&sc, hit.prim, hit.u, hit.v, ps.dir);
+#ifdef GRAD_GEOMETRY
+            {
+                Bsdf bg = bsdf_at(&sc, &s);
+                int kind = bsdf_is_delta(&bg) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
+                gc = geo_on_triangle(&sc, hit.prim, hit.u, hit.v, s.p, kind, ps.dir);
+                geo_motion(&sc, &tg, &gc);
+#ifdef GRAD_CAMERA
+                if (ps.depth == 0) {
+                    geo_camera_hit(&sc, &gc, camera_film_position(&sc, key, pixel), gb.p);
+                    geo_camera_motion(&sc, &tg, &gc);
+                }
+#endif
+                r_bc = m_length(v3_sub(gc.p, gb.p));
+                if (seg_area && r_bc > 0.0f) { /* the segment's factors, now that its far end is known */
+                    vec3 dw = geo_direction_tangent(&gb, &gc, ps.dir, r_bc), dwl = to_local(seg_frame, dw);
+                    vec3 dlog = v3_add(v3_add(v3_scale(seg_jac[0], dwl.x), v3_scale(seg_jac[1], dwl.y)),
+                                       v3_scale(seg_jac[2], dwl.z));
+                    dlog = v3_add(dlog, v3_splat(geo_area_segment_tangent(&gb, &gc, ps.dir, r_bc, dw)));
+                    dbeta = v3_add(dbeta, v3_mul(ps.beta, dlog));
+                }
+            }
+#endif
             vec3 le = light_emitted(&sc, s.light, s.ng, ps.dir, s.uv);
             if (!v3_is_zero(le)) {
                 float w = 1.0f;
@@ -60,13 +128,36 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
                 vec3 unit = v3_scale(n.f, n.weight); /* C / (beta Le) */
                 vec3 dC = v3_add(v3_mul(v3_add(dbeta, v3_mul(ps.beta, df_f)), v3_mul(unit, n.ls.radiance)),
                                  v3_mul(v3_mul(ps.beta, unit), dle));
+#ifdef GRAD_GEOMETRY
+                dC = v3_add(dC, v3_mul(n.sr.contrib, geo_nee_tangent(&sc, &tg, key, ps.depth, &s, &b, &n, ps.dir, &gb,
+                                                                      &gc, r_bc)));
+#endif
                 dL = v3_add(dL, dC);
             }
             vec3 beta = ps.beta;
+#ifdef GRAD_GEOMETRY
+            vec3 dir_in = ps.dir;
+#endif
             if (!path_sample_bsdf(key, &s, &b, &ps, max_depth)) break;
             /* beta' = beta * weight / q: dbeta' = dbeta * (beta' / beta) + beta' * df / f */
             vec3 df_f = bsdf_tangent_ratio(&tg, &s, &b, wi, to_local(s.sh, ps.dir), (ps.flags & PATH_PREV_DELTA) != 0, &db);
             dbeta = v3_add(v3_mul(dbeta, safe_div3(ps.beta, beta)), v3_mul(ps.beta, df_f));
+#ifdef GRAD_GEOMETRY
+            seg_area = !(ps.flags & PATH_PREV_DELTA);
+            if (seg_area) { /* the BSDF's derivative through wi and the frame now, through wo when the hit is known */
+                vec3 wi_w = v3_neg(dir_in), wo = to_local(s.sh, ps.dir);
+                vec3 dwi = gc.kind == GEO_ATTACHED && r_bc > 0.0f ? geo_direction_tangent(&gc, &gb, wi_w, r_bc)
+                                                                  : v3_neg(gc.dd);
+                float pdf;
+                vec3 f = bsdf_eval(&b, wi, wo, &pdf);
+                vec3 df = geo_bsdf_tangent(&b, wi, wo, geo_local_tangent(s.sh, wi_w, dwi, gc.dn),
+                                           geo_local_tangent(s.sh, ps.dir, v3_splat(0.0f), gc.dn));
+                dbeta = v3_add(dbeta, v3_mul(ps.beta, safe_div3(df, f)));
+                geo_bsdf_wo_jacobian(&b, wi, wo, f, seg_jac);
+                seg_frame = s.sh;
+            }
+            gb = gc;
+#endif
         }
     }
     film_commit(frame, drop_marks, f, dL);

@@ -8,12 +8,15 @@
  *           + 1)] the same for w + eps n: L_i the estimator of path.h from there (both sides with the same random
  *           numbers, key: seed, sample i, 0; the emission it meets counted whole, as after a delta sample); 0 where
  *           the camera ray misses, the direction is below the surface or the depth allows no bounce; a NaN or inf
- *           one gives 0 and adds 1 to drop_marks[2 i (+ 1)]. */
+ *           one gives 0 and adds 1 to drop_marks[2 i (+ 1)]; first_prim[2 i (+ 1)] the leaf-order triangle that
+ *           side's ray meets first (-1: none) and first_hit[3 (2 i (+ 1))] its distance and barycentrics there, so
+ *           that the host can tell the occluder's side from the one that passes it, and what lies behind. */
 #include "integrators/path.h"
 
 __kernel SCALAR_KERNEL void incident_radiance(SCENE_PARAMS, __global const float* samples, __global float* radiance,
-                                              __global uchar* drop_marks, uint seed, int count, int max_depth,
-                                              float eps) {
+                                              __global int* first_prim, __global float* first_hit,
+                                              __global uchar* drop_marks, uint seed,
+                                              int count, int max_depth, float eps) {
     int i = get_global_id(0);
     if (i >= count) return;
     Scene sc = SCENE_INIT;
@@ -34,6 +37,8 @@ __kernel SCALAR_KERNEL void incident_radiance(SCENE_PARAMS, __global const float
     }
     for (int side = 0; side < 2; side++) {
         vec3 out = v3_splat(0.0f);
+        int prim = -1;
+        vec3 where = v3_splat(0.0f);
         if (found) {
             vec3 dir = m_normalize(v3_add(w, v3_scale(n, side == 0 ? -eps : eps)));
             vec3 wo = to_local(s.sh, dir);
@@ -49,10 +54,17 @@ __kernel SCALAR_KERNEL void incident_radiance(SCENE_PARAMS, __global const float
                 ps.eta_scale = 1.0f;
                 ps.depth = 1;
                 ps.flags = PATH_PREV_DELTA;
+                Hit next;
+                if (scene_closest(&sc, key, 1, ps.org, ps.dir, &next)) {
+                    prim = next.prim;
+                    where = v3(next.t, next.u, next.v);
+                }
                 path_continue(&sc, key, &ps, max_depth, aov_out(0, 0, 0));
                 out = v3_mul(f, ps.L);
             }
         }
         film_commit(radiance, drop_marks, 2 * i + side, out);
+        first_prim[2 * i + side] = prim;
+        store3(first_hit, 2 * i + side, where);
     }
 }

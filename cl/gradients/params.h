@@ -8,13 +8,19 @@
  *          constant environment
  *   tex8   4 floats (RGBA) per texel of texels8: the texel's linear value (after sRGB decoding)
  *   tex32  4 floats per texel of texels32 (bitmaps stored as floats, environment maps)
+ *   verts  3 floats per vertex of the packed vertex arrays (scene_vnormals' order): its world position
+ *          (-DGRAD_GEOMETRY, gradients/geometry.h)
+ *   lightpos 3 floats per emitter: a point light's position (-DGRAD_GEOMETRY)
+ *   camera 12 floats: the camera's origin and its basis F, R, U (-DGRAD_CAMERA, gradients/geometry.h)
  * A textured reflectance is scale * texel values * the material's constant (1 unless changed): its
  * gradient goes to the texels (bilinear weights, texture.h tex_taps) and to the constant.
  *
  * -D specialisations say what is differentiated (the rest costs nothing): GRAD_COLOR (diffuse
  * reflectance of diffuse and plastic materials), GRAD_SPEC (specular reflectance of conductors and
  * plastics), GRAD_ALPHA (roughness of rough conductors, plastics and dielectrics), GRAD_EMISSION (area
- * lights' radiance), GRAD_ENV (the environment's radiance or texels).
+ * lights' radiance), GRAD_ENV (the environment's radiance or texels), GRAD_GEOMETRY (where meshes' vertices
+ * and point lights are: the interior term of gradients/geometry.h), GRAD_CAMERA (where the camera is; implies
+ * GRAD_GEOMETRY).
  * alpha_up, alpha_down: the material records packed again with alpha (1 +- BSDF_DIFF_STEP)
  * (pyclpt/gradients/replay.py), for the roughness derivative (bsdf_derivative.h).
  *
@@ -26,10 +32,17 @@
 
 #include "integrators/path.h"
 
+#if defined(GRAD_CAMERA) && !defined(GRAD_GEOMETRY)
+#define GRAD_GEOMETRY 1
+#endif
+
 #define GRAD_PARAMS                                                                                         \
     __global float *grad_mats, __global float *grad_lights, __global float *grad_tex8, __global float *grad_tex32, \
+        __global float *grad_verts, __global float *grad_lightpos, __global float *grad_camera,                 \
         __global const float *alpha_up, __global const float *alpha_down
-#define GRAD_INIT {grad_mats, grad_lights, grad_tex8, grad_tex32, alpha_up, alpha_down, {0}, {{0.0f}}, 0}
+#define GRAD_INIT                                                                                             \
+    {grad_mats,  grad_lights,   grad_tex8, grad_tex32, grad_verts, grad_lightpos, grad_camera, alpha_up,          \
+     alpha_down, {0},           {{0.0f}},  0}
 
 /* Adjoints a path adds to the same slots (its materials' colours, the light triangles it samples) are
  * summed in private memory first, in up to GRAD_CACHE slots, and added to the buffers once, when the
@@ -46,6 +59,9 @@ typedef struct {
     __global float* lights;
     __global float* tex8;
     __global float* tex32;
+    __global float* verts;
+    __global float* lightpos;
+    __global float* camera;
     __global const float* alpha_up;
     __global const float* alpha_down;
     __global float* pending_at[GRAD_CACHE]; /* three floats each */

@@ -107,16 +107,20 @@ static inline void camera_ray(const Scene* sc, RngKey key, float x, float y, Pat
 }
 
 /* The camera ray of (pixel, sample) through a position drawn from the film's reconstruction filter around
- * the pixel's centre (film/rfilter.h; the box and a splatting film: uniform in the pixel). `pixel`: the
+ * the pixel's centre (camera_film_position: that position) (film/rfilter.h; the box and a splatting film: uniform in the pixel). `pixel`: the
  * index of film_pixel, in the image padded by CONST_FILM_PAD pixels on each side (0 but for a splatting
  * film: the image's index). */
-static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
+static inline vec2 camera_film_position(const Scene* sc, RngKey key, int pixel) {
     __global const float* c = sc->consts;
     int pad = (int)c[CONST_FILM_PAD];
     int width = (int)c[CONST_WIDTH] + 2 * pad;
     vec2 j = rng_2d(key, 0, DIM_CAMERA_X);
-    camera_ray(sc, key, (float)(pixel % width - pad) + rfilter_position(c, j.x), (float)(pixel / width - pad) +
-               rfilter_position(c, j.y), ps);
+    return v2((float)(pixel % width - pad) + rfilter_position(c, j.x), (float)(pixel / width - pad) +
+              rfilter_position(c, j.y));
+}
+static inline void camera_path(const Scene* sc, RngKey key, int pixel, PathState* ps) {
+    vec2 x = camera_film_position(sc, key, pixel);
+    camera_ray(sc, key, x.x, x.y, ps);
 }
 
 /* miss: the environment seen along the ray, MIS-weighted against light sampling. */

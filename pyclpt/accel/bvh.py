@@ -59,7 +59,7 @@ as fast as single-threaded ones). Builds are deterministic either way.
 
 Build settings (measured)
 -------------------------
-``bench/bvh_build.py --compare`` on 2 cores of an AMD EPYC VM shared with
+``bench/timing/bvh_build.py --compare`` on 2 cores of an AMD EPYC VM shared with
 other jobs, Embree 4.4 from the embreex wheel, PoCL 3.0 CPU device, 400k
 random rays (half from a sphere around the mesh aimed into its box, half from
 inside the box in random directions; 52% hit). Build CPU-seconds (the build

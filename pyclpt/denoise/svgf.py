@@ -1,12 +1,12 @@
 """SVGF on the device: spatiotemporal variance-guided filtering (Schied et al. 2017, as Falcor's
 SVGFPass), with NRD RELAX's fast history clipping the long one.
 
-One frame is six passes, one kernel each in ``cl/denoise/`` and one method here of the same name:
+One frame is seven passes, one kernel each in ``cl/denoise/`` and one method here of the same name:
 :meth:`Svgf.demodulate` (sanitize, divide by the albedo, this frame's geometry),
 :meth:`Svgf.reproject` (firefly clamp, reproject and accumulate the fast history, moments and
-history length; the anti-lag cuts the history where the lighting changed),
-:meth:`Svgf.clip_history` (clip the long history into the fast one's neighbourhood and blend; the
-anti-lag statistic), :meth:`Svgf.variance` (temporal or, on a short history, spatial
+history length), :meth:`Svgf.clip_history` (clip the long history into the fast one's neighbourhood
+and blend; the anti-lag statistic), :meth:`Svgf.antilag` (cut the histories where the statistic says
+the lighting changed, in the same frame), :meth:`Svgf.variance` (temporal or, on a short history, spatial
 variance), :meth:`Svgf.atrous` (``iterations`` a-trous iterations) and :meth:`Svgf.modulate` (times
 the albedo, plus the emission's own temporal history: the emitted part of the colour is kept out of
 the filter). :meth:`Svgf.count_dropped` adds up the NaN/inf inputs (``cl/film/count_dropped.cl``).
@@ -34,7 +34,7 @@ from pyclpt.device.program import build_program
 log = logging.getLogger("pyclpt.denoise")
 
 #: The passes of a frame, in launch order (each a kernel, a .cl file and a method of Svgf).
-PASSES = ("demodulate", "count_dropped", "reproject", "clip_history", "variance", "atrous", "modulate")
+PASSES = ("demodulate", "count_dropped", "reproject", "clip_history", "antilag", "variance", "atrous", "modulate")
 #: Channels of a geometry record (cl/denoise/svgf.h, GEO_COUNT).
 GEO_COUNT = 6
 #: Floats of padding before and after each internal buffer (cl/denoise/svgf.h, PAD).
@@ -158,7 +158,7 @@ class Svgf:
         phi = self._settings.phi_normal
         power_of_two = phi >= 1 and phi == 2.0 ** int(math.log2(phi))
         squarings = {"NORMAL_SQUARINGS": int(math.log2(phi))} if power_of_two else {}
-        for name in ("demodulate", "reproject", "variance", "atrous", "modulate"):
+        for name in ("demodulate", "reproject", "antilag", "variance", "atrous", "modulate"):
             defines = squarings if name in ("variance", "atrous") else {}
             kernels[name] = cl.Kernel(build_program(d, [f"denoise/{name}.cl"], defines=defines,
                                                     options=BUILD_OPTIONS), name)
@@ -238,15 +238,15 @@ class Svgf:
 
     def reproject(self, aovs: cl.Buffer) -> cl.Event:
         """Pass 2 (cl/denoise/reproject.cl): the firefly-clamped sample and the reprojected history; the
-        fast history, moments and history length of this frame (cut by the previous frame's anti-lag)."""
+        fast history, moments and history length of this frame (cut by :meth:`antilag`)."""
         s, c, p = self._settings, self._cur, self._prev
         ev = self._kernels["reproject"](
             self.device.queue, self.global_size, self.local, self._ping[0], self._emission, self._geo[c], aovs,
-            self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p], self._lag,
-            self._temporal, self._fast[c], self._moments[c], self._len[c], self._emis[c], *self._args2d(),
+            self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p], self._temporal,
+            self._fast[c], self._moments[c], self._len[c], self._emis[c], *self._args2d(),
             np.float32(s.depth_threshold), np.float32(s.normal_threshold), np.float32(s.firefly_ratio),
             np.float32(s.firefly_sigma), np.float32(s.max_history), np.float32(s.alpha_min),
-            np.float32(s.moments_alpha_min), np.float32(s.fast_alpha), np.float32(s.antilag))
+            np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
         return self._record("reproject", ev)
 
     def count_dropped(self) -> cl.Event:
@@ -264,13 +264,24 @@ class Svgf:
 
     def clip_history(self) -> cl.Event:
         """Pass 3 (cl/denoise/clip_history.cl): the long history clipped and blended (one work-item per
-        pixel and channel); the anti-lag statistic that the next frame's reproject reads."""
+        pixel and channel); the anti-lag statistic that :meth:`antilag` reads."""
         s = self._settings
         ev = self._kernels["clip_history"](
             self.device.queue, (*self.global_size, 3), (*self.local, 1), self._temporal, self._fast[self._cur],
             self._len[self._cur], self._moments[self._cur], self._accum, self._lag, *self._args2d(),
             np.float32(s.alpha_min), np.float32(s.clip_gamma), np.float32(s.fast_alpha / (2.0 - s.fast_alpha)))
         return self._record("clip_history", ev)
+
+    def antilag(self) -> cl.Event:
+        """Pass 3b (cl/denoise/antilag.cl): where clip_history's statistic says the lighting changed, the
+        history length, moments and fast and long histories of this frame cut, in place."""
+        s, c = self._settings, self._cur
+        ev = self._kernels["antilag"](
+            self.device.queue, self.global_size, self.local, self._temporal, self._emission, self._lag, self._accum,
+            self._fast[c], self._moments[c], self._len[c], self._emis[c], *self._args2d(),
+            np.float32(s.antilag if s.clip_gamma >= 0 else 0.0), np.float32(s.alpha_min),
+            np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
+        return self._record("antilag", ev)
 
     def variance(self) -> cl.Event:
         """Pass 4 (cl/denoise/variance.cl): illumination and variance, the a-trous input."""
@@ -319,6 +330,7 @@ class Svgf:
         self.count_dropped()
         self.reproject(aovs)
         self.clip_history()
+        self.antilag()
         self.variance()
         for i in range(self._settings.iterations):
             self.atrous(i)

@@ -1,4 +1,5 @@
-"""Renders spread over a Dask cluster: :class:`DistributedRenderer` and :func:`render`.
+"""Renders spread over a Dask cluster: :class:`DistributedRenderer`, and :func:`render_on_cluster`, the
+cluster path of :func:`pyclpt.render` (``client=``).
 
 A render of ``spp`` samples becomes tasks of ``task_spp`` samples each (:mod:`.tasks`); the workers
 render them with the renderer they keep for the scene (:mod:`.worker`) and send back the sums; the
@@ -41,7 +42,7 @@ from pyclpt.distributed.worker import image_size, run_task
 from pyclpt.film.crop import tiles
 from pyclpt.film.film import DEFAULT_PRECISION
 from pyclpt.rendering.frame_loop import PROGRESS_DELAY_S
-from pyclpt.rendering.renderer import render as render_local
+from pyclpt.rendering.renderer import render  # noqa: F401  (pyclpt.render, here before it moved: kept importable)
 from pyclpt.scene.camera_path import CameraPath
 from pyclpt.scene.model import Camera, Scene, content_digest
 
@@ -359,22 +360,16 @@ class DistributedRenderer:
         self.close()
 
 
-def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = None, seed: int = 0,
-           integrator: str = "megakernel", width: int | None = None, height: int | None = None,
-           device: Any = None, layout: str = "soa", progress: bool | None = None,
-           wave_size: int | None = None, precision: str = DEFAULT_PRECISION,
-           aovs: Sequence[str] | str | bool | None = None, client: Any = None,
-           task_spp: int | None = None) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
-    """:func:`pyclpt.rendering.renderer.render`, or with ``client`` (a ``dask.distributed.Client``) the
-    same image rendered on that cluster's workers (:class:`DistributedRenderer`; ``task_spp`` samples a
-    task). A distributed render takes no ``device`` (each worker picks its own: ``PYCLPT_DEVICE``) and
-    no ``aovs``."""
-    if client is None:
-        if task_spp is not None:
-            raise ValueError("task_spp splits a distributed render: give client= too")
-        return render_local(scene, spp=spp, max_depth=max_depth, seed=seed, integrator=integrator, width=width,
-                            height=height, device=device, layout=layout, progress=progress, wave_size=wave_size,
-                            precision=precision, aovs=aovs)
+def render_on_cluster(client: Any, scene: Scene | str, spp: int | None = None, max_depth: int | None = None,
+                      seed: int = 0, integrator: str = "megakernel", width: int | None = None,
+                      height: int | None = None, device: Any = None, layout: str = "soa",
+                      progress: bool | None = None, wave_size: int | None = None,
+                      precision: str = DEFAULT_PRECISION, aovs: Sequence[str] | str | bool | None = None,
+                      task_spp: int | None = None) -> np.ndarray:
+    """The cluster path of :func:`pyclpt.render` (``client=``, a ``dask.distributed.Client``; named by
+    :data:`pyclpt.rendering.renderer.CLUSTER_RENDER`): the same image rendered on that cluster's workers
+    (:class:`DistributedRenderer`; ``task_spp`` samples a task). It takes no ``device`` (each worker picks
+    its own: ``PYCLPT_DEVICE``) and no ``aovs``."""
     if device is not None:
         raise ValueError("a distributed render runs on each worker's own device (PYCLPT_DEVICE in the "
                          "workers' environment); leave device=None")

@@ -51,7 +51,7 @@ UNSAFE_MATH_OPTIONS = ("-cl-fast-relaxed-math", "-cl-unsafe-math-optimizations",
 EMULATE_FP64_ENV = "PYCLPT_EMULATE_FP64"
 # Work-group shape: Falcor's 16x16 tiles on GPUs; on a CPU driver (PoCL) a row of 256 pixels,
 # on which 16x16 took 1.5x (single) to 1.7x (double) the time at 1920x1080
-# (bench/accumulation.py; docs/accumulation.md).
+# (bench/studies/accumulation.py; docs/accumulation.md).
 GPU_LOCAL_SIZE = (16, 16)
 CPU_LOCAL_SIZE = (256, 1)
 

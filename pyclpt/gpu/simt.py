@@ -202,7 +202,7 @@ def trace_paths(scene, *, spp: int = 1, max_depth: int | None = None, width: int
 # -- the machine and the cost model ---------------------------------------------------------------------
 #: Registers per thread of each kernel on sm_90, the occupancy input: the GPU layout's kernels of the Cornell
 #: box without the G-buffer (`pyclpt gpu-isa`, docs/benchmarks/gpu-isa.json; docs/gpu.md). Scenes with more
-#: material kinds need more (bench/simt_model.py --isa takes each scene's from a gpu-isa report).
+#: material kinds need more (bench/gpu/simt_model.py --isa takes each scene's from a gpu-isa report).
 REGISTERS: dict[str, int] = {
     "megakernel": 113, "finish_paths": 114, "intersect": 47, "shadow_test": 40, "sample_bsdf": 58,
     "process_hit": 60, "path_init": 27, "miss": 17, "light_contribution": 20, "compact_count": 19,

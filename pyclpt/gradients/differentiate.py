@@ -6,119 +6,44 @@ d, spp, seed)`` is the derivative along ``d`` of ``pyclpt.render(scene, spp, see
 path. Sampling decisions (which lobe, which light, pdfs, MIS weights, roulette) are not
 differentiated, as in Mitsuba 3's ``prb``; nor is visibility (docs/differentiable.md).
 
-The scene's device copy, its compiled kernels and buffers are kept between calls for the most recent
-scenes (:data:`CACHE_SIZE`), so that an optimisation loop pays for them once; :meth:`SceneParameters.update`
-uploads changed values into them, and so does the next call after a change made to the scene model
-directly (a field assigned, a list element replaced, a numpy array edited in place: every call compares
-a digest of the scene's arrays, :func:`pyclpt.scene.model.content_digest`, about 0.1 ms for the Cornell
-box and a few ms for 100k triangles). A changed texel or emitter is uploaded again; changed geometry
-(vertices moved in place) rebuilds the scene's device copy and BVH. Either way the scene is validated
-again, so a NaN written into an array is the usual validation error. :func:`clear_cache` drops every
-copy.
+The scene's device copy, its compiled kernels and buffers are kept between calls
+(:mod:`pyclpt.gradients.session`); :func:`clear_cache` drops every copy.
+
+Geometry (``SHAPE.vertex_positions``, ``SHAPE.to_world``, a point light's ``position``) is differentiated when
+named: the interior term by the replay (``cl/gradients/geometry.h``: the material form, shading that follows the
+moving surfaces) plus the boundary terms of camera silhouettes (:func:`pyclpt.gradients.edges.primary_boundary`),
+of what the first surface seen receives (:func:`pyclpt.gradients.shadows.soft_shadow_boundary`) and of point
+lights' hard shadows (:func:`pyclpt.gradients.shadows.shadow_boundary`).
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
-from collections import OrderedDict
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from pyclpt.buffers.scene import SceneBuffers
-from pyclpt.common.checks import check_int, check_optional_int
-from pyclpt.device.context import Device, get_device
-from pyclpt.gradients.layout import BUFFERS, buffer_sizes, parameter_slots
-from pyclpt.gradients.parameters import SceneParameters, forget, on_update
-from pyclpt.gradients.replay import PathReplay
-from pyclpt.scene.model import Scene, content_digest, generation
+from pyclpt.common.checks import check_int
+from pyclpt.device.context import Device
+from pyclpt.gradients.edges import (
+    primary_boundary,
+    primary_boundary_forward,
+    sensor_names,
+    vertex_gradients,
+    vertex_motion,
+)
+from pyclpt.gradients.layout import BUFFERS, buffer_sizes, parameter_slots, vertex_offset
+from pyclpt.gradients.parameters import SceneParameters
+from pyclpt.gradients.session import clear_cache, replay_for  # noqa: F401 (clear_cache: the public name)
+from pyclpt.gradients.shadows import (
+    shadow_boundary,
+    shadow_boundary_forward,
+    soft_shadow_boundary,
+    soft_shadow_boundary_forward,
+)
+from pyclpt.scene.model import Mesh, PointLight, Scene, SpotLight
 
 log = logging.getLogger("pyclpt")
-
-CACHE_SIZE = 4  # scenes whose device copies are kept
-UNLIMITED_DEPTH = 1024  # max_depth -1: paths end by Russian roulette, at most this many bounces
-
-
-def appearance_key(scene: Scene) -> tuple:
-    """What changes when the scene's materials, textures or emitters are changed through the model:
-    any field assignment (model.generation), an element of a list replaced, the environment."""
-    return (generation(), tuple(map(id, scene.materials)), tuple(map(id, scene.meshes)),
-            tuple(map(id, scene.lights)), id(scene.environment))
-
-
-@dataclass
-class _Session:
-    scene: Scene
-    device: Device
-    buffers: SceneBuffers
-    key: tuple
-    digest: tuple[bytes, bytes] = (b"", b"")  # content_digest of the arrays the buffers were built from
-    replays: dict[tuple[int, int, int], PathReplay] = field(default_factory=dict)
-
-
-_SESSIONS: OrderedDict[tuple[int, int], _Session] = OrderedDict()
-
-
-def clear_cache() -> None:
-    """Drop every scene's device copy kept for gradients."""
-    for s in _SESSIONS.values():
-        forget(s.scene)
-    _SESSIONS.clear()
-
-
-def replay_for(scene: Scene, *, width: int | None = None, height: int | None = None, max_depth: int | None = None,
-               device: Device | str | None = None) -> PathReplay:
-    """The :class:`PathReplay` of ``scene`` at that resolution and depth (cached; see the module)."""
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pyclpt.Scene, got {type(scene).__name__}")
-    dev = get_device(device)
-    width = check_optional_int(width, "width", lo=1, hi=65536) or scene.film.width
-    height = check_optional_int(height, "height", lo=1, hi=65536) or scene.film.height
-    depth = check_optional_int(max_depth, "max_depth", lo=-1, note=" (-1 = unlimited)")
-    depth = scene.max_depth if depth is None else depth
-    depth = UNLIMITED_DEPTH if depth == -1 else depth
-    key = (id(scene), id(dev))
-    session = _SESSIONS.get(key)
-    digest = content_digest(scene, values=False)  # arrays edited in place (checked every call)
-    if session is not None and session.scene is scene and session.digest[0] != digest[0]:
-        try:  # the geometry changed in place: its BVH refitted or built again, the scene checked again
-            scene.validate()
-            session.buffers.refresh_geometry()
-            session.key, session.digest = appearance_key(scene), digest
-        except ValueError:  # it needs other kernels (or is invalid: validated again below, raising)
-            forget(scene)
-            session = None
-    if session is None or session.scene is not scene:
-        scene.validate()
-        session = _Session(scene, dev, SceneBuffers(scene, dev), appearance_key(scene), digest)
-        _SESSIONS[key] = session
-
-        def refresh(areas: frozenset[str], s: _Session = session) -> None:
-            if "geometry" in areas:
-                s.buffers.refresh_geometry()
-            else:
-                s.buffers.refresh_appearance()
-            if "camera" in areas:
-                s.buffers.refresh_camera()
-            s.key = appearance_key(s.scene)
-            s.digest = content_digest(s.scene, values=False)
-
-        on_update(scene, refresh)
-        while len(_SESSIONS) > CACHE_SIZE:
-            _, old = _SESSIONS.popitem(last=False)
-            forget(old.scene)
-    elif session.key != appearance_key(scene) or session.digest != digest:
-        # the model was changed directly, not through update(): a field assigned, or an array (texels,
-        # emission) edited in place; refresh_appearance validates the scene again
-        session.buffers.refresh_appearance()
-        session.key = appearance_key(scene)
-        session.digest = digest
-    _SESSIONS.move_to_end(key)
-    rkey = (width, height, depth)
-    if rkey not in session.replays:
-        session.replays[rkey] = PathReplay(dev, session.buffers, width, height, depth)
-    return session.replays[rkey]
-
 
 def _check_seed(seed: int, name: str) -> int:
     return check_int(seed, name, lo=0, hi=2**32 - 1)
@@ -127,12 +52,18 @@ def _check_seed(seed: int, name: str) -> int:
 def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None, seed: int = 0,
                     max_depth: int | None = None, params: Sequence[str] | SceneParameters | None = None, *,
                     loss_seed: int | None = None, width: int | None = None, height: int | None = None,
-                    device: Device | str | None = None) -> dict[str, np.ndarray]:
+                    device: Device | str | None = None, boundary: bool = True, edge_samples: int = 65536,
+                    edge_spp: int = 4) -> dict[str, np.ndarray]:
     """Reverse mode: the gradient of a loss with respect to scene parameters, given the loss's gradient
     with respect to the image, ``image_grad`` (H, W, 3) (dLoss/dI of ``pyclpt.render(scene, ...)``).
 
-    ``params``: the names to differentiate, or one name (default: every differentiable one; see
-    :func:`pyclpt.traverse`). Returns ``{name: gradient}``, each shaped as the parameter's value.
+    ``params``: the names to differentiate, or one name (default: every differentiable one but those of where
+    things are; see :func:`pyclpt.traverse`). Returns ``{name: gradient}``, each shaped as the parameter's value.
+    Where things are (a mesh's ``vertex_positions`` or ``to_world``, a point light's ``position``: named in
+    ``params``): the interior term by the replay plus, with ``boundary``, the boundary terms of visibility (see the
+    module): ``edge_samples`` points on camera silhouettes and on hard-shadow outlines, ``edge_spp`` shading points
+    a pixel for the outlines in the light the first surfaces receive; outlines seen after the first bounce are
+    left out (docs/differentiable.md).
     ``seed`` must differ from the seed of the image the loss was computed on (``loss_seed``, when
     given, is checked): the same random numbers in both make the gradient biased (the error of the
     image and the paths that carry its gradient would be correlated).
@@ -160,7 +91,10 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
         raise ValueError("image_grad holds NaN or infinite values")
     # the scene was checked by replay_for (when packed, and again when it changed): no traverse() check here
     table = params if isinstance(params, SceneParameters) else SceneParameters(scene)
-    names = table.differentiable if params is None or isinstance(params, SceneParameters) else list(params)
+    if params is None or isinstance(params, SceneParameters):
+        names = [n for n in table.differentiable if table.parameter(n).kind not in ("geometry", "camera")]
+    else:
+        names = list(params)
     chosen = [table.parameter(n) for n in names]
     bad = [f"{p.name} ({p.reason})" for p in chosen if not p.differentiable]
     if bad:
@@ -179,10 +113,102 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     out = {}
     for p in chosen:
         value_shape = p.get().shape
-        exact = np.ldexp(parameter_slots(scene, replay.scene.arrays, p).gather(buffers), shift)
+        if p.kind == "camera":  # through the camera's origin and basis
+            g12 = np.ldexp(buffers["camera"][:12].astype(np.float64), shift)
+            exact = camera_jacobian(scene, replay.width, replay.height, p.name).T @ g12
+        elif p.kind == "geometry" and isinstance(p.target, Mesh):  # through its vertices (a pose: chained)
+            first, count = vertex_offset(scene, p.target), p.target.positions.shape[0]
+            gv = np.ldexp(buffers["verts"][3 * first:3 * (first + count)].astype(np.float64), shift).reshape(-1, 3)
+            pose: dict[str, np.ndarray] = {}
+            vertex_gradients(table, scene, scene.meshes.index(p.target), [p.name], gv, pose)
+            exact = pose[p.name].astype(np.float64)
+        else:
+            exact = np.ldexp(parameter_slots(scene, replay.scene.arrays, p).gather(buffers), shift)
         _check_float32(exact, p.name, peak)
         out[p.name] = exact.astype(np.float32).reshape(value_shape)
+    moving = [p.name for p in chosen if p.kind in ("geometry", "camera")]
+    if moving and boundary:
+        for name, g in boundary_backward(scene, image_grad, moving, table, seed=seed, max_depth=replay.max_depth,
+                                         device=device, samples=edge_samples, spp=edge_spp).items():
+            out[name] = (out[name] + g.reshape(out[name].shape)).astype(np.float32)
     return out
+
+
+def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str], parameters: SceneParameters, *,
+                      seed: int, max_depth: int, device: Device | str | None, samples: int = 65536, spp: int = 4
+                      ) -> dict[str, np.ndarray]:
+    """The boundary terms of visibility for ``names`` (meshes' ``vertex_positions`` and ``to_world``, point lights'
+    ``position``, the sensor's ``to_world`` and ``x_fov``): camera silhouettes, outlines in the light the first
+    surfaces receive (soft shadows, at max_depth 2 or more) and point and spot lights' hard shadows; see the
+    module."""
+    g = np.asarray(image_grad, np.float64)
+    cameras = [n for n in names if n in sensor_names(scene)]
+    meshes = [n for n in names if n.endswith((".vertex_positions", ".to_world")) and n not in cameras]
+    delta = any(isinstance(light, (PointLight, SpotLight)) for light in scene.lights)
+    bounce = max_depth < 0 or max_depth >= 2
+    out: dict[str, np.ndarray] = {}
+
+    def add(terms: dict[str, np.ndarray]) -> None:
+        for name, v in terms.items():
+            out[name] = out.get(name, 0.0) + np.asarray(v, np.float64)
+
+    common = dict(seed=seed, max_depth=max_depth, parameters=parameters, device=device)
+    if (meshes or cameras) and max_depth != 0:
+        add(primary_boundary(scene, g, meshes + cameras, samples=samples, **common))
+    if (meshes or cameras) and bounce:
+        add(soft_shadow_boundary(scene, g, meshes + cameras, spp=spp, **common))
+    if delta and bounce:
+        add(shadow_boundary(scene, g, list(names), samples=samples, **common))
+    return out
+
+
+def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: SceneParameters, *, width: int,
+                     height: int, seed: int, max_depth: int, device: Device | str | None, samples: int = 65536,
+                     spp: int = 4) -> np.ndarray:
+    """Forward mode of :func:`boundary_backward`: the boundary terms of d image (H, W, 3) along ``tangent``."""
+    common = dict(width=width, height=height, seed=seed, max_depth=max_depth, parameters=parameters, device=device)
+    image = np.zeros((height, width, 3), np.float64)
+    camera = name in sensor_names(scene)
+    mesh = name.endswith((".vertex_positions", ".to_world")) and not camera
+    bounce = max_depth < 0 or max_depth >= 2
+    if (mesh or camera) and max_depth != 0:
+        image += primary_boundary_forward(scene, name, tangent, samples=samples, **common)
+    if (mesh or camera) and bounce:
+        image += soft_shadow_boundary_forward(scene, name, tangent, spp=spp, **common)
+    if bounce and any(isinstance(light, (PointLight, SpotLight)) for light in scene.lights):
+        image += shadow_boundary_forward(scene, name, tangent, samples=samples, **common)
+    return image
+
+
+#: Steps of the central differences of the camera's basis with respect to its matrix (entries) and its fov
+#: (degrees), in float64.
+CAMERA_STEPS = {"to_world": 1e-6, "x_fov": 1e-5}
+
+
+def camera_jacobian(scene: Scene, width: int, height: int, name: str) -> np.ndarray:
+    """(12, P): d(origin, forward, right, up of the camera's basis at width x height) / d(parameter ``name``,
+    the sensor's ``to_world`` (P = 16, row-major) or ``x_fov`` (P = 1, degrees)), by central differences in
+    float64 (the basis is a closed form: exact to about 1e-9 relative)."""
+    cam = scene.camera
+    kind = name.rpartition(".")[2]
+    if kind == "to_world":
+        value = np.asarray(cam.to_world, np.float64).reshape(-1)
+
+        def basis(v: np.ndarray) -> np.ndarray:
+            return np.concatenate(dataclasses.replace(cam, to_world=v.reshape(4, 4)).basis(width, height))
+    else:
+        _, _, right, _ = cam.basis(width, height)
+        value = np.array([2 * np.degrees(np.arctan(np.linalg.norm(right)))])
+
+        def basis(v: np.ndarray) -> np.ndarray:
+            return np.concatenate(dataclasses.replace(cam, fov=float(v[0]), fov_axis="x").basis(width, height))
+    h = CAMERA_STEPS[kind]
+    jac = np.zeros((12, value.size))
+    for k in range(value.size):
+        step = np.zeros(value.size)
+        step[k] = h
+        jac[:, k] = (basis(value + step) - basis(value - step)) / (2 * h)
+    return jac
 
 
 def _check_float32(gradient: np.ndarray, name: str, peak: float) -> None:
@@ -198,10 +224,12 @@ def _check_float32(gradient: np.ndarray, name: str, peak: float) -> None:
 
 def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Iterable[float], spp: int | None = None,
                    seed: int = 0, max_depth: int | None = None, *, width: int | None = None,
-                   height: int | None = None, device: Device | str | None = None) -> np.ndarray:
+                   height: int | None = None, device: Device | str | None = None, boundary: bool = True,
+                   edge_samples: int = 65536, edge_spp: int = 4) -> np.ndarray:
     """Forward mode: the derivative of ``pyclpt.render(scene, spp, seed=seed)`` along ``direction`` in
     parameter ``param`` (an array of the parameter's shape, or a number for every element): an
-    (H, W, 3) float32 gradient image, rendered with the same paths as the image."""
+    (H, W, 3) float32 gradient image, rendered with the same paths as the image. Where things are: the interior
+    term plus, with ``boundary``, the boundary terms (:func:`render_backward`'s, the same samples for a seed)."""
     seed = _check_seed(seed, "seed")
     spp = check_int(scene.spp if spp is None else spp, "spp", lo=1, hi=2**32 - 1)
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
@@ -217,8 +245,21 @@ def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Ite
     if not np.all(np.isfinite(d)):
         raise ValueError(f"direction for {param} holds NaN or infinite values")
     tangent = {name: np.zeros(n, np.float32) for name, n in buffer_sizes(replay.scene.arrays).items()}
-    parameter_slots(scene, replay.scene.arrays, p).scatter(tangent, d)
-    image = replay.forward({b: tangent[b] for b in BUFFERS}, spp, seed)
+    table = SceneParameters(scene)
+    if p.kind == "camera":  # the camera's origin and basis
+        tangent["camera"][:] = camera_jacobian(scene, replay.width, replay.height, param) @ d.reshape(-1)
+    elif p.kind == "geometry" and isinstance(p.target, Mesh):  # the vertices' velocities (a pose's: chained)
+        _, dp = vertex_motion(table, scene, param, d)
+        first = 3 * vertex_offset(scene, p.target)
+        tangent["verts"][first:first + dp.size] = dp.reshape(-1)
+    else:
+        parameter_slots(scene, replay.scene.arrays, p).scatter(tangent, d)
+    geometry = p.kind in ("geometry", "camera")
+    image = replay.forward({b: tangent[b] for b in BUFFERS}, spp, seed, kinds=[p.kind])
     if replay.dropped:
         log.warning("%s: render_forward dropped %d NaN/inf samples", scene.name, replay.dropped)
+    if geometry and boundary:
+        image = (image + boundary_forward(scene, param, d, table, width=replay.width, height=replay.height,
+                                          seed=seed, max_depth=replay.max_depth, device=device, samples=edge_samples,
+                                          spp=edge_spp)).astype(np.float32)
     return image

@@ -12,8 +12,8 @@ them, :mod:`pyclpt.gradients.placement`):
 
 1. :func:`silhouette_edges`: the edges that can bound what the camera sees, in film coordinates: a
    mesh's boundary edges (one triangle), and edges whose two triangles face the camera on different
-   sides (silhouettes) or that have more than two; clipped to the image. Edges between two front-facing
-   triangles (shading creases) are left out: the image is continuous there up to shading.
+   sides (silhouettes) or that have more than two, and on a flat-shaded mesh the creases between two
+   triangles of different normals (its shading jumps there); clipped to the image.
 2. :func:`primary_boundary`: points sampled on those edges, stratified, with density proportional to
    their length in pixels; the radiance on both sides of each point from the ``edge_radiance`` kernel
    (``cl/gradients/edge_radiance.cl``: the full path estimator, both sides with the same random
@@ -38,8 +38,8 @@ import numpy as np
 
 from pyclpt.buffers.rfilter import filter_eval
 from pyclpt.device.context import Device
-from pyclpt.gradients.differentiate import replay_for
-from pyclpt.gradients.parameters import SceneParameters, traverse
+from pyclpt.gradients.parameters import SceneParameters, flat_shaded, traverse
+from pyclpt.gradients.session import replay_for
 from pyclpt.scene.model import Mesh, ReconstructionFilter, Scene
 
 #: Film-space offset (pixels) of the two rays on either side of an edge point.
@@ -77,14 +77,18 @@ class Projection:
     height: int
 
     @classmethod
-    def of(cls, scene: Scene, width: int, height: int, to_world: np.ndarray | None = None) -> Projection:
-        """The projection of ``scene``'s camera (with ``to_world`` instead of its own, when given)."""
+    def of(cls, scene: Scene, width: int, height: int, to_world: np.ndarray | None = None,
+           x_fov: float | None = None) -> Projection:
+        """The projection of ``scene``'s camera (with ``to_world`` instead of its own, and a horizontal fov of
+        ``x_fov`` degrees, when given)."""
         cam = scene.camera
         if cam.kind != "perspective":
             raise ValueError(f"the boundary term of primary visibility is implemented for perspective cameras; "
                              f"scene {scene.name!r} has a {cam.kind} camera")
         if to_world is not None:
             cam = dataclasses.replace(cam, to_world=np.asarray(to_world, np.float64))
+        if x_fov is not None:
+            cam = dataclasses.replace(cam, fov=x_fov, fov_axis="x")
         o, f, r, u = (np.asarray(v, np.float64) for v in cam.basis(width, height))
         return cls(o, f / np.linalg.norm(f), r, u, width, height)
 
@@ -126,10 +130,11 @@ def _clip(a: np.ndarray, b: np.ndarray, width: int, height: int) -> tuple[np.nda
     return s0, s1
 
 
-def mesh_edges(mesh: Mesh, camera_origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def mesh_edges(mesh: Mesh, camera_origin: np.ndarray, creases: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The vertex pairs (K, 2) of ``mesh``'s edges that can bound what a camera at ``camera_origin``
     sees: boundary edges, silhouettes (their two triangles facing the camera on different sides) and
-    edges of more than two triangles; and how many triangles share each (K,)."""
+    edges of more than two triangles; with ``creases``, also the edges between two triangles of different
+    normals (a flat-shaded mesh's shading jumps there); and how many triangles share each (K,)."""
     p = mesh.positions.astype(np.float64)
     f = mesh.indices.astype(np.int64)
     n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
@@ -149,6 +154,13 @@ def mesh_edges(mesh: Mesh, camera_origin: np.ndarray) -> tuple[np.ndarray, np.nd
     np.maximum.at(hi, group, facing[face])
     keep = (count != 2) | (lo != hi)
     first = np.flatnonzero(new)
+    if creases:
+        unit = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        two = count == 2
+        a, b = face[first[two]], face[first[two] + 1]
+        bent = np.zeros(len(count), bool)
+        bent[two] = np.einsum("ij,ij->i", unit[a], unit[b]) < 1.0 - 1e-7
+        keep |= bent
     return pairs[first][keep], count[keep]
 
 
@@ -159,7 +171,7 @@ def silhouette_edges(scene: Scene, meshes: Sequence[int], width: int, height: in
     cols: dict[str, list[np.ndarray]] = {k: [] for k in ("a", "b", "mesh", "v0", "v1", "s0", "s1", "z0", "z1")}
     for i in meshes:
         mesh = scene.meshes[i]
-        pairs, _ = mesh_edges(mesh, proj.origin)
+        pairs, _ = mesh_edges(mesh, proj.origin, creases=flat_shaded(mesh))  # flat shading jumps at creases
         p = mesh.positions.astype(np.float64)
         z0, z1 = proj.depth(p[pairs[:, 0]]), proj.depth(p[pairs[:, 1]])
         scale = max(float(np.abs(p - proj.origin).max()), 1e-30)
@@ -262,7 +274,7 @@ def _meshes_of(scene: Scene, names: Sequence[str]) -> dict[int, list[str]]:
     sensor = f"{scene.ids.get('camera', 'sensor')}.to_world"
     wanted: dict[int, list[str]] = {}
     for name in names:
-        if name == sensor:
+        if name in sensor_names(scene):
             continue
         shape, _, prop = name.rpartition(".")
         if prop not in ("vertex_positions", "to_world") or shape not in by_name:
@@ -274,6 +286,31 @@ def _meshes_of(scene: Scene, names: Sequence[str]) -> dict[int, list[str]]:
 
 #: Step of the central differences of the film position with respect to the camera's matrix (float64).
 CAMERA_STEP = 1e-6
+
+
+def sensor_names(scene: Scene) -> tuple[str, str]:
+    """The names of where the sensor is: its to_world and its x_fov."""
+    sensor = scene.ids.get("camera", "sensor")
+    return f"{sensor}.to_world", f"{sensor}.x_fov"
+
+
+#: Step of the central differences of the film position with respect to the horizontal fov (degrees).
+FOV_STEP = 1e-5
+
+
+def sensor_velocity(scene: Scene, width: int, height: int, point: np.ndarray, normal: np.ndarray, name: str
+                    ) -> np.ndarray:
+    """n . d(film position of each point)/d(sensor parameter ``name``): (N, 4, 4) for its to_world, (N, 1) for its
+    x_fov (degrees; central differences of the projection in float64)."""
+    if name.endswith(".to_world"):
+        return camera_velocity(scene, width, height, point, normal)
+    cam = scene.camera
+    _, _, right, _ = cam.basis(width, height)
+    fov = 2 * np.degrees(np.arctan(np.linalg.norm(right)))
+    film = []
+    for x in (fov + FOV_STEP, fov - FOV_STEP):
+        film.append(Projection.of(scene, width, height, x_fov=x).film(point))
+    return np.einsum("nk,nk->n", normal, (film[0] - film[1]) / (2 * FOV_STEP))[:, None]
 
 
 def camera_velocity(scene: Scene, width: int, height: int, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -313,6 +350,13 @@ def scatter_to_vertices(params: SceneParameters, scene: Scene, i: int, names: Se
     gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
     np.add.at(gv, v0, (1 - t)[:, None] * q)
     np.add.at(gv, v1, t[:, None] * q)
+    vertex_gradients(params, scene, i, names, gv, out)
+
+
+def vertex_gradients(params: SceneParameters, scene: Scene, i: int, names: Sequence[str], gv: np.ndarray,
+                     out: dict[str, np.ndarray]) -> None:
+    """Mesh i's gradients for ``names`` (its ``vertex_positions``, ``to_world``) into ``out``, from the gradient of
+    its vertices' world positions gv (V, 3)."""
     for name in names:
         if name.endswith(".vertex_positions"):
             out[name] = gv.reshape(-1).astype(np.float32)
@@ -366,15 +410,15 @@ def primary_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str],
     height, width = g.shape[:2]
     params = parameters if parameters is not None else traverse(scene)
     wanted = _meshes_of(scene, names)
-    sensor = f"{scene.ids.get('camera', 'sensor')}.to_world"
-    meshes = range(len(scene.meshes)) if sensor in names else sorted(wanted)  # the camera moves every edge
+    cameras = [n for n in names if n in sensor_names(scene)]
+    meshes = range(len(scene.meshes)) if cameras else sorted(wanted)  # the camera moves every edge
     es = sample_edges(scene, meshes, width, height, samples=samples, seed=seed, max_depth=max_depth,
                       device=device, stratified=stratified)
     weight = sample_weights(es.pixels, es.weights, g, es.jump)
     out: dict[str, np.ndarray] = {}
-    if sensor in names:
-        out[sensor] = np.einsum("n,nij->ij", weight, camera_velocity(scene, width, height, es.point,
-                                                                      es.normal)).astype(np.float32)
+    for name in cameras:
+        velocity = sensor_velocity(scene, width, height, es.point, es.normal, name)
+        out[name] = np.tensordot(weight, velocity, axes=1).astype(np.float32)
     for i, mesh_names in wanted.items():
         m = es.mesh == i
         scatter_to_vertices(params, scene, i, mesh_names, es.v0[m], es.v1[m], es.t[m],
@@ -395,10 +439,11 @@ def primary_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wi
     height = height or scene.film.height
     params = parameters if parameters is not None else traverse(scene)
     tan = np.asarray(tangent, np.float64)
-    if name == f"{scene.ids.get('camera', 'sensor')}.to_world":  # every edge moves in the film
+    if name in sensor_names(scene):  # every edge moves in the film
         es = sample_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
                           max_depth=max_depth, device=device)
-        dx = np.einsum("nij,ij->n", camera_velocity(scene, width, height, es.point, es.normal), tan.reshape(4, 4))
+        velocity = sensor_velocity(scene, width, height, es.point, es.normal, name)
+        dx = velocity.reshape(velocity.shape[0], int(np.prod(velocity.shape[1:]))) @ tan.reshape(-1)
     else:
         i, dp = vertex_motion(params, scene, name, tan)
         es = sample_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,

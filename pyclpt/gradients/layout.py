@@ -1,11 +1,14 @@
 """Where each differentiable parameter lives in the device buffers that the gradient kernels read
 and write (``cl/gradients/params.h``): a gradient or a tangent has the layout of the scene buffers.
 
-:func:`parameter_slots` gives, for a parameter, the buffer (``mats``, ``lights``, ``tex8``, ``tex32``)
-and an index array of shape (K, *value shape): the K device slots that hold each element of the
-value (an area light's radiance is in the record of each of its triangles, a grey texel in the three
+:func:`parameter_slots` gives, for a parameter, the buffer (``mats``, ``lights``, ``tex8``, ``tex32``, ``verts``,
+``lightpos``, ``camera``) and an index array of shape (K, *value shape): the K device slots that hold each element
+of the value (an area light's radiance is in the record of each of its triangles, a grey texel in the three
 colour channels of its RGBA texel; -1: no slot). A gradient sums the K slots; a tangent writes all K.
-The slots are recomputed after every update, since texture formats and offsets can change.
+The slots are recomputed after every update, since texture formats and offsets can change. Where things are
+(``-DGRAD_GEOMETRY``): ``verts``, 3 floats per vertex of the packed vertex arrays (a mesh's ``vertex_positions``),
+``lightpos``, 3 floats per light record (a point light's ``position``), and ``camera``, the camera's origin and
+basis (12 floats; ``-DGRAD_CAMERA``: the sensor's ``to_world`` and ``x_fov``, chained on the host).
 """
 from __future__ import annotations
 
@@ -13,13 +16,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pyclpt.buffers.lights import ENV_TEXTURE, LIGHT_PRIM, LIGHT_RADIANCE, LIGHT_STRIDE
+from pyclpt.buffers.lights import (
+    ENV_TEXTURE,
+    LIGHT_CONSTANT,
+    LIGHT_ENVMAP,
+    LIGHT_PRIM,
+    LIGHT_RADIANCE,
+    LIGHT_STRIDE,
+    LIGHT_TRIANGLE,
+    LIGHT_TYPE,
+)
 from pyclpt.buffers.materials import MAT_ALPHA, MAT_COLOR, MAT_SPEC, MAT_STRIDE, TEXF_FLOAT
-from pyclpt.buffers.scene import SceneArrays
+from pyclpt.buffers.scene import SceneArrays, scene_meshes
 from pyclpt.gradients.parameters import Parameter
-from pyclpt.scene.model import Bitmap, Envmap, Mesh, Scene
+from pyclpt.scene.model import Bitmap, Envmap, Mesh, PointLight, Scene
 
-BUFFERS = ("mats", "lights", "tex8", "tex32")
+BUFFERS = ("mats", "lights", "tex8", "tex32", "verts", "lightpos", "camera")
 
 
 @dataclass
@@ -66,6 +78,34 @@ def mesh_light_records(scene: Scene, arrays: SceneArrays, mesh: Mesh) -> np.ndar
     return lights[lights >= 0].astype(np.int64)
 
 
+def vertex_offset(scene: Scene, mesh: Mesh) -> int:
+    """The index of a mesh's first vertex in the packed vertex arrays (the ``verts`` buffer's order)."""
+    offset = 0
+    for m in scene_meshes(scene):
+        if m is mesh:
+            return offset
+        offset += m.positions.shape[0]
+    raise ValueError(f"mesh {mesh.name!r} is not in scene {scene.name!r}")
+
+
+def light_record(scene: Scene, arrays: SceneArrays, light: object) -> int:
+    """The record in ``lights`` of one of ``scene.lights`` (-1: none, it emits nothing): the emitters after the
+    triangles, in the scene's order, those with no power left out (pyclpt/buffers/lights.py)."""
+    types = arrays.lights.lights[:, LIGHT_TYPE].astype(np.int64)
+    records = np.flatnonzero((types != LIGHT_TRIANGLE) & (types != LIGHT_CONSTANT) & (types != LIGHT_ENVMAP))
+    j = 0
+    for other in scene.lights:
+        value = other.irradiance if hasattr(other, "irradiance") else other.intensity
+        if not max(value) > 0:
+            if other is light:
+                return -1
+            continue
+        if other is light:
+            return int(records[j])
+        j += 1
+    raise ValueError("the light is not in the scene")
+
+
 def parameter_slots(scene: Scene, arrays: SceneArrays, p: Parameter) -> Slots:
     """The device slots of differentiable parameter ``p`` in ``arrays`` (packed from ``scene``)."""
     rgb = np.arange(3, dtype=np.int64)
@@ -94,10 +134,19 @@ def parameter_slots(scene: Scene, arrays: SceneArrays, p: Parameter) -> Slots:
         if env < 0:
             return Slots("lights", np.full((1, 3), -1, np.int64))
         return Slots("lights", (LIGHT_STRIDE * env + LIGHT_RADIANCE + rgb)[None])
+    if p.kind == "geometry" and isinstance(p.target, Mesh) and p.name.endswith(".vertex_positions"):
+        first = 3 * vertex_offset(scene, p.target)
+        return Slots("verts", (first + np.arange(p.target.positions.size, dtype=np.int64))[None])
+    if p.kind == "geometry" and isinstance(p.target, PointLight):
+        record = light_record(scene, arrays, p.target)
+        return Slots("lightpos", (3 * record + rgb if record >= 0 else np.full(3, -1, np.int64))[None])
+    if p.kind == "geometry":
+        raise ValueError(f"{p.name}: a pose's gradient is its vertices' (pyclpt.gradients.differentiate chains it)")
     raise ValueError(f"{p.name} is not differentiable: {p.reason}")
 
 
 def buffer_sizes(arrays: SceneArrays) -> dict[str, int]:
     """Floats in each gradient buffer (the layout of the scene buffers)."""
     return {"mats": arrays.materials.size, "lights": arrays.lights.lights.size,
-            "tex8": arrays.textures.texels8().size, "tex32": arrays.textures.texels32().size}
+            "tex8": arrays.textures.texels8().size, "tex32": arrays.textures.texels32().size,
+            "verts": arrays.vnormals.size, "lightpos": 3 * arrays.lights.lights.shape[0], "camera": 12}

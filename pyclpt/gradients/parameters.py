@@ -22,6 +22,7 @@ Parameters whose gradient pyclpt does not compute are listed too, with the reaso
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
@@ -50,27 +51,80 @@ from pyclpt.scene.model import (
 )
 
 #: Kinds of differentiable parameters (the -D GRAD_* groups of cl/gradients/params.h).
-KINDS = ("color", "spec", "alpha", "emission", "env")
+KINDS = ("color", "spec", "alpha", "emission", "env", "geometry", "camera")
 
 NOT_DIFFERENTIABLE = {
     "ior": "index of refraction: not differentiated (changes Fresnel, refraction directions and sampling)",
     "conductor": "complex IOR of a conductor: not differentiated yet",
     "transmission": "dielectric reflectance and transmittance: not differentiated yet",
     "checkerboard": "checkerboard colours: not differentiated (only bitmap texels are)",
-    "geometry": "where a surface, the sensor or a light is: update() moves it (the BVH refitted or rebuilt, no "
-                "kernel compiled again); render_backward does not differentiate it: the boundary terms of camera "
-                "silhouettes and hard shadows are pyclpt.gradients.edges.primary_boundary and "
-                "pyclpt.gradients.shadows.shadow_boundary, the interior term (shading that follows the moving "
-                "surface) and soft-shadow and indirect boundaries are not implemented yet (docs/differentiable.md)",
+    "geometry": "where a spot light or an instance is: update() moves it (the BVH refitted or rebuilt, no kernel "
+                "compiled again); render_backward differentiates meshes' vertex_positions and to_world, point "
+                "lights' positions and the sensor, not these yet (docs/differentiable.md)",
     "point": "point light intensity: not differentiated yet",
     "spot": "spot light intensity: not differentiated yet",
     "directional": "directional light irradiance: not differentiated yet",
     "scale": "environment map scale: not differentiated (its texels are)",
     "mask": "opacity: changes visibility, not differentiated",
     "emission_texture": "the radiance of a textured area emitter: not differentiated yet",
+    "instanced": "an instanced scene: the interior term of moving geometry is implemented for scenes without "
+                 "instances; update() moves it",
     "anisotropic": "anisotropic roughness (alpha_u, alpha_v): not differentiated yet",
     "back": "the back BSDF of a twosided with two BSDFs: not differentiated yet",
 }
+
+
+def _textured(obj: object) -> bool:
+    """Whether a material (or what it wraps) has a texture in any field."""
+    if isinstance(obj, (Bitmap, Checkerboard)):
+        return True
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return any(_textured(getattr(obj, f.name)) for f in dataclasses.fields(obj))
+    return False
+
+
+def flat_shaded(mesh: Mesh, tolerance: float = 1e-4) -> bool:
+    """Whether ``mesh`` is shaded by its triangles' normals: no vertex normals, or each triangle's three equal to
+    its own (a rectangle's, a cube's)."""
+    if mesh.normals is None:
+        return True
+    p = mesh.positions.astype(np.float64)
+    f = mesh.indices
+    n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    vn = mesh.normals.astype(np.float64)[f]  # (T, 3, 3)
+    vn /= np.maximum(np.linalg.norm(vn, axis=2, keepdims=True), 1e-300)
+    return bool(np.all(np.abs(vn - n[:, None, :]) <= tolerance))
+
+
+def moving_mesh_reason(scene: Scene, mesh: Mesh) -> str:
+    """Why the gradient of where ``mesh`` is (its vertex_positions, its to_world) is not computed, or "" when it is:
+    the interior term (cl/gradients/geometry.h) holds for flat-shaded, untextured meshes of scenes without
+    instances."""
+    if scene.instances:
+        return "instanced"
+    if not flat_shaded(mesh):
+        return ("a mesh with vertex normals (smooth shading): the interior term of moving geometry is implemented "
+                "for flat-shaded meshes (mesh.normals = None shades it flat); update() moves it")
+    mat = scene.materials[mesh.material]
+    if _textured(mat) or mesh.emission_texture is not None:
+        return ("a textured mesh: the texture's motion under the pixels is not differentiated (the interior term of "
+                "moving geometry is implemented for untextured meshes); update() moves it")
+    if isinstance(mat, (BumpMap, Mask)) or getattr(mat, "anisotropic", False):
+        return ("a bump-mapped, masked or anisotropic material: its shading frame's or opacity's motion is not "
+                "differentiated; update() moves it")
+    return ""
+
+
+def moving_camera_reason(scene: Scene) -> str:
+    """Why the gradient of where the sensor is (its to_world, its x_fov) is not computed, or "" when it is: the
+    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole in a scene without instances."""
+    if scene.instances:
+        return "instanced"
+    if scene.camera.kind != "perspective":
+        return (f"a {scene.camera.kind} camera: the gradients of where the sensor is are implemented for perspective "
+                f"(pinhole) cameras; update() moves it")
+    return ""
 
 
 @dataclass
@@ -235,8 +289,15 @@ class _Walker:
 
     def mesh(self, mesh: Mesh) -> None:
         positions, pose = placement.mesh_accessors(mesh)
-        self.add(f"{mesh.name}.vertex_positions", "", positions, mesh, "geometry", "geometry")
-        self.add(f"{mesh.name}.to_world", "", pose, mesh, "geometry", "geometry")
+        reason = moving_mesh_reason(self.scene, mesh)
+        if not reason and mesh.normals is not None:  # update() recomputes them, angle-weighted: smooth
+            deform = ("the vertices of a mesh with vertex normals: update() recomputes the normals (smooth "
+                      "shading), whose motion the interior term does not follow (mesh.normals = None shades it "
+                      "flat); its to_world is differentiated")
+        else:
+            deform = reason
+        self.add(f"{mesh.name}.vertex_positions", "" if deform else "geometry", positions, mesh, deform, "geometry")
+        self.add(f"{mesh.name}.to_world", "" if reason else "geometry", pose, mesh, reason, "geometry")
         if mesh.emission is not None and mesh.emission_texture is not None:
             self.add(f"{mesh.name}.emitter.radiance.value", "", _rgb_param(mesh, "emission"), mesh,
                      "emission_texture")
@@ -268,16 +329,19 @@ class _Walker:
             if isinstance(light, SpotLight):
                 self.add(f"{name}.to_world", "", placement.spot_accessors(light), light, "geometry")
             elif isinstance(light, PointLight):
-                self.add(f"{name}.position", "", placement.point_accessors(light), light, "geometry")
+                reason = "instanced" if sc.instances else ""
+                self.add(f"{name}.position", "" if reason else "geometry", placement.point_accessors(light), light,
+                         reason, "geometry")
         names = [i.name for i in sc.instances]
         for k, inst in enumerate(sc.instances):
             name = inst.name if names.count(inst.name) == 1 else f"{inst.name}_{k}"
             self.add(f"{name}.to_world", "", placement.instance_accessors(inst), inst, "geometry", "geometry")
         sensor = sc.ids.get("camera", "sensor")
         to_world, x_fov = placement.camera_accessors(sc)
-        self.add(f"{sensor}.to_world", "", to_world, sc, "geometry", "camera")
+        reason = moving_camera_reason(sc)
+        self.add(f"{sensor}.to_world", "" if reason else "camera", to_world, sc, reason, "camera")
         if x_fov is not None:
-            self.add(f"{sensor}.x_fov", "", x_fov, sc, "geometry", "camera")
+            self.add(f"{sensor}.x_fov", "" if reason else "camera", x_fov, sc, reason, "camera")
         return self.params
 
 

@@ -33,7 +33,7 @@ LAUNCH = 1 << 18  # paths per launch (film slots)
 LOCAL_SIZE = 64
 BSDF_DIFF_STEP = 1.0 / 64.0  # cl/gradients/bsdf_derivative.h: the relative step of the roughness derivative
 GRAD_DEFINES = {"color": "GRAD_COLOR", "spec": "GRAD_SPEC", "alpha": "GRAD_ALPHA", "emission": "GRAD_EMISSION",
-                "env": "GRAD_ENV"}
+                "env": "GRAD_ENV", "geometry": "GRAD_GEOMETRY", "camera": "GRAD_CAMERA"}
 
 
 def moved_alpha_records(scene: Scene, step: float = BSDF_DIFF_STEP) -> tuple[np.ndarray, np.ndarray]:
@@ -83,6 +83,9 @@ class PathReplay:
     def kernel(self, name: str, kinds: Iterable[str] = ()) -> cl.Kernel:
         """Kernel ``backward`` (specialised for the parameter kinds differentiated) or ``forward``."""
         kinds = tuple(sorted(set(kinds)))
+        if ("geometry" in kinds or "camera" in kinds) and self.scene.scene.instances:
+            raise ValueError(f"scene {self.scene.scene.name!r}: the interior term of moving geometry is not "
+                             f"implemented for instanced scenes")
         key = (name, *kinds)
         if key not in self._programs:
             start = time.perf_counter()
@@ -212,36 +215,46 @@ class PathReplay:
             self.dropped += int(marks.astype(np.int64).sum())
         return out
 
-    def incident_radiance(self, samples: np.ndarray, seed: int, eps: float) -> np.ndarray:
+    def incident_radiance(self, samples: np.ndarray, seed: int, eps: float
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """f |cos| L_i (N, 2, 3) at the first hits of the camera rays through film points ``samples[:, :2]``, from
         directions ``samples[:, 2:5]`` minus and plus ``eps`` times ``samples[:, 5:8]`` (the incident_radiance
-        kernel; N, 8 float32), both with the random numbers of (seed, sample). NaN or inf ones give 0 and are
-        counted in :attr:`dropped`."""
+        kernel; N, 8 float32), both with the random numbers of (seed, sample), the leaf-order triangle (N, 2)
+        each side's ray meets first (-1: none) and its distance and barycentrics there (N, 2, 3). NaN or inf ones
+        give 0 and are counted in :attr:`dropped`."""
         kernel = self.kernel("incident_radiance")
         pts = np.ascontiguousarray(samples, np.float32).reshape(-1, 8)
         out = np.zeros((len(pts), 2, 3), np.float32)
+        prims = np.full((len(pts), 2), -1, np.int32)
+        hits = np.zeros((len(pts), 2, 3), np.float32)
         args = self.scene.args(self.width, self.height)
         self.dropped = 0
         for start in range(0, len(pts), LAUNCH):
             count = min(LAUNCH, len(pts) - start)
             p_buf = upload(self.device, pts[start:start + count], "incident-radiance samples")
             r_buf = alloc(self.device, 4 * 6 * count, "incident radiance")
+            f_buf = alloc(self.device, 4 * 2 * count, "incident radiance first triangles")
+            h_buf = alloc(self.device, 4 * 6 * count, "incident radiance first hits")
             marks = np.zeros(2 * count, np.uint8)
             m_buf = alloc(self.device, marks.nbytes, "incident radiance drop marks")
             fill_buffer(self.device.queue, m_buf, np.uint8(0), 0, marks.nbytes)
             g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
-            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, p_buf, r_buf, m_buf, np.uint32(seed),
+            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, p_buf, r_buf, f_buf, h_buf, m_buf,
+                        np.uint32(seed),
                         np.int32(count), np.int32(self.max_depth), np.float32(eps))
             self.profile.record("incident_radiance", ev)
             cl.enqueue_copy(self.device.queue, out[start:start + count], r_buf)
+            cl.enqueue_copy(self.device.queue, prims[start:start + count], f_buf)
+            cl.enqueue_copy(self.device.queue, hits[start:start + count], h_buf)
             cl.enqueue_copy(self.device.queue, marks, m_buf)
             self.dropped += int(marks.astype(np.int64).sum())
-        return out
+        return out, prims, hits
 
-    def forward(self, tangent: dict[str, np.ndarray], spp: int, seed: int) -> np.ndarray:
+    def forward(self, tangent: dict[str, np.ndarray], spp: int, seed: int, kinds: Iterable[str] = ()) -> np.ndarray:
         """Forward mode: the derivative of the image (H, W, 3) along ``tangent`` (host arrays by buffer
-        name, layout.py)."""
-        kernel = self.kernel("forward")
+        name, layout.py); ``kinds``: ``geometry`` when the tangent moves vertices or lights, ``camera`` when it moves
+        the camera (-DGRAD_GEOMETRY, -DGRAD_CAMERA: the interior term of cl/gradients/geometry.h)."""
+        kernel = self.kernel("forward", [k for k in kinds if k in ("geometry", "camera")])
         bufs = self._buffers()
         for name in BUFFERS:
             data = np.ascontiguousarray(tangent[name], np.float32)

@@ -15,10 +15,10 @@ through the edge and seen by the camera, and mapped to the image. There the outl
 come from the chain light -> edge point -> receiver plane -> film, and the radiance on its two sides from
 the ``edge_radiance`` kernel, as for silhouettes.
 
-Parameters: ``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders, ``SENSOR.to_world`` (the
-outline is fixed in the world and moves in the image), ``LIGHT.position`` of point lights. Left out (zero):
-the outline's motion when the receiver itself moves, shadows seen through specular bounces, instanced shapes
-(refused).
+Parameters: ``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders and of the receivers (the outline
+slides along the light's rays with the receiver's plane), ``SENSOR.to_world`` and ``SENSOR.x_fov`` (the outline is
+fixed in the world and moves in the image), ``LIGHT.position`` of point lights. Left out (zero): shadows seen
+through specular bounces, instanced shapes (refused).
 
 Soft shadows (area lights, the environment, any incident light an occluder's silhouette cuts at the first
 bounce) are :func:`soft_shadow_boundary`'s: an outline per shading point, on the sphere of directions, sampled
@@ -26,28 +26,32 @@ from each pixel's shading points with the ``incident_radiance`` kernel.
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from pyclpt.device.context import Device
-from pyclpt.gradients.differentiate import replay_for
 from pyclpt.gradients.edges import (
+    CAMERA_STEP,
+    FOV_STEP,
     SIDE_EPS,
     Projection,
     _filter_weights,
     _meshes_of,
-    camera_velocity,
     edge_point_motion,
     mesh_edges,
     sample_weights,
-    scatter_to_vertices,
+    sensor_names,
+    sensor_velocity,
     splat_image,
+    vertex_gradients,
     vertex_motion,
 )
 from pyclpt.gradients.parameters import SceneParameters, traverse
-from pyclpt.scene.model import PointLight, Scene, SpotLight
+from pyclpt.gradients.session import replay_for
+from pyclpt.scene.model import Camera, PointLight, Scene, SpotLight
 
 #: Relative offsets of the host's shadow-outline rays: the lit test stops this far short of the edge point, the
 #: receiver ray starts this far beyond it, and the camera's view of the receiver point may end this far short.
@@ -70,6 +74,10 @@ class ShadowSamples:
     light_velocity: np.ndarray  # (N, 3) n . d(film position)/d(light position)
     point: np.ndarray  # (N, 3) the receiver point (on the outline)
     normal: np.ndarray  # (N, 2) the outline's unit normal in the film plane (towards the "+" side)
+    receiver: np.ndarray  # (N,) the receiver's mesh, its triangle (index in the mesh), barycentrics (N, 2) there
+    rtri: np.ndarray
+    rbary: np.ndarray
+    receiver_velocity: np.ndarray  # (N, 3) n . d(film position)/d(the receiver's material point under the outline)
 
 
 def delta_lights(scene: Scene) -> list[tuple[int, np.ndarray]]:
@@ -107,14 +115,22 @@ class _HostTracer:
     def hit_mesh(self, org: np.ndarray, dirs: np.ndarray, tmax: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`hit`, and the index in scene.meshes of the mesh hit (-1: none)."""
+        t, ng, mesh, _, _ = self.hit_triangle(org, dirs, tmax)
+        return t, ng, mesh
+
+    def hit_triangle(self, org: np.ndarray, dirs: np.ndarray, tmax: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`hit_mesh`, the triangle hit (its index in its mesh) and the barycentrics (N, 2) there."""
         if not len(org):
-            return np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64)
+            return (np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
         dists = None if tmax is None else np.ascontiguousarray(tmax, np.float32)
         out = self.scene.run(np.ascontiguousarray(org, np.float32), np.ascontiguousarray(dirs, np.float32),
                              dists, output=1)
         hit = out["primID"] >= 0
         mesh = np.where(hit, np.searchsorted(self.first_triangle, out["primID"], side="right") - 1, -1)
-        return np.where(hit, out["tfar"].astype(np.float64), np.inf), out["Ng"].astype(np.float64), mesh
+        tri = np.where(hit, out["primID"] - self.first_triangle[np.maximum(mesh, 0)], -1)
+        bary = np.stack([out["u"], out["v"]], axis=1).astype(np.float64)
+        return np.where(hit, out["tfar"].astype(np.float64), np.inf), out["Ng"].astype(np.float64), mesh, tri, bary
 
 
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -135,10 +151,11 @@ def receiver_motion(p: np.ndarray, q: np.ndarray, light: np.ndarray, n_r: np.nda
 
 def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, samples: int, seed: int,
                         max_depth: int | None = None, device: Device | str | None = None,
-                        stratified: bool = True) -> ShadowSamples:
+                        stratified: bool = True, receivers: Sequence[int] | None = None) -> ShadowSamples:
     """``samples`` points on the edges of ``scene.meshes[i]`` (i in ``meshes``) that the scene's point and spot
     lights see as silhouettes, stratified along their total length in the world, mapped to the shadow outline
-    they cast in the image (the points that cast none are dropped), with the radiance on both sides there."""
+    they cast in the image (the points that cast none are dropped, and with ``receivers`` those whose outline
+    falls on another mesh), with the radiance on both sides there."""
     cols: dict[str, list[np.ndarray]] = {k: [] for k in ("light", "mesh", "v0", "v1")}
     lights = dict(delta_lights(scene))
     for k, pos in lights.items():
@@ -158,7 +175,8 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
     total = float(lengths.sum())
     empty = ShadowSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), np.zeros((0, 3)),
                           *(np.zeros(0, np.int64) for _ in range(3)), np.zeros(0), np.zeros(0, np.int64),
-                          np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)))
+                          np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
+                          np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3)))
     if samples <= 0 or total <= 0:
         return empty
     rng = np.random.default_rng([seed, 0x736861646F77])  # "shadow"
@@ -174,8 +192,10 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
     before, _ = tracer.hit(light_pos, d, dist * (1 - RAY_EPS))
     # the receiver: the first surface behind the edge point, along the light's ray
     start = point_on_edge + (RAY_EPS * dist)[:, None] * d
-    beyond, ng = tracer.hit(start, d)
+    beyond, ng, r_mesh, r_tri, r_bary = tracer.hit_triangle(start, d)
     keep = np.isinf(before) & np.isfinite(beyond) & (dist > 0)
+    if receivers is not None:
+        keep &= np.isin(r_mesh, np.asarray(list(receivers), np.int64))
     receiver = start + np.where(np.isfinite(beyond), beyond, 0.0)[:, None] * d
     # seen by the camera
     proj = Projection.of(scene, width, height)
@@ -191,6 +211,7 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
     if not len(idx):
         return empty
     e, t, d, dn, n_r, x = e[idx], t[idx], d[idx], dn[idx], n_r[idx], x[idx]
+    r_mesh, r_tri, r_bary = r_mesh[idx], r_tri[idx], r_bary[idx]
     p, q, lp = receiver[idx], point_on_edge[idx], light_pos[idx]
     sigma, proj_along = receiver_motion(p, q, lp, n_r)
     jac = np.stack([proj.normal_velocity(p, np.tile([1.0, 0.0], (len(p), 1))),
@@ -206,9 +227,12 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
     # the outline's image length per sample: |d film/dt| / (density of t: the edge's share of the total length)
     measure = np.where(ok, speed * total / (lengths[e] * samples), 0.0)
     pix, w, _ = _filter_weights(scene.film.rfilter, x, width, height)
+    # the receiver moving with its plane: the outline point slides along the light's ray d to the moved plane,
+    # dp = d (n_r . dx_r) / (n_r . d)
+    along = np.einsum("ni,nij,nj->n", normal, jac, d) / dn
     return ShadowSamples(pix, w, (radiance[:, 0] - radiance[:, 1]) * measure[:, None], edges["mesh"][e],
                          edges["v0"][e], edges["v1"][e], t, edges["light"][e], through * sigma[:, None],
-                         through * (1 - sigma)[:, None], p, normal)
+                         through * (1 - sigma)[:, None], p, normal, r_mesh, r_tri, r_bary, along[:, None] * n_r)
 
 
 def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, samples: int = 65536,
@@ -223,27 +247,39 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
         raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
     height, width = g.shape[:2]
     params = parameters if parameters is not None else traverse(scene)
-    sensor = f"{scene.ids.get('camera', 'sensor')}.to_world"
+    cameras = [n for n in names if n in sensor_names(scene)]
     light_names = {f"{scene.ids.get(f'light:{k}', f'light_{k}')}.position": k
                    for k, light in enumerate(scene.lights) if isinstance(light, PointLight)}
     wanted = _meshes_of(scene, [n for n in names if n not in light_names])
-    moving_all = sensor in names or any(n in light_names for n in names)
+    moving_all = bool(cameras) or any(n in light_names for n in names)
     meshes = range(len(scene.meshes)) if moving_all else sorted(wanted)
     ss = sample_shadow_edges(scene, meshes, width, height, samples=samples, seed=seed, max_depth=max_depth,
                              device=device, stratified=stratified)
     weight = sample_weights(ss.pixels, ss.weights, g, ss.jump)
     out: dict[str, np.ndarray] = {}
-    if sensor in names:
-        out[sensor] = np.einsum("n,nij->ij", weight, camera_velocity(scene, width, height, ss.point,
-                                                                      ss.normal)).astype(np.float32)
+    for name in cameras:
+        velocity = sensor_velocity(scene, width, height, ss.point, ss.normal, name)
+        out[name] = np.tensordot(weight, velocity, axes=1).astype(np.float32)
     for name, k in light_names.items():
         if name in names:
             m = ss.light == k
             out[name] = (weight[m, None] * ss.light_velocity[m]).sum(0).astype(np.float32)
+    if wanted:  # as receivers: the outlines every occluder casts on them move with them
+        rs = sample_shadow_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
+                                 max_depth=max_depth, device=device, stratified=stratified, receivers=sorted(wanted))
+        r_weight = sample_weights(rs.pixels, rs.weights, g, rs.jump)
     for i, mesh_names in wanted.items():
+        gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
         m = ss.mesh == i
-        scatter_to_vertices(params, scene, i, mesh_names, ss.v0[m], ss.v1[m], ss.t[m],
-                             ss.velocity[m] * weight[m][:, None], out)
+        q = ss.velocity[m] * weight[m][:, None]
+        np.add.at(gv, ss.v0[m], (1 - ss.t[m])[:, None] * q)
+        np.add.at(gv, ss.v1[m], ss.t[m][:, None] * q)
+        r = rs.receiver == i
+        q = rs.receiver_velocity[r] * r_weight[r][:, None]
+        corners = scene.meshes[i].indices.astype(np.int64)[rs.rtri[r]]
+        for k, bk in enumerate((1 - rs.rbary[r, 0] - rs.rbary[r, 1], rs.rbary[r, 0], rs.rbary[r, 1])):
+            np.add.at(gv, corners[:, k], bk[:, None] * q)
+        vertex_gradients(params, scene, i, mesh_names, gv, out)
     return out
 
 
@@ -278,10 +314,12 @@ class MeshEdges:
         return cls(key[first, 0], key[first, 1], face[first], face_b)
 
 
-def _camera_rays(scene: Scene, film: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """Origins and unit directions of the perspective camera's rays through film positions (N, 2), as the
-    kernels' camera_ray makes them."""
-    o, f, r, u = (np.asarray(v, np.float64) for v in scene.camera.basis(width, height))
+def _camera_rays(scene: Scene, film: np.ndarray, width: int, height: int, camera: Camera | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Origins and unit directions of the perspective camera's rays (``camera``'s, else the scene's) through film
+    positions (N, 2), as the kernels' camera_ray makes them."""
+    cam = scene.camera if camera is None else camera
+    o, f, r, u = (np.asarray(v, np.float64) for v in cam.basis(width, height))
     sx = 2.0 * film[:, 0] / width - 1.0
     sy = 1.0 - 2.0 * film[:, 1] / height
     d, _ = _unit(f[None] + sx[:, None] * r[None] + sy[:, None] * u[None])
@@ -300,31 +338,82 @@ class SoftSamples:
     v1: np.ndarray
     t: np.ndarray  # (N,) the edge point's parameter on v0 -> v1
     velocity: np.ndarray  # (N, 3) n . d(direction)/d(edge point) = n / |e - x|
+    # the shading point: its mesh and triangle (index in the mesh), barycentrics (N, 2) there, its film position
+    # (N, 2) and the camera ray's direction (N, 3) it lies on, the triangle's unit normal (N, 3)
+    receiver: np.ndarray
+    tri: np.ndarray
+    bary: np.ndarray
+    film: np.ndarray
+    ray: np.ndarray
+    receiver_normal: np.ndarray
+    point: np.ndarray  # (N, 3) the shading point
+    # what the occluder hides there (the first hit of the side that passes it): its mesh (-1: none, the
+    # environment), triangle (index in its mesh), barycentrics (N, 2), distance (inf: none); the edge point's
+    background: np.ndarray
+    back_tri: np.ndarray
+    back_bary: np.ndarray
+    back_dist: np.ndarray
+    edge_dist: np.ndarray
+
+    @property
+    def relative(self) -> np.ndarray:
+        """(N,): 1 - |e - x| / |b - x|: the outline's direction moves with the shading point x as 1 / |e - x|, the
+        (attached) background point b behind it as 1 / |b - x|; the boundary term is their difference."""
+        return 1.0 - self.edge_dist / self.back_dist
+
+    def receiver_velocity(self) -> np.ndarray:
+        """(N, 3): n . d(outline's direction relative to the background)/d(the shading point's triangle's material
+        point under it): the shading point slides along its camera ray, x = o + d (n_r . (p - o)) / (n_r . d), so
+        n . (dw_e - dw_b) = -(n . d) (n_r . dp) (1 / |e - x| - 1 / |b - x|) / (n_r . d), n the outline's normal
+        (velocity = n / |e - x|)."""
+        nd = np.einsum("nc,nc->n", self.receiver_normal, self.ray)
+        k = -np.einsum("nc,nc->n", self.velocity, self.ray) / np.where(nd != 0, nd, np.inf) * self.relative
+        return k[:, None] * self.receiver_normal
+
+    def background_velocity(self) -> np.ndarray:
+        """(N, 3): n . d(outline's direction relative to the background)/d(the background's material point):
+        -n / |b - x|."""
+        return -self.velocity * (self.edge_dist / self.back_dist)[:, None]
 
 
 def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
-                      max_depth: int | None = None, device: Device | str | None = None) -> SoftSamples:
+                      max_depth: int | None = None, device: Device | str | None = None,
+                      receivers: Sequence[int] = (), camera: bool = False) -> SoftSamples:
     """``spp`` shading points a pixel (stratified), each with one point on an edge of ``scene.meshes[i]`` (i in
     ``meshes``) that is a silhouette from it, chosen in proportion to the angle the edges subtend, and the
-    radiance either side from the ``incident_radiance`` kernel (see :func:`soft_shadow_boundary`)."""
+    radiance either side from the ``incident_radiance`` kernel (see :func:`soft_shadow_boundary`). With
+    ``receivers`` (mesh indices) the shading points on those meshes also take a point on an edge of every other
+    mesh (their own motion moves the outlines they see); with ``camera``, every shading point does."""
     Projection.of(scene, width, height)  # perspective cameras only (the others are refused by name)
     rng = np.random.default_rng([seed, 0x736F6674])  # "soft"
     pix = np.repeat(np.arange(width * height), spp)
     film = np.stack([pix % width, pix // width], axis=1) + rng.random((len(pix), 2))
     org, dirs = _camera_rays(scene, film, width, height)
     tracer = _HostTracer(scene)
-    t_hit, _, mesh_hit = tracer.hit_mesh(org, dirs)
+    t_hit, ng_hit, mesh_hit, tri_hit, bary_hit = tracer.hit_triangle(org, dirs)
+    ng_hit, _ = _unit(ng_hit)
     x = org + np.where(np.isfinite(t_hit), t_hit, 0.0)[:, None] * dirs
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
-    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("film", "jump", "mesh", "v0", "v1", "t", "velocity")}
-    for i in meshes:
+    first = np.cumsum([0] + [m.triangle_count for m in scene.meshes])
+    order = replay.scene.arrays.bvh.tri_order
+
+    def prim_mesh(prims: np.ndarray) -> np.ndarray:
+        """The mesh (index in scene.meshes) of leaf-order triangles (-1: none)."""
+        return np.where(prims >= 0, np.searchsorted(first, order[np.maximum(prims, 0)], side="right") - 1, -1)
+
+    keys = ("film", "jump", "mesh", "v0", "v1", "t", "velocity", "receiver", "tri", "bary", "ray", "receiver_normal",
+            "point", "background", "back_tri", "back_bary", "back_dist", "edge_dist")
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in keys}
+    moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | camera  # shading points that move
+    occluders = set(meshes)
+    for i in sorted(occluders | (set(range(len(scene.meshes))) if len(receivers) or camera else set())):
         mesh = scene.meshes[i]
         p = mesh.positions.astype(np.float64)
         tri = mesh.indices.astype(np.int64)
         face_n = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
         edges = MeshEdges.of(mesh)
         a, b = p[edges.v0], p[edges.v1]
-        live = np.flatnonzero(np.isfinite(t_hit) & (mesh_hit != i))
+        live = np.flatnonzero(np.isfinite(t_hit) & (mesh_hit != i) & ((i in occluders) | moving))
         chosen_e = np.full(len(x), -1)
         chosen_w = np.zeros(len(x))  # 1 / the edge's probability
         for c0 in range(0, len(live), POINT_CHUNK):
@@ -356,7 +445,21 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         keep = speed > 1e-12
         sel, k, t, w, dist, n, speed = (v[keep] for v in (sel, k, t, w, dist, n, speed))
         samples = np.concatenate([film[sel], w, n], axis=1)
-        radiance = replay.incident_radiance(samples, seed, SOFT_SIDE_EPS).astype(np.float64)
+        radiance, prims, hits = replay.incident_radiance(samples, seed, SOFT_SIDE_EPS)
+        # The material form (the interior term's: points on the surfaces move with them): the occluder's own
+        # radiance has no jump at its outline (its points stay in its area integral), what it hides behind does:
+        # the side whose ray meets mesh i first counts 0, and the outline moves relative to that background.
+        pm = prim_mesh(prims)
+        radiance = np.where((pm == i)[..., None], 0.0, radiance.astype(np.float64))
+        rows = np.arange(len(pm))
+        side = np.where(pm[:, 0] != i, 0, 1)  # the side that passes the occluder (0 when both do)
+        back = np.where(pm[rows, side] != i, pm[rows, side], -1)
+        back_prim = np.maximum(prims[rows, side], 0)
+        parts["background"].append(back)
+        parts["back_tri"].append(np.where(back >= 0, order[back_prim] - first[np.maximum(back, 0)], -1))
+        parts["back_bary"].append(hits[rows, side, 1:].astype(np.float64))
+        parts["back_dist"].append(np.where(back >= 0, hits[rows, side, 0].astype(np.float64), np.inf))
+        parts["edge_dist"].append(dist)
         # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel
         parts["jump"].append((radiance[:, 0] - radiance[:, 1]) * (speed * chosen_w[sel] / spp)[:, None])
         parts["film"].append(film[sel])
@@ -365,12 +468,15 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         parts["v1"].append(edges.v1[k])
         parts["t"].append(t)
         parts["velocity"].append(n / dist[:, None])  # n is normal to w: n . (I - w w^T) / |e - x| = n / |e - x|
+        for key, v in (("receiver", mesh_hit), ("tri", tri_hit), ("bary", bary_hit), ("ray", dirs),
+                       ("receiver_normal", ng_hit), ("point", x)):
+            parts[key].append(v[sel])
     if not parts["film"]:
-        z = np.zeros(0)
-        return SoftSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), np.zeros((0, 3)), z.astype(np.int64),
-                           z.astype(np.int64), z.astype(np.int64), z, np.zeros((0, 3)))
+        z, z3, zi = np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64)
+        return SoftSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), z3, zi, zi, zi, z, z3, zi, zi,
+                           np.zeros((0, 2)), np.zeros((0, 2)), z3, z3, z3, zi, zi, np.zeros((0, 2)), z, z)
     cat = {k: np.concatenate(v) for k, v in parts.items()}
-    pixels, weights, _ = _filter_weights(scene.film.rfilter, cat.pop("film"), width, height)
+    pixels, weights, _ = _filter_weights(scene.film.rfilter, cat["film"], width, height)
     return SoftSamples(pixels, weights, **cat)
 
 
@@ -378,28 +484,89 @@ def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[s
                          seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
                          device: Device | str | None = None) -> dict[str, np.ndarray]:
     """Reverse mode: the boundary term of what the surfaces the camera sees receive, at their first bounce, for
-    ``names`` (``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders), given dLoss/dImage
-    ``image_grad`` (H, W, 3): soft shadows of area lights and the environment, and every occluder's outline in
-    the incident light (secondary visibility, Li et al. 2018). ``spp`` shading points per pixel (stratified),
-    each with one point on the occluders' edges that are silhouettes from it, chosen in proportion to the angle
-    they subtend; the radiance either side of it from the ``incident_radiance`` kernel. Not included: shading
-    points on the moving mesh itself (their motion is the interior term), later bounces' outlines, delta lights
-    (:func:`shadow_boundary`)."""
+    ``names`` (``SHAPE.vertex_positions`` and ``SHAPE.to_world``, ``SENSOR.to_world`` and ``SENSOR.x_fov``),
+    given dLoss/dImage ``image_grad`` (H, W, 3): soft shadows of area lights and the environment, and every
+    occluder's outline in the incident light (secondary visibility, Li et al. 2018), as occluders move and as
+    the shading points move with the surface they lie on or with the camera (they slide along its rays).
+    ``spp`` shading points per pixel (stratified), each with one point on the edges that are silhouettes from
+    it, chosen in proportion to the angle they subtend; the radiance either side of it from the
+    ``incident_radiance`` kernel. Not included: a mesh's outlines on itself, later bounces' outlines, delta
+    lights (:func:`shadow_boundary`)."""
     g = np.asarray(image_grad, np.float64)
     if g.ndim != 3 or g.shape[2] != 3:
         raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
     height, width = g.shape[:2]
     params = parameters if parameters is not None else traverse(scene)
     wanted = _meshes_of(scene, names)
+    cameras = [n for n in names if n in sensor_names(scene)]
     out = {name: np.zeros_like(np.asarray(params[name], np.float32)) for ns in wanted.values() for name in ns}
     ss = sample_soft_edges(scene, sorted(wanted), width, height, spp=spp, seed=seed, max_depth=max_depth,
-                           device=device)
+                           device=device, receivers=sorted(wanted), camera=bool(cameras))
     weight = sample_weights(ss.pixels, ss.weights, g, ss.jump)
     for i, mesh_names in wanted.items():
-        m = ss.mesh == i
-        scatter_to_vertices(params, scene, i, mesh_names, ss.v0[m], ss.v1[m], ss.t[m],
-                             ss.velocity[m] * weight[m][:, None], out)
+        vertex_gradients(params, scene, i, mesh_names, _vertex_sums(scene, i, ss, weight), out)
+    for name in cameras:
+        out[name] = np.tensordot(weight, _shading_camera_velocity(scene, width, height, ss, name), axes=1
+                                 ).reshape(np.shape(params[name])).astype(np.float32)
     return out
+
+
+def _vertex_sums(scene: Scene, i: int, ss: SoftSamples, weight: np.ndarray) -> np.ndarray:
+    """(V, 3): sum over the samples of weight x d(outline's normal motion)/d(mesh i's vertex): as the occluder
+    (its edge's two vertices) and as the receiver (the shading point's triangle's three, by its barycentrics)."""
+    mesh = scene.meshes[i]
+    gv = np.zeros((mesh.positions.shape[0], 3))
+    m = ss.mesh == i
+    q = ss.velocity[m] * weight[m][:, None]
+    np.add.at(gv, ss.v0[m], (1 - ss.t[m])[:, None] * q)
+    np.add.at(gv, ss.v1[m], ss.t[m][:, None] * q)
+    for owner, tri, bary, velocity in ((ss.receiver, ss.tri, ss.bary, ss.receiver_velocity()),
+                                       (ss.background, ss.back_tri, ss.back_bary, ss.background_velocity())):
+        r = owner == i
+        q = velocity[r] * weight[r][:, None]
+        corners = mesh.indices.astype(np.int64)[tri[r]]
+        b = bary[r]
+        for k, bk in enumerate((1 - b[:, 0] - b[:, 1], b[:, 0], b[:, 1])):
+            np.add.at(gv, corners[:, k], bk[:, None] * q)
+    return gv
+
+
+def _point_motion(scene: Scene, i: int, tri: np.ndarray, bary: np.ndarray, dp: np.ndarray) -> np.ndarray:
+    """(N, 3): the motion of the points at barycentrics ``bary`` of mesh i's triangles ``tri``, for vertex
+    velocities dp (V, 3)."""
+    corners = scene.meshes[i].indices.astype(np.int64)[tri]
+    return ((1 - bary[:, 0] - bary[:, 1])[:, None] * dp[corners[:, 0]] + bary[:, :1] * dp[corners[:, 1]]
+            + bary[:, 1:] * dp[corners[:, 2]])
+
+
+def _shading_camera_velocity(scene: Scene, width: int, height: int, ss: SoftSamples, name: str) -> np.ndarray:
+    """(N, *value shape): n . d(direction of the edge point from the shading point)/d(sensor parameter ``name``):
+    the shading point slides on its triangle's plane along its camera ray as the camera moves (central
+    differences of that intersection in float64)."""
+    cam = scene.camera
+    if name.endswith(".to_world"):
+        base, step = np.asarray(cam.to_world, np.float64).reshape(-1), CAMERA_STEP
+
+        def moved(v: np.ndarray) -> Camera:
+            return dataclasses.replace(cam, to_world=v.reshape(4, 4))
+    else:
+        _, _, right, _ = cam.basis(width, height)
+        base, step = np.array([2 * np.degrees(np.arctan(np.linalg.norm(right)))]), FOV_STEP
+
+        def moved(v: np.ndarray) -> Camera:
+            return dataclasses.replace(cam, fov=float(v[0]), fov_axis="x")
+    out = np.zeros((len(ss.point), base.size))
+    for k in range(base.size):
+        d = np.zeros(base.size)
+        d[k] = step
+        ends = []
+        for v in (base + d, base - d):
+            o, dirs = _camera_rays(scene, ss.film, width, height, moved(v))
+            t = np.einsum("nc,nc->n", ss.receiver_normal, ss.point - o) / np.einsum("nc,nc->n", ss.receiver_normal,
+                                                                                   dirs)
+            ends.append(o + t[:, None] * dirs)
+        out[:, k] = -np.einsum("nc,nc->n", ss.velocity, (ends[0] - ends[1]) / (2 * step)) * ss.relative
+    return out.reshape(len(ss.point), *((4, 4) if name.endswith(".to_world") else (1,)))
 
 
 def soft_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
@@ -410,9 +577,22 @@ def soft_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *
     value), from the same samples for the same seed and size."""
     width, height = width or scene.film.width, height or scene.film.height
     params = parameters if parameters is not None else traverse(scene)
-    i, dp = vertex_motion(params, scene, name, tangent)
-    ss = sample_soft_edges(scene, [i], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device)
-    dx = edge_point_motion(ss.velocity, ss.v0, ss.v1, ss.t, dp)
+    tan = np.asarray(tangent, np.float64)
+    if name in sensor_names(scene):
+        ss = sample_soft_edges(scene, [], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device,
+                               camera=True)
+        velocity = _shading_camera_velocity(scene, width, height, ss, name)
+        dx = velocity.reshape(velocity.shape[0], int(np.prod(velocity.shape[1:]))) @ tan.reshape(-1)
+    else:
+        i, dp = vertex_motion(params, scene, name, tan)
+        ss = sample_soft_edges(scene, [i], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device,
+                               receivers=[i])
+        dx = np.where(ss.mesh == i, edge_point_motion(ss.velocity, ss.v0, ss.v1, ss.t, dp), 0.0)
+        for owner, tri, bary, velocity in ((ss.receiver, ss.tri, ss.bary, ss.receiver_velocity()),
+                                           (ss.background, ss.back_tri, ss.back_bary, ss.background_velocity())):
+            r = owner == i
+            if np.any(r):
+                dx[r] += np.einsum("nc,nc->n", velocity[r], _point_motion(scene, i, tri[r], bary[r], dp))
     return splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
 
 
@@ -426,14 +606,15 @@ def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wid
     width, height = width or scene.film.width, height or scene.film.height
     params = parameters if parameters is not None else traverse(scene)
     tan = np.asarray(tangent, np.float64)
-    sensor = f"{scene.ids.get('camera', 'sensor')}.to_world"
     light_names = {f"{scene.ids.get(f'light:{k}', f'light_{k}')}.position": k
                    for k, light in enumerate(scene.lights) if isinstance(light, PointLight)}
-    if name == sensor or name in light_names:
+    camera = name in sensor_names(scene)
+    if camera or name in light_names:
         ss = sample_shadow_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
                                  max_depth=max_depth, device=device)
-        if name == sensor:
-            dx = np.einsum("nij,ij->n", camera_velocity(scene, width, height, ss.point, ss.normal), tan.reshape(4, 4))
+        if camera:
+            velocity = sensor_velocity(scene, width, height, ss.point, ss.normal, name)
+            dx = velocity.reshape(velocity.shape[0], int(np.prod(velocity.shape[1:]))) @ tan.reshape(-1)
         else:
             dx = np.where(ss.light == light_names[name], ss.light_velocity @ tan.reshape(3), 0.0)
     else:
@@ -441,4 +622,9 @@ def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wid
         ss = sample_shadow_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,
                                  device=device)
         dx = edge_point_motion(ss.velocity, ss.v0, ss.v1, ss.t, dp)
+        rs = sample_shadow_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
+                                 max_depth=max_depth, device=device, receivers=[i])
+        dr = np.einsum("nc,nc->n", rs.receiver_velocity, _point_motion(scene, i, rs.rtri, rs.rbary, dp))
+        receiving = splat_image(rs.pixels, rs.weights, rs.jump * dr[:, None], width, height)
+        return splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height) + receiving
     return splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)

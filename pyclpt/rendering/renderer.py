@@ -13,11 +13,13 @@ image to image.
 """
 from __future__ import annotations
 
+import importlib
 import logging
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -258,7 +260,8 @@ def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = N
            integrator: str = "megakernel", width: int | None = None, height: int | None = None,
            device: Device | str | None = None, layout: str = "soa", progress: bool | None = None,
            wave_size: int | None = None, precision: str = DEFAULT_PRECISION,
-           aovs: Sequence[str] | str | bool | None = None) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
+           aovs: Sequence[str] | str | bool | None = None, client: Any = None,
+           task_spp: int | None = None) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
     """Render ``scene`` (a Scene or a built-in scene name / file) to a (H, W, 3) float32 linear image.
 
     ``spp`` and ``max_depth`` default to the scene's; ``width``/``height`` override its film.
@@ -268,7 +271,17 @@ def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = N
     :mod:`pyclpt.film.accumulator`).
     ``aovs``: AOV names (or True: all; :data:`pyclpt.film.aovs.AOV_NAMES`); then the result is
     ``(image, {name: array})``, the G-buffer averaged over the same samples (:meth:`Renderer.aovs`).
+    ``client``: a ``dask.distributed.Client``; then the same image is rendered on that cluster's workers
+    (the ``[distributed]`` extra; ``task_spp`` samples a task), by the function that
+    ``pyclpt.rendering.renderer.CLUSTER_RENDER`` names in the distributed layer. A distributed
+    render takes no ``device`` (each worker picks its own: ``PYCLPT_DEVICE``) and no ``aovs``.
     """
+    if client is not None:
+        return cluster_render()(client, scene, spp=spp, max_depth=max_depth, seed=seed, integrator=integrator,
+                                width=width, height=height, device=device, layout=layout, progress=progress,
+                                wave_size=wave_size, precision=precision, aovs=aovs, task_spp=task_spp)
+    if task_spp is not None:
+        raise ValueError("task_spp splits a distributed render: give client= too")
     spp = check_optional_int(spp, "spp", lo=1, hi=2**32, note=" (None: the scene's)")
     check_int(seed, "seed", lo=0, hi=2**32 - 1)
     check_optional_bool(progress, "progress")
@@ -281,3 +294,15 @@ def render(scene: Scene | str, spp: int | None = None, max_depth: int | None = N
                  height=height, device=device, wave_size=wave_size, precision=precision, aovs=aovs)
     image = r.render(scene.spp if spp is None else spp, seed=seed, progress=progress)
     return (image, r.aovs()) if r.aov_names else image
+
+
+#: The cluster path of :func:`render` (``client=``), as ``"module:function"``: the distributed layer, above
+#: this one, provides it, so this layer names it rather than importing it (the layers contract of setup.cfg);
+#: it is imported on the first render given a client, and takes the client, the scene and render's keywords.
+CLUSTER_RENDER = "pyclpt.distributed.renderer:render_on_cluster"
+
+
+def cluster_render() -> Callable[..., Any]:
+    """The function :data:`CLUSTER_RENDER` names, imported."""
+    module, _, name = CLUSTER_RENDER.partition(":")
+    return getattr(importlib.import_module(module), name)

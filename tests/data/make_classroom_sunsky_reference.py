@@ -4,7 +4,7 @@ tests/test_scenes.py::test_classroom_sunsky_matches_mitsuba3.
 
     DRJIT_LIBLLVM_PATH=... /tmp/mitsuba-venv/bin/python tests/data/make_classroom_sunsky_reference.py
 
-The file goes through ``bench/mitsuba_driver.py``'s ``edit_xml`` (Mitsuba's ``path`` integrator, max depth
+The file goes through ``bench/report/mitsuba_driver.py``'s ``edit_xml`` (Mitsuba's ``path`` integrator, max depth
 8, rr depth 3; a 96x54 ``hdrfilm`` with a box filter; ``independent`` sampler), which turns the 0.6
 ``sunsky`` into Mitsuba 3's in Mitsuba 3's frame: the same sun direction in the world (``sunDirection``
 kept, a -90 degree rotation about x prepended to the sky's ``toWorld``: 0.5's sky is +y up, Mitsuba 3's
@@ -29,7 +29,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
-from bench.mitsuba_driver import edit_xml  # noqa: E402
+from bench.report.mitsuba_driver import edit_xml  # noqa: E402
 
 WIDTH, HEIGHT, MAX_DEPTH, SPP = 96, 54, 8, 4096
 

@@ -1,7 +1,7 @@
 """The Hosek-Wilkie clear-sky model, RGB version (Hosek & Wilkie 2012, "An Analytic Model for Full
 Spectral Sky-Dome Radiance", ACM TOG 31(4)), as Mitsuba 0.5 (``sky``) and Mitsuba 3 (``sunsky``) use it.
 
-The fitted data (``hosek_wilkie_rgb.npz`` beside this file, written by ``bench/make_sky_tables.py``) are
+The fitted data (``hosek_wilkie_rgb.npz`` beside this file, written by ``bench/tools/make_sky_tables.py``) are
 the tables ``datasetRGB1-3`` / ``datasetRGBRad1-3`` of Hosek & Wilkie's ``ArHosekSkyModelData_RGB.h``
 (3-clause BSD, ``HOSEK_WILKIE_LICENSE.txt``), stored as (turbidity 1-10, albedo 0/1, 6 control points,
 R/G/B[, 9 coefficients]). :func:`sky_state` interpolates them as the model does: linearly in turbidity
@@ -27,7 +27,7 @@ _DATA = Path(__file__).with_name("hosek_wilkie_rgb.npz")
 
 @lru_cache(maxsize=1)
 def tables() -> dict[str, np.ndarray]:
-    """The data tables (see ``bench/make_sky_tables.py`` for their layout), read once."""
+    """The data tables (see ``bench/tools/make_sky_tables.py`` for their layout), read once."""
     with np.load(_DATA) as f:
         return {k: np.asarray(f[k], np.float64) for k in f.files}
 

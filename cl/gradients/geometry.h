@@ -1,0 +1,323 @@
+/* geometry.h: the interior term of moving geometry, for the gradient kernels (-DGRAD_GEOMETRY).
+ *
+ * The material form of the path integral (Zhang, Miller, Yan, Gkioulekas and Zhao 2020, "Path-space
+ * differentiable rendering"): a path is a chain of points, each attached to the surface it lies on, so that
+ * when the surfaces move the points move with them and what changes is the integrand of the area form:
+ *   the BSDF values (f |cos| at each vertex, through its two directions and its normal's frame),
+ *   the other end's cosine and the 1/r^2 of every segment sampled from a BSDF or a light,
+ *   the area Jacobian of each attached point (a triangle that grows spreads its points out).
+ * The sampling densities and MIS weights are held fixed (detached), as in prb: their derivatives sum to zero
+ * over the strategies when all are expressed in area measure. What is not an area-measure point:
+ *   the first hit slides along its camera ray (the pixel integral is over the film), and so does a point
+ *   reached by a delta (smooth specular) lobe, along its ray; a vertex of a delta-only material is held still
+ *   (a moving mirror's own motion is not differentiated: docs/differentiable.md), and so is a direction to
+ *   the environment or a directional light (a point at infinity).
+ * A point on triangle T with barycentrics b moves as sum_j b_j dv_j (attached), or along its ray d as
+ * d (n . dp) / (n . d) (sliding); the triangle's unit normal and area follow its vertices' motion.
+ *
+ * Reverse mode (backward.cl's replay, where the path's radiance L is known): the factors of a segment carry
+ * everything gathered after it (L - G, the radiance gathered after the segment's first vertex), the factors of a
+ * light sample its contribution; their log-derivatives, weighted by dLoss/dL, give adjoints of the points'
+ * positions, normals and area Jacobians (GeoVertex), scattered when no later factor needs the vertex into
+ * grad_verts (3 floats per vertex of the scene's packed vertex arrays) and grad_lightpos (3 floats per light
+ * record: a point light's position). Forward mode (forward.cl): the tangents of the same quantities from the
+ * tangent buffers of the same layout, and the log-derivatives added to the throughput's tangent.
+ *
+ * BSDF values are differentiated with respect to their two local directions in closed form for diffuse ones,
+ * by central differences of bsdf_eval for the others (GEO_FD_STEP, the directions renormalised), a coordinate whose two evaluations straddle the
+ * support's edge (one zero, one not) left out; the frame follows the normal by the smallest rotation (isotropic
+ * BSDFs do not see the twist). Flat-shaded meshes only: the host refuses vertex normals, bump maps and
+ * anisotropic frames on a moving mesh, instanced scenes, and spot lights' falloff (pyclpt/gradients/). */
+#ifndef PYCLPT_GRADIENT_GEOMETRY_H
+#define PYCLPT_GRADIENT_GEOMETRY_H
+
+#include "gradients/params.h"
+
+#ifdef SCENE_HAS_INSTANCES
+#error "GRAD_GEOMETRY: the interior term of moving geometry is not implemented for instanced scenes"
+#endif
+
+#define GEO_FD_STEP 1e-3f
+
+#define GEO_FIXED 0    /* does not move (the camera, a delta-only vertex, no vertex) */
+#define GEO_ATTACHED 1 /* attached to its triangle by its barycentrics */
+#define GEO_SLIDING 2  /* on a fixed ray (the camera's, a delta lobe's), where that meets its moving triangle */
+#define GEO_POINT 3    /* a point light's position */
+
+typedef struct {
+    vec3 p;     /* position */
+    vec3 n;     /* its triangle's unit normal (winding order) */
+    vec3 d;     /* GEO_SLIDING: the ray's direction */
+    float b1, b2; /* barycentrics (u, v) on the triangle */
+    int kind;   /* GEO_* */
+    int id;     /* leaf-order triangle, or the light record of a GEO_POINT */
+    vec3 gx, gn; /* reverse mode: the adjoints of the position and the normal */
+    float gj;   /*               and of the log of the area Jacobian */
+    vec3 dx, dn; /* forward mode: their tangents */
+    float dj;
+    int camera;   /* -DGRAD_CAMERA: the camera ray's hit, t from the camera at film coordinates (sx, sy) */
+    float t, sx, sy;
+    vec3 gwi, dd; /* the adjoint (reverse) or tangent (forward, dd = -d wi) of the camera ray's direction */
+} GeoVertex;
+
+static inline GeoVertex geo_fixed(vec3 p) {
+    GeoVertex v;
+    v.p = p;
+    v.n = v.d = v.gx = v.gn = v.dx = v.dn = v.gwi = v.dd = v3_splat(0.0f);
+    v.b1 = v.b2 = v.gj = v.dj = v.t = v.sx = v.sy = 0.0f;
+    v.kind = GEO_FIXED;
+    v.id = -1;
+    v.camera = 0;
+    return v;
+}
+
+#ifdef GRAD_CAMERA
+/* The moving camera (a pinhole: -DGRAD_CAMERA, the sensor's to_world and fov differentiated): its origin O and
+ * the basis F, R, U of camera_ray, whose ray through film coordinates (sx, sy) is d = v / |v|, v = F + sx R + sy U.
+ * The camera ray's hit slides along the moving ray, x = O + t d on the moving triangle, so
+ *   dx = P (dO + t dd) + d (n . dp) / (n . d),   P u = u - d (n . u) / (n . d),
+ * and its incident direction -d turns with the ray. Their adjoints go to 12 floats (O, F, R, U: grad_camera),
+ * which the host chains to to_world and fov (pyclpt/gradients/differentiate.py). */
+static inline vec3 geo_camera_v(const Scene* sc, float sx, float sy) {
+    __global const float* c = sc->consts;
+    return v3_add(v3_add(rgb_at(c + CONST_CAM_FORWARD, sc->unit), v3_scale(rgb_at(c + CONST_CAM_RIGHT, sc->unit), sx)),
+                  v3_scale(rgb_at(c + CONST_CAM_UP, sc->unit), sy));
+}
+
+/* Marks v, the hit of the camera ray from origin through film position film, as the camera's. */
+static inline void geo_camera_hit(const Scene* sc, GeoVertex* v, vec2 film, vec3 origin) {
+    if (v->kind != GEO_SLIDING) return; /* a delta-only vertex is held still */
+    __global const float* c = sc->consts;
+    v->camera = 1;
+    v->sx = 2.0f * (film.x / c[CONST_WIDTH]) - 1.0f;
+    v->sy = 1.0f - 2.0f * (film.y / c[CONST_HEIGHT]);
+    v->t = m_length(v3_sub(v->p, origin));
+}
+
+/* Reverse mode: the camera hit's adjoints to the camera's 12 floats. */
+static inline void geo_camera_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
+    float nd = m_dot(v->n, v->d);
+    if (nd == 0.0f) return;
+    vec3 q = v3_sub(v->gx, v3_scale(v->n, m_dot(v->d, v->gx) / nd)); /* P^T gx */
+    vec3 g_dd = v3_sub(v3_scale(q, v->t), v->gwi);
+    vec3 w = geo_camera_v(sc, v->sx, v->sy);
+    vec3 g_v = v3_divs(v3_sub(g_dd, v3_scale(v->d, m_dot(v->d, g_dd))), m_length(w));
+    grad_put3(gr, gr->camera, q);
+    grad_put3(gr, gr->camera + 3, g_v);
+    grad_put3(gr, gr->camera + 6, v3_scale(g_v, v->sx));
+    grad_put3(gr, gr->camera + 9, v3_scale(g_v, v->sy));
+}
+
+/* Forward mode: the camera's tangent added to its hit's motion (dx) and to its ray's direction (dd). */
+static inline void geo_camera_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
+    if (!v->camera) return;
+    float nd = m_dot(v->n, v->d);
+    if (nd == 0.0f) return;
+    vec3 w = geo_camera_v(sc, v->sx, v->sy);
+    vec3 dw = v3_add(v3_add(tangent3(tg->camera + 3), v3_scale(tangent3(tg->camera + 6), v->sx)),
+                     v3_scale(tangent3(tg->camera + 9), v->sy));
+    v->dd = v3_divs(v3_sub(dw, v3_scale(v->d, m_dot(v->d, dw))), m_length(w));
+    vec3 u = v3_add(tangent3(tg->camera), v3_scale(v->dd, v->t));
+    v->dx = v3_add(v->dx, v3_sub(u, v3_scale(v->d, m_dot(v->n, u) / nd)));
+}
+#endif
+
+/* The point at barycentrics (b1, b2) of leaf-order triangle prim, attached or sliding along d. */
+static inline GeoVertex geo_on_triangle(const Scene* sc, int prim, float b1, float b2, vec3 p, int kind, vec3 d) {
+    GeoVertex v = geo_fixed(p);
+    __global const float* t = sc->tris + 9 * prim;
+    v.n = m_normalize(m_cross(rgb_at(t + 3, sc->unit), rgb_at(t + 6, sc->unit)));
+    v.b1 = b1;
+    v.b2 = b2;
+    v.kind = kind;
+    v.id = prim;
+    v.d = d;
+    return v;
+}
+
+/* ---- reverse mode ------------------------------------------------------------------------------------ */
+
+/* A vertex's adjoints to its triangle's three vertices (or its point light's position). */
+static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
+#ifdef GRAD_CAMERA
+    if (v->camera) geo_camera_scatter(sc, gr, v);
+#endif
+    if (v->kind == GEO_POINT) {
+        grad_put3(gr, gr->lightpos + 3 * v->id, v->gx);
+        return;
+    }
+    if (v->kind == GEO_FIXED) return;
+    __global const float* t = sc->tris + 9 * v->id;
+    vec3 e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
+    vec3 c = m_cross(e1, e2);
+    float len = m_length(c);
+    if (!(len > 0.0f)) return;
+    vec3 n = v3_divs(c, len);
+    vec3 gp = v->gx; /* the adjoint of the triangle's material point under the vertex */
+    if (v->kind == GEO_SLIDING) {
+        float nd = m_dot(n, v->d);
+        gp = nd != 0.0f ? v3_scale(n, m_dot(v->d, v->gx) / nd) : v3_splat(0.0f);
+    }
+    /* n = c / |c|, log J = log |c| + const: the adjoint of c */
+    vec3 gc = v3_divs(v3_add(v3_sub(v->gn, v3_scale(n, m_dot(n, v->gn))), v3_scale(n, v->gj)), len);
+    vec3 ge1 = m_cross(e2, gc), ge2 = m_cross(gc, e1);
+    __global const int* vi = sc->tri_vidx + 3 * v->id;
+    float b0 = 1.0f - v->b1 - v->b2;
+    grad_put3(gr, gr->verts + 3 * vi[0], v3_sub(v3_scale(gp, b0), v3_add(ge1, ge2)));
+    grad_put3(gr, gr->verts + 3 * vi[1], v3_add(v3_scale(gp, v->b1), ge1));
+    grad_put3(gr, gr->verts + 3 * vi[2], v3_add(v3_scale(gp, v->b2), ge2));
+}
+
+/* The adjoint g_w of the unit direction w = (b - a) / r and g_r of the distance r, to a's and b's positions. */
+static inline void geo_segment_adjoint(GeoVertex* a, GeoVertex* b, vec3 w, float r, vec3 g_w, float g_r) {
+    vec3 g = v3_add(v3_divs(v3_sub(g_w, v3_scale(w, m_dot(w, g_w))), r), v3_scale(w, g_r));
+    b->gx = v3_add(b->gx, g);
+    a->gx = v3_sub(a->gx, g);
+}
+
+/* The adjoint of a direction's local coordinates (to_local(f, w)) to the world direction (returned) and to the
+ * frame's normal (added to *gn): the frame turns with the normal by the smallest rotation. */
+static inline vec3 geo_local_adjoint(Frame f, vec3 w, vec3 gl, vec3* gn) {
+    float nw = m_dot(f.n, w);
+    *gn = v3_add(*gn, v3_sub(v3_scale(w, gl.z), v3_scale(v3_add(v3_scale(f.s, gl.x), v3_scale(f.t, gl.y)), nw)));
+    return to_world(f, gl);
+}
+
+/* f(wi, wo) |cos| with the local directions moved by h along the unit coordinate axis k of the six (wi's three,
+ * then wo's), renormalised. */
+static inline vec3 geo_bsdf_moved(const Bsdf* b, vec3 wi, vec3 wo, int k, float h) {
+    if (k < 3) {
+        if (k == 0) wi.x += h; else if (k == 1) wi.y += h; else wi.z += h;
+        wi = m_normalize(wi);
+    } else {
+        if (k == 3) wo.x += h; else if (k == 4) wo.y += h; else wo.z += h;
+        wo = m_normalize(wo);
+    }
+    float pdf;
+    return bsdf_eval(b, wi, wo, &pdf);
+}
+
+/* A diffuse BSDF's value f = reflectance / pi |wo.z| (where wi and wo are on its sides; 0 elsewhere) has the
+ * derivative f / wo.z along wo.z and none along wi: no differences needed. */
+static inline bool geo_diffuse(const Bsdf* b) { return HAS_MATERIAL(MAT_DIFFUSE) && b->type == MAT_DIFFUSE; }
+
+/* The gradient of s . f(wi, wo) |cos| with respect to the local directions (wi's in *g_wi, wo's in *g_wo). */
+static inline void geo_bsdf_gradient(const Bsdf* b, vec3 wi, vec3 wo, vec3 s, vec3* g_wi, vec3* g_wo) {
+    if (geo_diffuse(b)) {
+        float pdf;
+        vec3 f = bsdf_eval(b, wi, wo, &pdf);
+        *g_wi = v3_splat(0.0f);
+        *g_wo = v3(0.0f, 0.0f, wo.z != 0.0f ? m_dot(s, f) / wo.z : 0.0f);
+        return;
+    }
+    float g[6];
+    for (int k = 0; k < 6; k++) {
+        vec3 fp = geo_bsdf_moved(b, wi, wo, k, GEO_FD_STEP), fm = geo_bsdf_moved(b, wi, wo, k, -GEO_FD_STEP);
+        bool straddles = (max3(fp) > 0.0f) != (max3(fm) > 0.0f);
+        g[k] = straddles ? 0.0f : m_dot(s, v3_sub(fp, fm)) * (0.5f / GEO_FD_STEP);
+    }
+    *g_wi = v3(g[0], g[1], g[2]);
+    *g_wo = v3(g[3], g[4], g[5]);
+}
+
+/* Reverse mode, a BSDF factor f(wi, wo) |cos| at vertex v (frame fr, f its value) through which the radiance C
+ * flows, weighted by dL: its adjoints to v's normal and to the two world directions (returned in *g_wi, *g_wo). */
+static inline void geo_bsdf_adjoint(const Bsdf* b, Frame fr, vec3 wi_w, vec3 wo_w, vec3 f, vec3 C, vec3 dL,
+                                    GeoVertex* v, vec3* g_wi, vec3* g_wo) {
+    vec3 s = safe_div3(v3_mul(dL, C), f);
+    vec3 gli, glo;
+    geo_bsdf_gradient(b, to_local(fr, wi_w), to_local(fr, wo_w), s, &gli, &glo);
+    *g_wi = geo_local_adjoint(fr, wi_w, gli, &v->gn);
+    *g_wo = geo_local_adjoint(fr, wo_w, glo, &v->gn);
+}
+
+/* Reverse mode, the area-form factors of segment a -> b (direction w, length r) other than a's BSDF: b's cosine,
+ * 1 / r^2 and b's area Jacobian, with scalar weight a_w = dL . (what flows through) and g_w the adjoint of w from
+ * a's BSDF. */
+static inline void geo_area_segment(GeoVertex* a, GeoVertex* b, vec3 w, float r, float a_w, vec3 g_w) {
+    float cb = m_dot(b->n, w);
+    if (cb != 0.0f) {
+        b->gn = v3_add(b->gn, v3_scale(w, a_w / cb));
+        g_w = v3_add(g_w, v3_scale(b->n, a_w / cb));
+    }
+    b->gj += a_w;
+    geo_segment_adjoint(a, b, w, r, g_w, -2.0f * a_w / r);
+}
+
+/* ---- forward mode ------------------------------------------------------------------------------------ */
+
+/* The tangents of a vertex's position, normal and log area Jacobian from the tangent buffers. */
+static inline void geo_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
+    if (v->kind == GEO_POINT) {
+        v->dx = tangent3(tg->lightpos + 3 * v->id);
+        return;
+    }
+    if (v->kind == GEO_FIXED) return;
+    __global const float* t = sc->tris + 9 * v->id;
+    vec3 e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
+    __global const int* vi = sc->tri_vidx + 3 * v->id;
+    vec3 d0 = tangent3(tg->verts + 3 * vi[0]), d1 = tangent3(tg->verts + 3 * vi[1]), d2 = tangent3(tg->verts + 3 * vi[2]);
+    vec3 c = m_cross(e1, e2);
+    float len = m_length(c);
+    if (!(len > 0.0f)) return;
+    vec3 n = v3_divs(c, len);
+    vec3 dp = v3_add(v3_add(v3_scale(d0, 1.0f - v->b1 - v->b2), v3_scale(d1, v->b1)), v3_scale(d2, v->b2));
+    if (v->kind == GEO_SLIDING) {
+        float nd = m_dot(n, v->d);
+        dp = nd != 0.0f ? v3_scale(v->d, m_dot(n, dp) / nd) : v3_splat(0.0f);
+    }
+    v->dx = dp;
+    vec3 dc = v3_add(m_cross(v3_sub(d1, d0), e2), m_cross(e1, v3_sub(d2, d0)));
+    v->dn = v3_divs(v3_sub(dc, v3_scale(n, m_dot(n, dc))), len);
+    v->dj = v->kind == GEO_ATTACHED ? m_dot(n, dc) / len : 0.0f;
+}
+
+/* The tangent of the unit direction from a to b (length r). */
+static inline vec3 geo_direction_tangent(const GeoVertex* a, const GeoVertex* b, vec3 w, float r) {
+    vec3 d = v3_sub(b->dx, a->dx);
+    return v3_divs(v3_sub(d, v3_scale(w, m_dot(w, d))), r);
+}
+
+/* The tangent of a direction's local coordinates: dw the world direction's, dn the frame's normal's. */
+static inline vec3 geo_local_tangent(Frame f, vec3 w, vec3 dw, vec3 dn) {
+    float nw = m_dot(f.n, w);
+    return v3(m_dot(f.s, dw) - m_dot(f.s, dn) * nw, m_dot(f.t, dw) - m_dot(f.t, dn) * nw, m_dot(f.n, dw) + m_dot(dn, w));
+}
+
+/* The derivative of f(wi, wo) |cos| along local tangents (dwi, dwo), by central differences. */
+static inline vec3 geo_bsdf_tangent(const Bsdf* b, vec3 wi, vec3 wo, vec3 dwi, vec3 dwo) {
+    float pdf;
+    if (geo_diffuse(b)) return wo.z != 0.0f ? v3_scale(bsdf_eval(b, wi, wo, &pdf), dwo.z / wo.z) : v3_splat(0.0f);
+    float m = m_max(m_length(dwi), m_length(dwo));
+    if (!(m > 0.0f) || !m_isfinite(m)) return v3_splat(0.0f);
+    float h = GEO_FD_STEP / m;
+    vec3 fp = bsdf_eval(b, m_normalize(v3_add(wi, v3_scale(dwi, h))), m_normalize(v3_add(wo, v3_scale(dwo, h))), &pdf);
+    vec3 fm = bsdf_eval(b, m_normalize(v3_sub(wi, v3_scale(dwi, h))), m_normalize(v3_sub(wo, v3_scale(dwo, h))), &pdf);
+    if ((max3(fp) > 0.0f) != (max3(fm) > 0.0f)) return v3_splat(0.0f);
+    return v3_scale(v3_sub(fp, fm), 0.5f / h);
+}
+
+/* The local Jacobian of f(wi, wo) |cos| / f with respect to wo's three local coordinates (columns), for a
+ * segment whose far end is not known yet (forward.cl). */
+static inline void geo_bsdf_wo_jacobian(const Bsdf* b, vec3 wi, vec3 wo, vec3 f, vec3* jac) {
+    if (geo_diffuse(b)) {
+        jac[0] = jac[1] = v3_splat(0.0f);
+        jac[2] = safe_div3(v3_scale(f, wo.z != 0.0f ? 1.0f / wo.z : 0.0f), f);
+        return;
+    }
+    for (int k = 0; k < 3; k++) {
+        vec3 fp = geo_bsdf_moved(b, wi, wo, 3 + k, GEO_FD_STEP), fm = geo_bsdf_moved(b, wi, wo, 3 + k, -GEO_FD_STEP);
+        bool straddles = (max3(fp) > 0.0f) != (max3(fm) > 0.0f);
+        jac[k] = straddles ? v3_splat(0.0f) : safe_div3(v3_scale(v3_sub(fp, fm), 0.5f / GEO_FD_STEP), f);
+    }
+}
+
+/* The log-derivative of the area-form factors of segment a -> b other than a's BSDF: b's cosine, 1 / r^2, b's
+ * area Jacobian. */
+static inline float geo_area_segment_tangent(const GeoVertex* a, const GeoVertex* b, vec3 w, float r, vec3 dw) {
+    float cb = m_dot(b->n, w);
+    float dcos = cb != 0.0f ? (m_dot(b->dn, w) + m_dot(b->n, dw)) / cb : 0.0f;
+    return dcos - 2.0f * m_dot(w, v3_sub(b->dx, a->dx)) / r + b->dj;
+}
+
+#endif
