@@ -385,7 +385,7 @@ def test_lazy_package_keeps_its_names():
             "assert set(pyclpt.__all__) <= set(dir(pyclpt))\nprint(render.__module__, Scene.__name__)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=_env())
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split() == ["pyclpt.distributed.renderer", "Scene"]
+    assert proc.stdout.split() == ["pyclpt.rendering.renderer", "Scene"]
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
         pyclpt.no_such_name  # noqa: B018
 

@@ -7,7 +7,8 @@ primal render, memory against spp, and a cross-check of the forward gradient wit
   with respect to one reflectance, ``red.reflectance.value``): the primal render (``Renderer.render``,
   megakernel), the backward pass (``render_backward``) and a full step (both), medians over
   ``--repeats`` rounds after a warm-up (compilation is reported apart), and their ratios; the same with
-  every differentiable parameter of the scene;
+  every differentiable appearance parameter of the scene; and the small box's pose (``small-box.to_world``: the
+  interior term of moving geometry alone, then with the boundary terms of visibility);
 * **memory**: the device bytes the gradient renderer holds (scene, film batch, gradient buffers) and the
   peak resident memory of a process that runs one backward pass (on a CPU device the device memory is
   host memory), for spp 16, 64 and 256;
@@ -33,6 +34,7 @@ from pyclpt.common import env
 
 REPO = Path(__file__).resolve().parents[2]  # Mitsuba's side runs as bench.peers.mitsuba_gradients from here
 PARAM = "red.reflectance.value"
+GEOMETRY = "small-box.to_world"
 SETTING = {"scene": "cornell-box", "width": 256, "height": 256, "spp": 16, "max_depth": 8}
 
 
@@ -45,28 +47,30 @@ def _median_times(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
-def timing(repeats: int, device: str | None, params: list[str] | None) -> dict:
-    """Primal, backward and step times (medians) in the issue's setting, for ``params`` (None: all)."""
+def timing(repeats: int, device: str | None, params: list[str] | None, label: str = "", **options) -> dict:
+    """Primal, backward and step times (medians) in the issue's setting, for ``params`` (None: all);
+    ``options``: render_backward's (the boundary terms' for geometry)."""
     scene = pyclpt.load(SETTING["scene"])
     w, h, spp, depth = SETTING["width"], SETTING["height"], SETTING["spp"], SETTING["max_depth"]
     t0 = time.perf_counter()
     renderer = pyclpt.Renderer(scene, width=w, height=h, max_depth=depth, device=device)
     grad = np.full((h, w, 3), 1.0 / (w * h * 3), np.float32)
     pyclpt.render_backward(scene, grad, spp=1, seed=1, max_depth=depth, width=w, height=h, device=device,
-                           params=params)
+                           params=params, **options)
     compile_s = time.perf_counter() - t0
     primal = _median_times(lambda k: renderer.render(spp, seed=2 * k), repeats)
     backward = _median_times(lambda k: pyclpt.render_backward(
-        scene, grad, spp=spp, seed=2 * k + 1, max_depth=depth, width=w, height=h, device=device, params=params),
-        repeats)
+        scene, grad, spp=spp, seed=2 * k + 1, max_depth=depth, width=w, height=h, device=device, params=params,
+        **options), repeats)
 
     def step(k: int) -> None:
         image = renderer.render(spp, seed=2 * k)
         pyclpt.render_backward(scene, 2 * image / image.size, spp=spp, seed=2 * k + 1, max_depth=depth, width=w,
-                               height=h, device=device, params=params)
+                               height=h, device=device, params=params, **options)
 
     full = _median_times(step, repeats)
-    return {"params": params or "all", "primal_s": primal, "backward_s": backward, "step_s": full,
+    return {"params": params or "all", "label": label or ("every parameter" if params is None else "one reflectance"),
+            "primal_s": primal, "backward_s": backward, "step_s": full,
             "backward_over_primal": backward / primal, "step_over_primal": full / primal,
             "setup_and_compile_s": compile_s}
 
@@ -134,7 +138,7 @@ def report(results: dict) -> str:
              f"Machine: {m['cpu']}; device: {m['device']}.", "",
              "| setting | primal | backward | step | backward / primal | step / primal |", "|---|---|---|---|---|---|"]
     for t in results["timing"]:
-        label = "one reflectance" if t["params"] != "all" else "every parameter"
+        label = t.get("label") or ("one reflectance" if t["params"] != "all" else "every parameter")
         lines.append(f"| pyclpt, {label} | {t['primal_s']:.3f} s | {t['backward_s']:.3f} s | {t['step_s']:.3f} s | "
                      f"{t['backward_over_primal']:.2f} | {t['step_over_primal']:.2f} |")
     mi = results.get("mitsuba")
@@ -167,7 +171,13 @@ def main(argv: list[str] | None = None) -> int:
     from bench.report.machine import cpu_model
     results: dict = {"setting": SETTING, "param": PARAM,
                      "machine": {"cpu": cpu_model(), "device": pyclpt.get_device(a.device).name}}
-    results["timing"] = [timing(a.repeats, a.device, [PARAM]), timing(a.repeats, a.device, None)]
+    results["timing"] = [timing(a.repeats, a.device, [PARAM]), timing(a.repeats, a.device, None),
+                         # where a box is (issue 25): the interior term alone, then with the boundary terms
+                         timing(a.repeats, a.device, [GEOMETRY], "the small box's pose, interior term",
+                                boundary=False),
+                         timing(a.repeats, a.device, [GEOMETRY], "the small box's pose, both terms (edge_spp 1)",
+                                edge_spp=1),
+                         timing(a.repeats, a.device, [GEOMETRY], "the small box's pose, both terms (edge_spp 4)")]
     results["memory"] = memory(a.device)
     if a.mitsuba_python:
         results["mitsuba"] = mitsuba(a.mitsuba_python, a.seeds, a.repeats)

@@ -71,8 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
                                 "; --quick: " + ", ".join(f"{k}={v}" for k, v in QUICK.items()))
     p.add_argument("-o", "--output", default=None,
                    help="report folder (default bench-report, or the folder of --from-json)")
-    p.add_argument("--quick", action="store_true", help="small settings for a run of about two minutes; "
-                   "options given explicitly still apply")
+    p.add_argument("--quick", action="store_true", help="small settings (a run of 43 s on 2 CPU cores: "
+                   "docs/benchmarks.md); options given explicitly still apply")
     p.add_argument("--scenes", nargs="+", default=None,
                    help="'builtin', 'shared', built-in scene names, shared scene folders (living-room) "
                         "or scene files")
