@@ -119,9 +119,17 @@ def plot(h: dict, path: Path) -> None:
         ax[1].semilogy(cam[:, k] + 1e-6, "--", label=name)
     ax[1].set(title="parameter error", xlabel="Adam step")
     ax[1].legend(fontsize=7)
-    for a, key in zip(ax[2:], ("target", "start", "final")):
-        a.imshow(np.clip(h[key], 0, 1) ** (1 / 2.2))
-        a.set_title(key)
+    finish_figure(fig, ax[2:], h, path)
+
+
+def finish_figure(fig, axes, images: dict, path: Path, suffix: str = "") -> None:
+    """The target, start and final images (linear, shown with gamma 2.2) in ``axes``, titled with ``suffix``, then
+    the figure saved to ``path`` and closed (the examples' figures share this)."""
+    import matplotlib.pyplot as plt
+
+    for a, key in zip(axes, ("target", "start", "final")):
+        a.imshow(np.clip(images[key], 0, 1) ** (1 / 2.2))
+        a.set_title(f"{key}{suffix}")
         a.axis("off")
     fig.tight_layout()
     fig.savefig(path, dpi=80)

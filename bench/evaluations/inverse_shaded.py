@@ -47,7 +47,7 @@ import numpy as np
 
 import pyclpt
 from bench.evaluations import inverse_shape
-from bench.evaluations.inverse_pose import chain
+from bench.evaluations.inverse_pose import chain, finish_figure
 from bench.evaluations.inverse_shape import TARGET, VIEWS, ellipsoid_error, laplacian
 from pyclpt.gradients.edges import primary_boundary
 from pyclpt.gradients.parameters import SceneParameters
@@ -203,19 +203,7 @@ def recover_shape(steps: int = 150, width: int = 40, height: int = 40, spp: int 
     truth = tf.apply_points(TARGET, start_pos).astype(np.float64)
     params = pyclpt.traverse(scene)
     views = VIEWS if views is None else views
-    cams = [tf.look_at(v, [0, 0, 0], [0, 0, 1] if abs(v[1]) > 1 else [0, 1, 0]) for v in views]
-
-    def set_shape(x: np.ndarray) -> None:
-        params.update({"shape.vertex_positions": x.reshape(-1)})
-
-    def view(k: int) -> None:
-        params.update({"sensor.to_world": cams[k]})
-
-    set_shape(truth)
-    targets = []
-    for k in range(len(views)):
-        view(k)
-        targets.append(pyclpt.render(scene, spp=64, seed=1000 + k, max_depth=max_depth))
+    set_shape, view, targets = inverse_shape.views_and_targets(scene, params, views, truth, max_depth=max_depth)
     m = (identity(len(start_pos)) + lam * laplacian(len(start_pos), faces)).tocsc()
     solve = splu(m)
     opt = pyclpt.optim.Adam(lr=lr, beta_1=0.8, beta_2=0.95, params={"u": m @ start_pos})
@@ -275,13 +263,7 @@ def plot_pose(h: dict, silhouette: dict | None, path: Path) -> None:
         ax[1].semilogy(np.abs(err).max(1) + 1e-6, "k:", label="silhouettes only: largest")
     ax[1].set(title="parameter error", xlabel="Adam step")
     ax[1].legend(fontsize=7)
-    for a, key in zip(ax[2:], ("target", "start", "final")):
-        a.imshow(np.clip(h[key], 0, 1) ** (1 / 2.2))
-        a.set_title(key)
-        a.axis("off")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    finish_figure(fig, ax[2:], h, path)
 
 
 def plot_shape(h: dict, silhouette: dict[str, dict], path: Path) -> None:
@@ -298,13 +280,7 @@ def plot_shape(h: dict, silhouette: dict[str, dict], path: Path) -> None:
         ax[1].plot(run["vertex_error"], "--", label=f"emitting, silhouettes only, {label}")
     ax[1].set(title="distance to the target surface", xlabel="Adam step")
     ax[1].legend(fontsize=7)
-    for a, key in zip(ax[2:], ("target", "start", "final")):
-        a.imshow(np.clip(h["images"][key], 0, 1) ** (1 / 2.2))
-        a.set_title(f"{key} (view 1)")
-        a.axis("off")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    finish_figure(fig, ax[2:], h["images"], path, " (view 1)")
 
 
 def main(argv: list[str] | None = None) -> int:

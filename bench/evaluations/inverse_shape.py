@@ -14,11 +14,13 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 import pyclpt
+from bench.evaluations.inverse_pose import finish_figure
 from pyclpt.gradients.edges import primary_boundary
 from pyclpt.scene import transform as tf
 from pyclpt.scene.shapes import sphere
@@ -60,15 +62,11 @@ def ellipsoid_error(x: np.ndarray) -> float:
     return float(np.abs(np.linalg.norm(x @ np.linalg.inv(TARGET[:3, :3]).T, axis=1) - 1.0).mean())
 
 
-def recover(steps: int = 150, width: int = 40, height: int = 40, spp: int = 8, samples: int = 8192,
-            rings: int = 12, segments: int = 24, lam: float = 20.0, lr: float = 0.02) -> dict:
-    from scipy.sparse import identity
-    from scipy.sparse.linalg import splu
-
-    scene, start_pos, faces = setup(width, height, rings, segments)
-    truth = tf.apply_points(TARGET, start_pos).astype(np.float64)
-    params = pyclpt.traverse(scene)
-    cams = [tf.look_at(v, [0, 0, 0], [0, 0, 1] if abs(v[1]) > 1 else [0, 1, 0]) for v in VIEWS]
+def views_and_targets(scene: pyclpt.Scene, params: pyclpt.SceneParameters, views, truth: np.ndarray, **render
+                      ) -> tuple[Callable[[np.ndarray], None], Callable[[int], None], list[np.ndarray]]:
+    """set_shape(x) (the mesh "shape"'s vertices), view(k) (the camera at ``views[k]``, looking at the origin) and
+    the target images of the shape ``truth`` from each view (64 spp; ``render``: more of pyclpt.render's)."""
+    cams = [tf.look_at(v, [0, 0, 0], [0, 0, 1] if abs(v[1]) > 1 else [0, 1, 0]) for v in views]
 
     def set_shape(x: np.ndarray) -> None:
         params.update({"shape.vertex_positions": x.reshape(-1)})
@@ -78,9 +76,21 @@ def recover(steps: int = 150, width: int = 40, height: int = 40, spp: int = 8, s
 
     set_shape(truth)
     targets = []
-    for k in range(len(VIEWS)):
+    for k in range(len(views)):
         view(k)
-        targets.append(pyclpt.render(scene, spp=64, seed=1000 + k))
+        targets.append(pyclpt.render(scene, spp=64, seed=1000 + k, **render))
+    return set_shape, view, targets
+
+
+def recover(steps: int = 150, width: int = 40, height: int = 40, spp: int = 8, samples: int = 8192,
+            rings: int = 12, segments: int = 24, lam: float = 20.0, lr: float = 0.02) -> dict:
+    from scipy.sparse import identity
+    from scipy.sparse.linalg import splu
+
+    scene, start_pos, faces = setup(width, height, rings, segments)
+    truth = tf.apply_points(TARGET, start_pos).astype(np.float64)
+    params = pyclpt.traverse(scene)
+    set_shape, view, targets = views_and_targets(scene, params, VIEWS, truth)
     m = (identity(len(start_pos)) + lam * laplacian(len(start_pos), faces)).tocsc()
     solve = splu(m)
     u = m @ start_pos
@@ -128,13 +138,7 @@ def plot(h: dict, path: Path) -> None:
     ax[0].set(title="image MSE (5 views)", xlabel="Adam step")
     ax[1].plot(h["vertex_error"])
     ax[1].set(title="distance to the target surface", xlabel="Adam step")
-    for a, key in zip(ax[2:], ("target", "start", "final")):
-        a.imshow(np.clip(h["images"][key], 0, 1) ** (1 / 2.2))
-        a.set_title(f"{key} (view 1)")
-        a.axis("off")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    finish_figure(fig, ax[2:], h["images"], path, " (view 1)")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -93,26 +93,12 @@ static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, co
     geo_bsdf_adjoint(b, s->sh, v3_neg(dir_in), n->ls.wi, n->f, C, dL, gc, &g_wi, &g_wo);
     if (gc->kind == GEO_ATTACHED && r_bc > 0.0f) geo_segment_adjoint(gc, gb, v3_neg(dir_in), r_bc, g_wi, 0.0f);
     else if (gc->camera) gc->gwi = v3_add(gc->gwi, g_wi); /* the camera ray turns */
-    __global const float* l = sc->lights + LIGHT_STRIDE * n->ls.light;
-    int type = (int)l[LIGHT_TYPE];
+    GeoVertex gy;
+    if (!geo_light_end(sc, key, depth, n, gc, &gy)) return;
     float r = n->ls.dist;
-    if (type == LIGHT_TRIANGLE) {
-        int prim = as_int(l[LIGHT_PRIM]);
-        vec2 u = square_to_triangle(rng_2d(key, depth, DIM_LIGHT_U));
-        __global const float* t = sc->tris + 9 * prim;
-        vec3 y = v3_add(v3_add(rgb_at(t, sc->unit), v3_scale(rgb_at(t + 3, sc->unit), u.x)), v3_scale(rgb_at(t + 6, sc->unit), u.y));
-        GeoVertex gy = geo_on_triangle(sc, prim, u.x, u.y, y, GEO_ATTACHED, v3_splat(0.0f));
-        geo_area_segment(gc, &gy, n->ls.wi, r, a, g_wo);
-        geo_scatter(sc, gr, &gy);
-    } else if (type == LIGHT_POINT || type == LIGHT_SPOT) {
-        GeoVertex gy = geo_fixed(v3_add(gc->p, v3_scale(n->ls.wi, r)));
-        if (type == LIGHT_POINT) {
-            gy.kind = GEO_POINT;
-            gy.id = n->ls.light;
-        }
-        geo_segment_adjoint(gc, &gy, n->ls.wi, r, g_wo, -2.0f * a / r);
-        geo_scatter(sc, gr, &gy);
-    }
+    if (gy.kind == GEO_ATTACHED) geo_area_segment(gc, &gy, n->ls.wi, r, a, g_wo); /* its cosine, 1 / r^2, area */
+    else geo_segment_adjoint(gc, &gy, n->ls.wi, r, g_wo, -2.0f * a / r);         /* a point: 1 / r^2 */
+    geo_scatter(sc, gr, &gy);
 }
 #endif
 

@@ -22,27 +22,13 @@ static inline vec3 geo_nee_tangent(const Scene* sc, const Grads* tg, RngKey key,
                                    const GeoVertex* gc, float r_bc) {
     vec3 wi_w = v3_neg(dir_in), dwi = v3_neg(gc->dd), dwo = v3_splat(0.0f); /* dd: the camera ray's turn */
     if (gc->kind == GEO_ATTACHED && r_bc > 0.0f) dwi = geo_direction_tangent(gc, gb, wi_w, r_bc);
-    __global const float* l = sc->lights + LIGHT_STRIDE * n->ls.light;
-    int type = (int)l[LIGHT_TYPE];
     float r = n->ls.dist, scalar = 0.0f;
-    if (type == LIGHT_TRIANGLE) {
-        int prim = as_int(l[LIGHT_PRIM]);
-        vec2 u = square_to_triangle(rng_2d(key, depth, DIM_LIGHT_U));
-        __global const float* t = sc->tris + 9 * prim;
-        vec3 y = v3_add(v3_add(rgb_at(t, sc->unit), v3_scale(rgb_at(t + 3, sc->unit), u.x)), v3_scale(rgb_at(t + 6, sc->unit), u.y));
-        GeoVertex gy = geo_on_triangle(sc, prim, u.x, u.y, y, GEO_ATTACHED, v3_splat(0.0f));
+    GeoVertex gy;
+    if (geo_light_end(sc, key, depth, n, gc, &gy)) {
         geo_motion(sc, tg, &gy);
         dwo = geo_direction_tangent(gc, &gy, n->ls.wi, r);
-        scalar = geo_area_segment_tangent(gc, &gy, n->ls.wi, r, dwo);
-    } else if (type == LIGHT_POINT || type == LIGHT_SPOT) {
-        GeoVertex gy = geo_fixed(v3_add(gc->p, v3_scale(n->ls.wi, r)));
-        if (type == LIGHT_POINT) {
-            gy.kind = GEO_POINT;
-            gy.id = n->ls.light;
-            geo_motion(sc, tg, &gy);
-        }
-        dwo = geo_direction_tangent(gc, &gy, n->ls.wi, r);
-        scalar = -2.0f * m_dot(n->ls.wi, v3_sub(gy.dx, gc->dx)) / r;
+        scalar = gy.kind == GEO_ATTACHED ? geo_area_segment_tangent(gc, &gy, n->ls.wi, r, dwo) /* cosine, 1/r^2, area */
+                                         : -2.0f * m_dot(n->ls.wi, v3_sub(gy.dx, gc->dx)) / r; /* a point: 1 / r^2 */
     }
     vec3 df = geo_bsdf_tangent(b, to_local(s->sh, wi_w), n->wo, geo_local_tangent(s->sh, wi_w, dwi, gc->dn),
                                geo_local_tangent(s->sh, n->ls.wi, dwo, gc->dn));

@@ -135,6 +135,32 @@ static inline GeoVertex geo_on_triangle(const Scene* sc, int prim, float b1, flo
     return v;
 }
 
+/* The far end of a light sample n taken at vertex gc with rng key (key, depth): an emissive triangle's point,
+ * attached (GEO_ATTACHED; its barycentrics are light_sample's); a point light's position (GEO_POINT); a spot
+ * light's, held still (GEO_FIXED: its falloff is not differentiated). Returns false for a direction to the
+ * environment or a directional light (fixed: a point at infinity). */
+static inline bool geo_light_end(const Scene* sc, RngKey key, int depth, const NeeSample* n, const GeoVertex* gc,
+                                 GeoVertex* gy) {
+    __global const float* l = sc->lights + LIGHT_STRIDE * n->ls.light;
+    int type = (int)l[LIGHT_TYPE];
+    if (type == LIGHT_TRIANGLE) {
+        int prim = as_int(l[LIGHT_PRIM]);
+        vec2 u = square_to_triangle(rng_2d(key, depth, DIM_LIGHT_U));
+        __global const float* t = sc->tris + 9 * prim;
+        vec3 y = v3_add(v3_add(rgb_at(t, sc->unit), v3_scale(rgb_at(t + 3, sc->unit), u.x)),
+                        v3_scale(rgb_at(t + 6, sc->unit), u.y));
+        *gy = geo_on_triangle(sc, prim, u.x, u.y, y, GEO_ATTACHED, v3_splat(0.0f));
+        return true;
+    }
+    if (type != LIGHT_POINT && type != LIGHT_SPOT) return false;
+    *gy = geo_fixed(v3_add(gc->p, v3_scale(n->ls.wi, n->ls.dist)));
+    if (type == LIGHT_POINT) {
+        gy->kind = GEO_POINT;
+        gy->id = n->ls.light;
+    }
+    return true;
+}
+
 /* ---- reverse mode ------------------------------------------------------------------------------------ */
 
 /* A vertex's adjoints to its triangle's three vertices (or its point light's position). */
