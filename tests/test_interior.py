@@ -336,3 +336,13 @@ def test_receiver_moving_under_a_hard_shadow():
     assert full == pytest.approx(fd, rel=0.03)
     back = pyclpt.render_backward(scene, np.ones((48, 48, 3), np.float32), params=["floor.to_world"], **kw)
     assert float(back["floor.to_world"][2, 3]) == pytest.approx(full, rel=1e-4)
+
+
+def test_a_moving_camera_over_textures_is_refused():
+    """What slides under the pixels as the camera moves is not differentiated: a textured floor or an environment map
+    lists the sensor's parameters with the reason."""
+    textured = _floor_scene(bsdf={"type": "diffuse", "reflectance": {"type": "checkerboard"}})
+    assert "textures" in pyclpt.traverse(textured).unsupported()["sensor.to_world"]
+    sky = _floor_scene()
+    sky.environment = pyclpt.Envmap(np.ones((4, 8, 3), np.float32))
+    assert "environment map" in pyclpt.traverse(sky).unsupported()["sensor.x_fov"]

@@ -118,12 +118,17 @@ def moving_mesh_reason(scene: Scene, mesh: Mesh) -> str:
 
 def moving_camera_reason(scene: Scene) -> str:
     """Why the gradient of where the sensor is (its to_world, its x_fov) is not computed, or "" when it is: the
-    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole in a scene without instances."""
+    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole in a scene without instances, textures
+    or an environment map."""
     if scene.instances:
         return "instanced"
     if scene.camera.kind != "perspective":
         return (f"a {scene.camera.kind} camera: the gradients of where the sensor is are implemented for perspective "
                 f"(pinhole) cameras; update() moves it")
+    if isinstance(scene.environment, Envmap) or any(_textured(m) for m in scene.materials) or any(
+            m.emission_texture is not None for m in scene.meshes):
+        return ("textures or an environment map in view: what slides under the pixels as the camera moves (a "
+                "texture's, the map's gradient across the image) is not differentiated; update() moves it")
     return ""
 
 
