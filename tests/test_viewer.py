@@ -671,18 +671,20 @@ def test_in_chromium_window_size_samples_and_devices(cornell_box, device, tmp_pa
                 page.select_option("#view", "samples")
                 page.wait_for_function("document.getElementById('frame').dataset.shown === 'samples'", timeout=10000)
                 page.wait_for_function(f"{frame_of} > {page.evaluate(frame_of) + 2}", timeout=10000)
-                size = page.evaluate("[document.getElementById('frame').naturalWidth, "
-                                     "document.getElementById('frame').naturalHeight]")
-                assert size == [side, side]
-                # the picture itself, as the page decoded it: one colour (the renderer is not adaptive)
-                colours = page.evaluate("""() => {
-                    const img = document.getElementById('frame'), c = document.createElement('canvas');
+                # the picture itself, as the page decoded it: its size and one colour (the renderer is not adaptive).
+                # Read in one task once a frame has loaded (the next frame may be loading: naturalWidth 0 meanwhile).
+                size, colours = page.evaluate("""async () => {
+                    const img = document.getElementById('frame');
+                    for (let k = 0; k < 200 && !(img.complete && img.naturalWidth > 0); k++)
+                        await new Promise(r => setTimeout(r, 25));
+                    const c = document.createElement('canvas');
                     c.width = img.naturalWidth; c.height = img.naturalHeight;
                     const g = c.getContext('2d'); g.drawImage(img, 0, 0);
                     const d = g.getImageData(0, 0, c.width, c.height).data, seen = new Set();
                     for (let i = 0; i < d.length; i += 4) seen.add(d[i] + ',' + d[i + 1] + ',' + d[i + 2]);
-                    return [...seen];
+                    return [[c.width, c.height], [...seen]];
                 }""")
+                assert size == [side, side]
                 assert len(colours) == 1 and colours[0] != "0,0,0", colours
 
                 listed = page.eval_on_selector_all("#device option", "els => els.map(e => e.value)")
