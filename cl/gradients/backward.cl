@@ -147,9 +147,9 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
         }
         Surface s = surface_hit(sc, hit.prim, hit.u, hit.v, ps.dir);
 #ifdef GRAD_GEOMETRY
+        Bsdf b = bsdf_at(sc, &s); /* here already: a delta-only vertex is held still */
         if (replay) {
-            Bsdf bg = bsdf_at(sc, &s);
-            int kind = bsdf_is_delta(&bg) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
+            int kind = bsdf_is_delta(&b) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
             gc = geo_on_triangle(sc, hit.prim, hit.u, hit.v, s.p, kind, ps.dir);
 #ifdef GRAD_CAMERA
             if (ps.depth == 0) geo_camera_hit(sc, &gc, camera_film_position(sc, key, pixel), gb.p);
@@ -173,7 +173,9 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
 #endif
             return ps.L;
         }
+#ifndef GRAD_GEOMETRY
         Bsdf b = bsdf_at(sc, &s);
+#endif
         vec3 wi = to_local(s.sh, v3_neg(ps.dir));
         NeeSample n;
         if (path_nee(sc, key, &s, &b, &ps, &n)) {

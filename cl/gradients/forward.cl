@@ -73,9 +73,9 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
             }
             Surface s = surface_hit(&sc, hit.prim, hit.u, hit.v, ps.dir);
 #ifdef GRAD_GEOMETRY
+            Bsdf b = bsdf_at(&sc, &s); /* here already: a delta-only vertex is held still */
             {
-                Bsdf bg = bsdf_at(&sc, &s);
-                int kind = bsdf_is_delta(&bg) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
+                int kind = bsdf_is_delta(&b) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
                 gc = geo_on_triangle(&sc, hit.prim, hit.u, hit.v, s.p, kind, ps.dir);
                 geo_motion(&sc, &tg, &gc);
 #ifdef GRAD_CAMERA
@@ -103,7 +103,9 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
                 dL = v3_add(dL, v3_scale(v3_add(v3_mul(dbeta, le), v3_mul(ps.beta, dle)), w));
             }
             if (!depth_allows(ps.depth + 1, max_depth)) break;
+#ifndef GRAD_GEOMETRY
             Bsdf b = bsdf_at(&sc, &s);
+#endif
             BsdfTangent db = tangent_bsdf(&sc, &tg, &s);
             vec3 wi = to_local(s.sh, v3_neg(ps.dir));
             NeeSample n;

@@ -348,9 +348,27 @@ def scatter_to_vertices(params: SceneParameters, scene: Scene, i: int, names: Se
     """Mesh i's gradients for ``names`` (``vertex_positions``, ``to_world``) into ``out``, from per-sample vectors
     q (N, 3) at the points (1 - t) v0 + t v1 of its edges."""
     gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
+    add_on_edges(gv, v0, v1, t, q)
+    vertex_gradients(params, scene, i, names, gv, out)
+
+
+def add_on_edges(gv: np.ndarray, v0: np.ndarray, v1: np.ndarray, t: np.ndarray, q: np.ndarray) -> None:
+    """gv (V, 3) += per-point vectors q (N, 3) at the points (1 - t) v0 + t v1, to the two vertices linearly."""
     np.add.at(gv, v0, (1 - t)[:, None] * q)
     np.add.at(gv, v1, t[:, None] * q)
-    vertex_gradients(params, scene, i, names, gv, out)
+
+
+def add_on_triangles(gv: np.ndarray, indices: np.ndarray, tri: np.ndarray, bary: np.ndarray, q: np.ndarray) -> None:
+    """gv (V, 3) += per-point vectors q (N, 3) at barycentrics ``bary`` (N, 2) of triangles ``tri`` (N,) of a mesh
+    with ``indices``, to the three vertices by their barycentrics."""
+    corners = np.asarray(indices, np.int64)[tri]
+    for k, bk in enumerate((1 - bary[:, 0] - bary[:, 1], bary[:, 0], bary[:, 1])):
+        np.add.at(gv, corners[:, k], bk[:, None] * q)
+
+
+def along(velocity: np.ndarray, tangent: np.ndarray) -> np.ndarray:
+    """(N,): per-point velocities (N, *parameter shape) contracted with a tangent of the parameter's shape."""
+    return velocity.reshape(velocity.shape[0], int(np.prod(velocity.shape[1:]))) @ np.asarray(tangent).reshape(-1)
 
 
 def vertex_gradients(params: SceneParameters, scene: Scene, i: int, names: Sequence[str], gv: np.ndarray,
@@ -443,7 +461,7 @@ def primary_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wi
         es = sample_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
                           max_depth=max_depth, device=device)
         velocity = sensor_velocity(scene, width, height, es.point, es.normal, name)
-        dx = velocity.reshape(velocity.shape[0], int(np.prod(velocity.shape[1:]))) @ tan.reshape(-1)
+        dx = along(velocity, tan)
     else:
         i, dp = vertex_motion(params, scene, name, tan)
         es = sample_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,

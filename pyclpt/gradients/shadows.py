@@ -40,6 +40,9 @@ from pyclpt.gradients.edges import (
     Projection,
     _filter_weights,
     _meshes_of,
+    add_on_edges,
+    add_on_triangles,
+    along,
     edge_point_motion,
     mesh_edges,
     sample_weights,
@@ -271,14 +274,10 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
     for i, mesh_names in wanted.items():
         gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
         m = ss.mesh == i
-        q = ss.velocity[m] * weight[m][:, None]
-        np.add.at(gv, ss.v0[m], (1 - ss.t[m])[:, None] * q)
-        np.add.at(gv, ss.v1[m], ss.t[m][:, None] * q)
+        add_on_edges(gv, ss.v0[m], ss.v1[m], ss.t[m], ss.velocity[m] * weight[m][:, None])
         r = rs.receiver == i
-        q = rs.receiver_velocity[r] * r_weight[r][:, None]
-        corners = scene.meshes[i].indices.astype(np.int64)[rs.rtri[r]]
-        for k, bk in enumerate((1 - rs.rbary[r, 0] - rs.rbary[r, 1], rs.rbary[r, 0], rs.rbary[r, 1])):
-            np.add.at(gv, corners[:, k], bk[:, None] * q)
+        add_on_triangles(gv, scene.meshes[i].indices, rs.rtri[r], rs.rbary[r],
+                         rs.receiver_velocity[r] * r_weight[r][:, None])
         vertex_gradients(params, scene, i, mesh_names, gv, out)
     return out
 
@@ -517,17 +516,11 @@ def _vertex_sums(scene: Scene, i: int, ss: SoftSamples, weight: np.ndarray) -> n
     mesh = scene.meshes[i]
     gv = np.zeros((mesh.positions.shape[0], 3))
     m = ss.mesh == i
-    q = ss.velocity[m] * weight[m][:, None]
-    np.add.at(gv, ss.v0[m], (1 - ss.t[m])[:, None] * q)
-    np.add.at(gv, ss.v1[m], ss.t[m][:, None] * q)
+    add_on_edges(gv, ss.v0[m], ss.v1[m], ss.t[m], ss.velocity[m] * weight[m][:, None])
     for owner, tri, bary, velocity in ((ss.receiver, ss.tri, ss.bary, ss.receiver_velocity()),
                                        (ss.background, ss.back_tri, ss.back_bary, ss.background_velocity())):
         r = owner == i
-        q = velocity[r] * weight[r][:, None]
-        corners = mesh.indices.astype(np.int64)[tri[r]]
-        b = bary[r]
-        for k, bk in enumerate((1 - b[:, 0] - b[:, 1], b[:, 0], b[:, 1])):
-            np.add.at(gv, corners[:, k], bk[:, None] * q)
+        add_on_triangles(gv, mesh.indices, tri[r], bary[r], velocity[r] * weight[r][:, None])
     return gv
 
 
@@ -582,7 +575,7 @@ def soft_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *
         ss = sample_soft_edges(scene, [], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device,
                                camera=True)
         velocity = _shading_camera_velocity(scene, width, height, ss, name)
-        dx = velocity.reshape(velocity.shape[0], int(np.prod(velocity.shape[1:]))) @ tan.reshape(-1)
+        dx = along(velocity, tan)
     else:
         i, dp = vertex_motion(params, scene, name, tan)
         ss = sample_soft_edges(scene, [i], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device,
@@ -614,7 +607,7 @@ def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wid
                                  max_depth=max_depth, device=device)
         if camera:
             velocity = sensor_velocity(scene, width, height, ss.point, ss.normal, name)
-            dx = velocity.reshape(velocity.shape[0], int(np.prod(velocity.shape[1:]))) @ tan.reshape(-1)
+            dx = along(velocity, tan)
         else:
             dx = np.where(ss.light == light_names[name], ss.light_velocity @ tan.reshape(3), 0.0)
     else:
