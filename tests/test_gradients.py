@@ -39,7 +39,7 @@ def test_traverse_names_as_mitsuba(box):
         assert params[name].shape == (3,)
     np.testing.assert_allclose(params[RED], RED_TRUTH, rtol=1e-6)
     assert "floor.to_world" in params.differentiable  # where things are: differentiated when named
-    assert "vertex normals" in params.unsupported()["floor.vertex_positions"]
+    assert "floor.vertex_positions" in params.differentiable  # smooth or flat: through the normals update() writes
 
 
 def test_traverse_names_every_kind():
@@ -300,8 +300,11 @@ def test_bad_arguments_name_what_is_wrong(box):
         pyclpt.render_backward(box, np.zeros((4, 4, 3)), spp=1, width=8, height=8)
     with pytest.raises(ValueError, match="NaN"):
         pyclpt.render_backward(box, np.full((8, 8, 3), np.nan), spp=1, width=8, height=8)
-    with pytest.raises(ValueError, match="not differentiable: floor.vertex_positions"):
-        pyclpt.render_backward(box, np.zeros((8, 8, 3)), spp=1, width=8, height=8, params=["floor.vertex_positions"])
+    checkered = pyclpt.load_dict({"type": "scene", "floor": {"type": "rectangle", "bsdf": {
+        "type": "diffuse", "reflectance": {"type": "checkerboard"}}}})
+    with pytest.raises(ValueError, match="not differentiable: floor.vertex_positions \\(a textured mesh"):
+        pyclpt.render_backward(checkered, np.zeros((8, 8, 3)), spp=1, width=8, height=8,
+                               params=["floor.vertex_positions"])
     with pytest.raises(KeyError, match="no parameter"):
         pyclpt.render_forward(box, "nothing.value", 1.0, spp=1, width=8, height=8)
     with pytest.raises(ValueError, match="direction for red.reflectance.value"):

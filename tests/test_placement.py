@@ -30,11 +30,11 @@ def _moved(scene: pyclpt.Scene, mesh: str, m: np.ndarray) -> pyclpt.Scene:
 
 
 def test_moving_parameters_are_listed():
-    """A flat-shaded mesh's pose and the sensor's are differentiated (when named: tests/test_interior.py), a mesh's
-    vertices where it has no vertex normals (update() would recompute them); the others say why not."""
+    """A mesh's pose and vertices (with or without vertex normals: tests/test_interior.py) and the sensor's are
+    differentiated when named; the others say why not."""
     params = pyclpt.traverse(pyclpt.load("cornell-box"))
     assert "small-box.to_world" in params.differentiable
-    assert "vertex normals" in params.unsupported()["small-box.vertex_positions"]
+    assert "small-box.vertex_positions" in params.differentiable
     for name in ("sensor.to_world", "sensor.x_fov"):
         assert name in params.differentiable
     assert params["small-box.to_world"].shape == (4, 4)

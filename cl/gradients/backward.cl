@@ -83,8 +83,8 @@ static inline void geo_end(const Scene* sc, Grads* gr, GeoVertex* ga, GeoVertex*
 
 /* The interior term of a visible light sample n at vertex gc (reached from gb, r_bc away): its BSDF factor's
  * directions and frame, and the light's end: an emissive triangle's point attached to it (its cosine, 1 / r^2,
- * area Jacobian), a point light's position, a spot light held still (its falloff not differentiated), a direction
- * to the environment or a directional light fixed. */
+ * area Jacobian), a point or spot light's position (and a spot's axis, through its falloff), a direction to the
+ * environment or a directional light fixed. */
 static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, const Surface* s, const Bsdf* b,
                            const NeeSample* n, vec3 dL, vec3 dir_in, GeoVertex* gb, GeoVertex* gc, float r_bc) {
     vec3 C = n->sr.contrib;
@@ -97,7 +97,15 @@ static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, co
     if (!geo_light_end(sc, key, depth, n, gc, &gy)) return;
     float r = n->ls.dist;
     if (gy.kind == GEO_ATTACHED) geo_area_segment(gc, &gy, n->ls.wi, r, a, g_wo); /* its cosine, 1 / r^2, area */
-    else geo_segment_adjoint(gc, &gy, n->ls.wi, r, g_wo, -2.0f * a / r);         /* a point: 1 / r^2 */
+    else { /* a point: 1 / r^2, and a spot's falloff F(c), c = -wi . axis */
+        vec3 axis;
+        float k = a * geo_spot_falloff(sc, n->ls.light, n->ls.wi, &axis);
+        if (k != 0.0f) {
+            g_wo = v3_sub(g_wo, v3_scale(axis, k));
+            grad_put3(gr, gr->lightpos + GEO_LIGHT_STRIDE * n->ls.light + 3, v3_scale(n->ls.wi, -k));
+        }
+        geo_segment_adjoint(gc, &gy, n->ls.wi, r, g_wo, -2.0f * a / r);
+    }
     geo_scatter(sc, gr, &gy);
 }
 #endif

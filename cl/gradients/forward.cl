@@ -27,11 +27,18 @@ static inline vec3 geo_nee_tangent(const Scene* sc, const Grads* tg, RngKey key,
     if (geo_light_end(sc, key, depth, n, gc, &gy)) {
         geo_motion(sc, tg, &gy);
         dwo = geo_direction_tangent(gc, &gy, n->ls.wi, r);
-        scalar = gy.kind == GEO_ATTACHED ? geo_area_segment_tangent(gc, &gy, n->ls.wi, r, dwo) /* cosine, 1/r^2, area */
-                                         : -2.0f * m_dot(n->ls.wi, v3_sub(gy.dx, gc->dx)) / r; /* a point: 1 / r^2 */
+        if (gy.kind == GEO_ATTACHED) {
+            scalar = geo_area_segment_tangent(gc, &gy, n->ls.wi, r, dwo); /* cosine, 1/r^2, area */
+        } else { /* a point: 1 / r^2, and a spot's falloff F(c), c = -wi . axis */
+            vec3 axis;
+            float k = geo_spot_falloff(sc, n->ls.light, n->ls.wi, &axis);
+            vec3 daxis = tangent3(tg->lightpos + GEO_LIGHT_STRIDE * n->ls.light + 3);
+            scalar = -2.0f * m_dot(n->ls.wi, v3_sub(gy.dx, gc->dx)) / r
+                     - k * (m_dot(dwo, axis) + m_dot(n->ls.wi, daxis));
+        }
     }
-    vec3 df = geo_bsdf_tangent(b, to_local(s->sh, wi_w), n->wo, geo_local_tangent(s->sh, wi_w, dwi, gc->dn),
-                               geo_local_tangent(s->sh, n->ls.wi, dwo, gc->dn));
+    vec3 df = geo_bsdf_tangent(b, to_local(s->sh, wi_w), n->wo, geo_local_tangent(s->sh, wi_w, dwi, gc->ds),
+                               geo_local_tangent(s->sh, n->ls.wi, dwo, gc->ds));
     return v3_add(safe_div3(df, n->f), v3_splat(scalar));
 }
 #endif
@@ -84,6 +91,7 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
                     geo_camera_motion(&sc, &tg, &gc);
                 }
 #endif
+                geo_shading_motion(&sc, &tg, &gc);
                 r_bc = m_length(v3_sub(gc.p, gb.p));
                 if (seg_area && r_bc > 0.0f) { /* the segment's factors, now that its far end is known */
                     vec3 dw = geo_direction_tangent(&gb, &gc, ps.dir, r_bc), dwl = to_local(seg_frame, dw);
@@ -138,8 +146,8 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
                                                                   : v3_neg(gc.dd);
                 float pdf;
                 vec3 f = bsdf_eval(&b, wi, wo, &pdf);
-                vec3 df = geo_bsdf_tangent(&b, wi, wo, geo_local_tangent(s.sh, wi_w, dwi, gc.dn),
-                                           geo_local_tangent(s.sh, ps.dir, v3_splat(0.0f), gc.dn));
+                vec3 df = geo_bsdf_tangent(&b, wi, wo, geo_local_tangent(s.sh, wi_w, dwi, gc.ds),
+                                           geo_local_tangent(s.sh, ps.dir, v3_splat(0.0f), gc.ds));
                 dbeta = v3_add(dbeta, v3_mul(ps.beta, safe_div3(df, f)));
                 geo_bsdf_wo_jacobian(&b, wi, wo, f, seg_jac);
                 seg_frame = s.sh;

@@ -19,15 +19,21 @@
  * everything gathered after it (L - G, the radiance gathered after the segment's first vertex), the factors of a
  * light sample its contribution; their log-derivatives, weighted by dLoss/dL, give adjoints of the points'
  * positions, normals and area Jacobians (GeoVertex), scattered when no later factor needs the vertex into
- * grad_verts (3 floats per vertex of the scene's packed vertex arrays) and grad_lightpos (3 floats per light
- * record: a point light's position). Forward mode (forward.cl): the tangents of the same quantities from the
+ * grad_verts (3 floats per vertex of the scene's packed vertex arrays) and grad_lightpos (GEO_LIGHT_STRIDE floats
+ * per light record: a point or spot light's position, a spot light's axis). Forward mode (forward.cl): the tangents of the same quantities from the
  * tangent buffers of the same layout, and the log-derivatives added to the throughput's tangent.
  *
  * BSDF values are differentiated with respect to their two local directions in closed form for diffuse ones,
  * by central differences of bsdf_eval for the others (GEO_FD_STEP, the directions renormalised), a coordinate whose two evaluations straddle the
- * support's edge (one zero, one not) left out; the frame follows the normal by the smallest rotation (isotropic
- * BSDFs do not see the twist). Flat-shaded meshes only: the host refuses vertex normals, bump maps and
- * anisotropic frames on a moving mesh, instanced scenes, and spot lights' falloff (pyclpt/gradients/). */
+ * support's edge (one zero, one not) left out; the frame follows the shading normal by the smallest rotation
+ * (isotropic BSDFs do not see the twist). The shading normal is the triangle's (flat shading) or, on a triangle
+ * with vertex normals (TRI_HAS_NORMALS), ns = m / |m|, m = sum b_j n_j, which moves with the vertex normals n_j
+ * (their adjoints go to grad_vnormals, 3 floats per vertex, their tangents come from the tangent buffer of that
+ * name; the host chains them to the positions through the normals update() computes) and, for a sliding point,
+ * with its barycentrics: the point moves over its triangle by D = dx - sum b_j dv_j (in the plane), so
+ * db1 = D . (e2 x n) / |e1 x e2| and db2 = D . (n x e1) / |e1 x e2|. The area-form cosines keep the triangle's
+ * normal. The host refuses bump maps and anisotropic frames on a moving mesh, instanced scenes, and spot
+ * lights' falloff (pyclpt/gradients/). */
 #ifndef PYCLPT_GRADIENT_GEOMETRY_H
 #define PYCLPT_GRADIENT_GEOMETRY_H
 
@@ -42,7 +48,10 @@
 #define GEO_FIXED 0    /* does not move (the camera, a delta-only vertex, no vertex) */
 #define GEO_ATTACHED 1 /* attached to its triangle by its barycentrics */
 #define GEO_SLIDING 2  /* on a fixed ray (the camera's, a delta lobe's), where that meets its moving triangle */
-#define GEO_POINT 3    /* a point light's position */
+#define GEO_POINT 3    /* a point or spot light's position */
+
+/* grad_lightpos / the tangent's lightpos: per light record, its position (3 floats) and a spot light's axis (3) */
+#define GEO_LIGHT_STRIDE 6
 
 typedef struct {
     vec3 p;     /* position */
@@ -51,9 +60,9 @@ typedef struct {
     float b1, b2; /* barycentrics (u, v) on the triangle */
     int kind;   /* GEO_* */
     int id;     /* leaf-order triangle, or the light record of a GEO_POINT */
-    vec3 gx, gn; /* reverse mode: the adjoints of the position and the normal */
+    vec3 gx, gn, gs; /* reverse mode: the adjoints of the position, the triangle's normal, the shading normal */
     float gj;   /*               and of the log of the area Jacobian */
-    vec3 dx, dn; /* forward mode: their tangents */
+    vec3 dx, dn, ds; /* forward mode: their tangents */
     float dj;
     int camera;   /* -DGRAD_CAMERA: the camera ray's hit, t from the camera at film coordinates (sx, sy) */
     float t, sx, sy;
@@ -63,7 +72,7 @@ typedef struct {
 static inline GeoVertex geo_fixed(vec3 p) {
     GeoVertex v;
     v.p = p;
-    v.n = v.d = v.gx = v.gn = v.dx = v.dn = v.gwi = v.dd = v3_splat(0.0f);
+    v.n = v.d = v.gx = v.gn = v.gs = v.dx = v.dn = v.ds = v.gwi = v.dd = v3_splat(0.0f);
     v.b1 = v.b2 = v.gj = v.dj = v.t = v.sx = v.sy = 0.0f;
     v.kind = GEO_FIXED;
     v.id = -1;
@@ -94,11 +103,11 @@ static inline void geo_camera_hit(const Scene* sc, GeoVertex* v, vec2 film, vec3
     v->t = m_length(v3_sub(v->p, origin));
 }
 
-/* Reverse mode: the camera hit's adjoints to the camera's 12 floats. */
-static inline void geo_camera_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
+/* Reverse mode: the camera hit's adjoints to the camera's 12 floats, gx the adjoint of its position. */
+static inline void geo_camera_scatter(const Scene* sc, Grads* gr, const GeoVertex* v, vec3 gx) {
     float nd = m_dot(v->n, v->d);
     if (nd == 0.0f) return;
-    vec3 q = v3_sub(v->gx, v3_scale(v->n, m_dot(v->d, v->gx) / nd)); /* P^T gx */
+    vec3 q = v3_sub(gx, v3_scale(v->n, m_dot(v->d, gx) / nd)); /* P^T gx */
     vec3 g_dd = v3_sub(v3_scale(q, v->t), v->gwi);
     vec3 w = geo_camera_v(sc, v->sx, v->sy);
     vec3 g_v = v3_divs(v3_sub(g_dd, v3_scale(v->d, m_dot(v->d, g_dd))), m_length(w));
@@ -136,9 +145,9 @@ static inline GeoVertex geo_on_triangle(const Scene* sc, int prim, float b1, flo
 }
 
 /* The far end of a light sample n taken at vertex gc with rng key (key, depth): an emissive triangle's point,
- * attached (GEO_ATTACHED; its barycentrics are light_sample's); a point light's position (GEO_POINT); a spot
- * light's, held still (GEO_FIXED: its falloff is not differentiated). Returns false for a direction to the
- * environment or a directional light (fixed: a point at infinity). */
+ * attached (GEO_ATTACHED; its barycentrics are light_sample's); a point or spot light's position (GEO_POINT; a
+ * spot's falloff: geo_spot_falloff). Returns false for a direction to the environment or a directional light
+ * (fixed: a point at infinity). */
 static inline bool geo_light_end(const Scene* sc, RngKey key, int depth, const NeeSample* n, const GeoVertex* gc,
                                  GeoVertex* gy) {
     __global const float* l = sc->lights + LIGHT_STRIDE * n->ls.light;
@@ -154,22 +163,45 @@ static inline bool geo_light_end(const Scene* sc, RngKey key, int depth, const N
     }
     if (type != LIGHT_POINT && type != LIGHT_SPOT) return false;
     *gy = geo_fixed(v3_add(gc->p, v3_scale(n->ls.wi, n->ls.dist)));
-    if (type == LIGHT_POINT) {
-        gy->kind = GEO_POINT;
-        gy->id = n->ls.light;
-    }
+    gy->kind = GEO_POINT;
+    gy->id = n->ls.light;
     return true;
+}
+
+/* A spot light's falloff F(c) at c = -wi . axis (lights.h: 1 inside the beam, linear in angle to 0 at the
+ * cutoff): its log-derivative dF/dc / F, 0 inside the beam and for any other light; *axis its axis. */
+static inline float geo_spot_falloff(const Scene* sc, int light, vec3 wi, vec3* axis) {
+    *axis = v3_splat(0.0f);
+    __global const float* l = sc->lights + LIGHT_STRIDE * light;
+    if (!(HAS_LIGHT(LIGHT_SPOT) && (int)l[LIGHT_TYPE] == LIGHT_SPOT)) return 0.0f;
+    __global const float* s = sc->light_data + as_int(l[LIGHT_PRIM]);
+    *axis = rgb_at(s + SPOT_AXIS, sc->unit);
+    float c = -m_dot(wi, *axis);
+    if (c >= s[SPOT_COS_BEAM] || c <= s[SPOT_COS_CUTOFF]) return 0.0f;
+    float sin_t = m_sqrt(m_max(1.0f - c * c, 0.0f));
+    float f = (s[SPOT_CUTOFF] - m_acos(m_clamp(c, -1.0f, 1.0f))) * s[SPOT_INV_TRANSITION];
+    return f > 0.0f && sin_t > 0.0f ? s[SPOT_INV_TRANSITION] / (sin_t * f) : 0.0f; /* d acos(c)/dc = -1/sin */
 }
 
 /* ---- reverse mode ------------------------------------------------------------------------------------ */
 
-/* A vertex's adjoints to its triangle's three vertices (or its point light's position). */
+/* A triangle's vertex normals n0, n1, n2 and their interpolation m at the vertex's barycentrics (the shading
+ * normal is m / |m|); false for a triangle without vertex normals (flat: the shading normal is its own). */
+static inline bool geo_vertex_normals(const Scene* sc, const GeoVertex* v, vec3* n0, vec3* n1, vec3* n2, vec3* m) {
+    if (!(sc->tri_info[2 * v->id] & TRI_HAS_NORMALS)) return false;
+    __global const int* vi = sc->tri_vidx + 3 * v->id;
+    *n0 = rgb_at(sc->vnormals + 3 * vi[0], sc->unit);
+    *n1 = rgb_at(sc->vnormals + 3 * vi[1], sc->unit);
+    *n2 = rgb_at(sc->vnormals + 3 * vi[2], sc->unit);
+    *m = v3_add(v3_add(v3_scale(*n0, 1.0f - v->b1 - v->b2), v3_scale(*n1, v->b1)), v3_scale(*n2, v->b2));
+    float len = m_length(*m);
+    return len > 0.0f && m_isfinite(len);
+}
+
+/* A vertex's adjoints to its triangle's three vertices and vertex normals (or its point light's position). */
 static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
-#ifdef GRAD_CAMERA
-    if (v->camera) geo_camera_scatter(sc, gr, v);
-#endif
     if (v->kind == GEO_POINT) {
-        grad_put3(gr, gr->lightpos + 3 * v->id, v->gx);
+        grad_put3(gr, gr->lightpos + GEO_LIGHT_STRIDE * v->id, v->gx);
         return;
     }
     if (v->kind == GEO_FIXED) return;
@@ -179,16 +211,37 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
     float len = m_length(c);
     if (!(len > 0.0f)) return;
     vec3 n = v3_divs(c, len);
-    vec3 gp = v->gx; /* the adjoint of the triangle's material point under the vertex */
-    if (v->kind == GEO_SLIDING) {
-        float nd = m_dot(n, v->d);
-        gp = nd != 0.0f ? v3_scale(n, m_dot(v->d, v->gx) / nd) : v3_splat(0.0f);
-    }
-    /* n = c / |c|, log J = log |c| + const: the adjoint of c */
-    vec3 gc = v3_divs(v3_add(v3_sub(v->gn, v3_scale(n, m_dot(n, v->gn))), v3_scale(n, v->gj)), len);
-    vec3 ge1 = m_cross(e2, gc), ge2 = m_cross(gc, e1);
     __global const int* vi = sc->tri_vidx + 3 * v->id;
     float b0 = 1.0f - v->b1 - v->b2;
+    vec3 gx = v->gx, gn = v->gn, g_slide = v3_splat(0.0f);
+    vec3 n0, n1, n2, m;
+    if (geo_vertex_normals(sc, v, &n0, &n1, &n2, &m)) { /* the shading normal m / |m| */
+        float lm = m_length(m);
+        vec3 ns = v3_divs(m, lm);
+        vec3 gm = v3_divs(v3_sub(v->gs, v3_scale(ns, m_dot(ns, v->gs))), lm);
+        grad_put3(gr, gr->vnormals + 3 * vi[0], v3_scale(gm, b0));
+        grad_put3(gr, gr->vnormals + 3 * vi[1], v3_scale(gm, v->b1));
+        grad_put3(gr, gr->vnormals + 3 * vi[2], v3_scale(gm, v->b2));
+        if (v->kind == GEO_SLIDING) { /* its barycentrics, through its motion over the triangle D = dx - dp */
+            float g1 = m_dot(gm, v3_sub(n1, n0)), g2 = m_dot(gm, v3_sub(n2, n0));
+            g_slide = v3_divs(v3_add(v3_scale(m_cross(e2, n), g1), v3_scale(m_cross(n, e1), g2)), len);
+            gx = v3_add(gx, g_slide);
+        }
+    } else {
+        gn = v3_add(gn, v->gs); /* flat: the shading normal is the triangle's */
+    }
+#ifdef GRAD_CAMERA
+    if (v->camera) geo_camera_scatter(sc, gr, v, gx);
+#endif
+    vec3 gp = gx; /* the adjoint of the triangle's material point under the vertex */
+    if (v->kind == GEO_SLIDING) {
+        float nd = m_dot(n, v->d);
+        gp = nd != 0.0f ? v3_scale(n, m_dot(v->d, gx) / nd) : v3_splat(0.0f);
+        gp = v3_sub(gp, g_slide);
+    }
+    /* n = c / |c|, log J = log |c| + const: the adjoint of c */
+    vec3 gc = v3_divs(v3_add(v3_sub(gn, v3_scale(n, m_dot(n, gn))), v3_scale(n, v->gj)), len);
+    vec3 ge1 = m_cross(e2, gc), ge2 = m_cross(gc, e1);
     grad_put3(gr, gr->verts + 3 * vi[0], v3_sub(v3_scale(gp, b0), v3_add(ge1, ge2)));
     grad_put3(gr, gr->verts + 3 * vi[1], v3_add(v3_scale(gp, v->b1), ge1));
     grad_put3(gr, gr->verts + 3 * vi[2], v3_add(v3_scale(gp, v->b2), ge2));
@@ -253,8 +306,8 @@ static inline void geo_bsdf_adjoint(const Bsdf* b, Frame fr, vec3 wi_w, vec3 wo_
     vec3 s = safe_div3(v3_mul(dL, C), f);
     vec3 gli, glo;
     geo_bsdf_gradient(b, to_local(fr, wi_w), to_local(fr, wo_w), s, &gli, &glo);
-    *g_wi = geo_local_adjoint(fr, wi_w, gli, &v->gn);
-    *g_wo = geo_local_adjoint(fr, wo_w, glo, &v->gn);
+    *g_wi = geo_local_adjoint(fr, wi_w, gli, &v->gs);
+    *g_wo = geo_local_adjoint(fr, wo_w, glo, &v->gs);
 }
 
 /* Reverse mode, the area-form factors of segment a -> b (direction w, length r) other than a's BSDF: b's cosine,
@@ -275,7 +328,7 @@ static inline void geo_area_segment(GeoVertex* a, GeoVertex* b, vec3 w, float r,
 /* The tangents of a vertex's position, normal and log area Jacobian from the tangent buffers. */
 static inline void geo_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
     if (v->kind == GEO_POINT) {
-        v->dx = tangent3(tg->lightpos + 3 * v->id);
+        v->dx = tangent3(tg->lightpos + GEO_LIGHT_STRIDE * v->id);
         return;
     }
     if (v->kind == GEO_FIXED) return;
@@ -296,6 +349,38 @@ static inline void geo_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
     vec3 dc = v3_add(m_cross(v3_sub(d1, d0), e2), m_cross(e1, v3_sub(d2, d0)));
     v->dn = v3_divs(v3_sub(dc, v3_scale(n, m_dot(n, dc))), len);
     v->dj = v->kind == GEO_ATTACHED ? m_dot(n, dc) / len : 0.0f;
+}
+
+/* The tangent of a vertex's shading normal (v->ds), once its motion (v->dx, with the camera's) is known: the
+ * triangle's normal's (flat), or that of m / |m| through the vertex normals' tangents and, for a sliding point,
+ * its barycentrics'. */
+static inline void geo_shading_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
+    v->ds = v->dn;
+    vec3 n0, n1, n2, m;
+    if ((v->kind != GEO_ATTACHED && v->kind != GEO_SLIDING) || !geo_vertex_normals(sc, v, &n0, &n1, &n2, &m)) return;
+    __global const int* vi = sc->tri_vidx + 3 * v->id;
+    float b0 = 1.0f - v->b1 - v->b2;
+    vec3 dm = v3_add(v3_add(v3_scale(tangent3(tg->vnormals + 3 * vi[0]), b0),
+                            v3_scale(tangent3(tg->vnormals + 3 * vi[1]), v->b1)),
+                     v3_scale(tangent3(tg->vnormals + 3 * vi[2]), v->b2));
+    if (v->kind == GEO_SLIDING) {
+        __global const float* t = sc->tris + 9 * v->id;
+        vec3 e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
+        vec3 c = m_cross(e1, e2);
+        float len = m_length(c);
+        if (len > 0.0f) {
+            vec3 n = v3_divs(c, len);
+            vec3 dp = v3_add(v3_add(v3_scale(tangent3(tg->verts + 3 * vi[0]), b0),
+                                    v3_scale(tangent3(tg->verts + 3 * vi[1]), v->b1)),
+                             v3_scale(tangent3(tg->verts + 3 * vi[2]), v->b2));
+            vec3 slide = v3_sub(v->dx, dp);
+            float db1 = m_dot(slide, m_cross(e2, n)) / len, db2 = m_dot(slide, m_cross(n, e1)) / len;
+            dm = v3_add(dm, v3_add(v3_scale(v3_sub(n1, n0), db1), v3_scale(v3_sub(n2, n0), db2)));
+        }
+    }
+    float lm = m_length(m);
+    vec3 ns = v3_divs(m, lm);
+    v->ds = v3_divs(v3_sub(dm, v3_scale(ns, m_dot(ns, dm))), lm);
 }
 
 /* The tangent of the unit direction from a to b (length r). */

@@ -10,8 +10,10 @@
  *   tex32  4 floats per texel of texels32 (bitmaps stored as floats, environment maps)
  *   verts  3 floats per vertex of the packed vertex arrays (scene_vnormals' order): its world position
  *          (-DGRAD_GEOMETRY, gradients/geometry.h)
- *   lightpos 3 floats per emitter: a point light's position (-DGRAD_GEOMETRY)
+ *   lightpos 6 floats per emitter: a point or spot light's position, a spot light's axis (-DGRAD_GEOMETRY)
  *   camera 12 floats: the camera's origin and its basis F, R, U (-DGRAD_CAMERA, gradients/geometry.h)
+ *   vnormals 3 floats per vertex (as verts): its vertex normal, before the interpolated normal is normalised
+ *          (-DGRAD_GEOMETRY: triangles with vertex normals)
  * A textured reflectance is scale * texel values * the material's constant (1 unless changed): its
  * gradient goes to the texels (bilinear weights, texture.h tex_taps) and to the constant.
  *
@@ -39,10 +41,10 @@
 #define GRAD_PARAMS                                                                                         \
     __global float *grad_mats, __global float *grad_lights, __global float *grad_tex8, __global float *grad_tex32, \
         __global float *grad_verts, __global float *grad_lightpos, __global float *grad_camera,                 \
-        __global const float *alpha_up, __global const float *alpha_down
+        __global float *grad_vnormals, __global const float *alpha_up, __global const float *alpha_down
 #define GRAD_INIT                                                                                             \
-    {grad_mats,  grad_lights,   grad_tex8, grad_tex32, grad_verts, grad_lightpos, grad_camera, alpha_up,          \
-     alpha_down, {0},           {{0.0f}},  0}
+    {grad_mats,     grad_lights, grad_tex8, grad_tex32, grad_verts, grad_lightpos, grad_camera, grad_vnormals,     \
+     alpha_up,      alpha_down,  {0},       {{0.0f}},   0}
 
 /* Adjoints a path adds to the same slots (its materials' colours, the light triangles it samples) are
  * summed in private memory first, in up to GRAD_CACHE slots, and added to the buffers once, when the
@@ -62,6 +64,7 @@ typedef struct {
     __global float* verts;
     __global float* lightpos;
     __global float* camera;
+    __global float* vnormals;
     __global const float* alpha_up;
     __global const float* alpha_down;
     __global float* pending_at[GRAD_CACHE]; /* three floats each */

@@ -9,7 +9,8 @@ differentiated, as in Mitsuba 3's ``prb``; nor is visibility (docs/differentiabl
 The scene's device copy, its compiled kernels and buffers are kept between calls
 (:mod:`pyclpt.gradients.session`); :func:`clear_cache` drops every copy.
 
-Geometry (``SHAPE.vertex_positions``, ``SHAPE.to_world``, a point light's ``position``) is differentiated when
+Geometry (``SHAPE.vertex_positions``, ``SHAPE.to_world``, a point light's ``position``, a spot light's
+``to_world``) is differentiated when
 named: the interior term by the replay (``cl/gradients/geometry.h``: the material form, shading that follows the
 moving surfaces) plus the boundary terms of camera silhouettes (:func:`pyclpt.gradients.edges.primary_boundary`),
 of what the first surface seen receives (:func:`pyclpt.gradients.shadows.soft_shadow_boundary`) and of point
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -32,10 +33,19 @@ from pyclpt.gradients.edges import (
     vertex_gradients,
     vertex_motion,
 )
-from pyclpt.gradients.layout import BUFFERS, buffer_sizes, parameter_slots, vertex_offset
-from pyclpt.gradients.parameters import SceneParameters
+from pyclpt.gradients.layout import (
+    BUFFERS,
+    buffer_sizes,
+    parameter_slots,
+    spot_gradient,
+    spot_tangent,
+    vertex_offset,
+)
+from pyclpt.gradients.normals import normals_backward, normals_forward
+from pyclpt.gradients.parameters import Parameter, SceneParameters
 from pyclpt.gradients.session import clear_cache, replay_for  # noqa: F401 (clear_cache: the public name)
 from pyclpt.gradients.shadows import (
+    moving_light_names,
     shadow_boundary,
     shadow_boundary_forward,
     soft_shadow_boundary,
@@ -122,6 +132,11 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
             pose: dict[str, np.ndarray] = {}
             vertex_gradients(table, scene, scene.meshes.index(p.target), [p.name], gv, pose)
             exact = pose[p.name].astype(np.float64)
+            if p.target.normals is not None:  # smooth shading: through the normals update() writes
+                gn = np.ldexp(buffers["vnormals"][3 * first:3 * (first + count)].astype(np.float64), shift)
+                exact = exact + _normals(p, table, gn, normals_backward).reshape(exact.shape)
+        elif p.kind == "geometry" and isinstance(p.target, SpotLight):  # its position and axis
+            exact = np.ldexp(spot_gradient(scene, replay.scene.arrays, p.target, buffers["lightpos"]), shift)
         else:
             exact = np.ldexp(parameter_slots(scene, replay.scene.arrays, p).gather(buffers), shift)
         _check_float32(exact, p.name, peak)
@@ -143,7 +158,8 @@ def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str]
     module."""
     g = np.asarray(image_grad, np.float64)
     cameras = [n for n in names if n in sensor_names(scene)]
-    meshes = [n for n in names if n.endswith((".vertex_positions", ".to_world")) and n not in cameras]
+    lights = moving_light_names(scene)
+    meshes = [n for n in names if n.endswith((".vertex_positions", ".to_world")) and n not in cameras + list(lights)]
     delta = any(isinstance(light, (PointLight, SpotLight)) for light in scene.lights)
     bounce = max_depth < 0 or max_depth >= 2
     out: dict[str, np.ndarray] = {}
@@ -169,7 +185,7 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
     common = dict(width=width, height=height, seed=seed, max_depth=max_depth, parameters=parameters, device=device)
     image = np.zeros((height, width, 3), np.float64)
     camera = name in sensor_names(scene)
-    mesh = name.endswith((".vertex_positions", ".to_world")) and not camera
+    mesh = name.endswith((".vertex_positions", ".to_world")) and not camera and name not in moving_light_names(scene)
     bounce = max_depth < 0 or max_depth >= 2
     if (mesh or camera) and max_depth != 0:
         image += primary_boundary_forward(scene, name, tangent, samples=samples, **common)
@@ -178,6 +194,16 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
     if bounce and any(isinstance(light, (PointLight, SpotLight)) for light in scene.lights):
         image += shadow_boundary_forward(scene, name, tangent, samples=samples, **common)
     return image
+
+
+def _normals(p: Parameter, table: SceneParameters, value: np.ndarray, chain: Callable[..., np.ndarray]
+             ) -> np.ndarray:
+    """``chain`` (normals_backward or normals_forward) for a mesh parameter ``p``, with ``value`` the normals'
+    gradient or the parameter's tangent."""
+    mesh = p.target
+    kind = p.name.rpartition(".")[2]
+    matrix = np.asarray(table[p.name], np.float64) if kind == "to_world" else np.eye(4)
+    return chain(kind, mesh.positions, mesh.indices, mesh.normals, matrix, np.asarray(value, np.float64))
 
 
 #: Steps of the central differences of the camera's basis with respect to its matrix (entries) and its fov
@@ -252,6 +278,10 @@ def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Ite
         _, dp = vertex_motion(table, scene, param, d)
         first = 3 * vertex_offset(scene, p.target)
         tangent["verts"][first:first + dp.size] = dp.reshape(-1)
+        if p.target.normals is not None:  # smooth shading: the normals update() writes move too
+            tangent["vnormals"][first:first + dp.size] = _normals(p, table, d, normals_forward).reshape(-1)
+    elif p.kind == "geometry" and isinstance(p.target, SpotLight):
+        spot_tangent(scene, replay.scene.arrays, p.target, d, tangent["lightpos"])
     else:
         parameter_slots(scene, replay.scene.arrays, p).scatter(tangent, d)
     geometry = p.kind in ("geometry", "camera")

@@ -1,14 +1,17 @@
 """Where each differentiable parameter lives in the device buffers that the gradient kernels read
 and write (``cl/gradients/params.h``): a gradient or a tangent has the layout of the scene buffers.
 
-:func:`parameter_slots` gives, for a parameter, the buffer (``mats``, ``lights``, ``tex8``, ``tex32``, ``verts``,
-``lightpos``, ``camera``) and an index array of shape (K, *value shape): the K device slots that hold each element
-of the value (an area light's radiance is in the record of each of its triangles, a grey texel in the three
-colour channels of its RGBA texel; -1: no slot). A gradient sums the K slots; a tangent writes all K.
-The slots are recomputed after every update, since texture formats and offsets can change. Where things are
-(``-DGRAD_GEOMETRY``): ``verts``, 3 floats per vertex of the packed vertex arrays (a mesh's ``vertex_positions``),
-``lightpos``, 3 floats per light record (a point light's ``position``), and ``camera``, the camera's origin and
-basis (12 floats; ``-DGRAD_CAMERA``: the sensor's ``to_world`` and ``x_fov``, chained on the host).
+:func:`parameter_slots` gives, for a parameter, the buffer (``mats``, ``lights``, ``tex8``, ``tex32``,
+``verts``, ``lightpos``, ``camera``, ``vnormals``) and an index array of shape (K, *value shape): the K device
+slots that hold each element of the value (an area light's radiance is in the record of each of its triangles, a
+grey texel in the three colour channels of its RGBA texel; -1: no slot). A gradient sums the K slots; a tangent
+writes all K. The slots are recomputed after every update, since texture formats and offsets can change. Where
+things are (``-DGRAD_GEOMETRY``): ``verts``, 3 floats per vertex of the packed vertex arrays (a mesh's
+``vertex_positions``), ``lightpos``, 6 floats per light record (a point or spot light's position, a spot light's
+axis: :func:`spot_gradient`), ``camera``, the camera's origin and basis (12 floats; ``-DGRAD_CAMERA``: the
+sensor's ``to_world`` and ``x_fov``, chained on the host), and ``vnormals``, 3 floats per vertex as ``verts``:
+its vertex normal (a smooth-shaded mesh's; chained on the host to the positions through the normals ``update()``
+computes, :mod:`pyclpt.gradients.normals`).
 """
 from __future__ import annotations
 
@@ -29,9 +32,13 @@ from pyclpt.buffers.lights import (
 from pyclpt.buffers.materials import MAT_ALPHA, MAT_COLOR, MAT_SPEC, MAT_STRIDE, TEXF_FLOAT
 from pyclpt.buffers.scene import SceneArrays, scene_meshes
 from pyclpt.gradients.parameters import Parameter
-from pyclpt.scene.model import Bitmap, Envmap, Mesh, PointLight, Scene
+from pyclpt.gradients.placement import spot_pose
+from pyclpt.scene.model import Bitmap, Envmap, Mesh, PointLight, Scene, SpotLight
 
-BUFFERS = ("mats", "lights", "tex8", "tex32", "verts", "lightpos", "camera")
+#: Floats per light record in ``lightpos`` (geometry.h's GEO_LIGHT_STRIDE): its position, a spot light's axis.
+LIGHTPOS_STRIDE = 6
+
+BUFFERS = ("mats", "lights", "tex8", "tex32", "verts", "lightpos", "camera", "vnormals")
 
 
 @dataclass
@@ -139,7 +146,7 @@ def parameter_slots(scene: Scene, arrays: SceneArrays, p: Parameter) -> Slots:
         return Slots("verts", (first + np.arange(p.target.positions.size, dtype=np.int64))[None])
     if p.kind == "geometry" and isinstance(p.target, PointLight):
         record = light_record(scene, arrays, p.target)
-        return Slots("lightpos", (3 * record + rgb if record >= 0 else np.full(3, -1, np.int64))[None])
+        return Slots("lightpos", (LIGHTPOS_STRIDE * record + rgb if record >= 0 else np.full(3, -1, np.int64))[None])
     if p.kind == "geometry":
         raise ValueError(f"{p.name}: a pose's gradient is its vertices' (pyclpt.gradients.differentiate chains it)")
     raise ValueError(f"{p.name} is not differentiable: {p.reason}")
@@ -149,4 +156,36 @@ def buffer_sizes(arrays: SceneArrays) -> dict[str, int]:
     """Floats in each gradient buffer (the layout of the scene buffers)."""
     return {"mats": arrays.materials.size, "lights": arrays.lights.lights.size,
             "tex8": arrays.textures.texels8().size, "tex32": arrays.textures.texels32().size,
-            "verts": arrays.vnormals.size, "lightpos": 3 * arrays.lights.lights.shape[0], "camera": 12}
+            "verts": arrays.vnormals.size, "lightpos": LIGHTPOS_STRIDE * arrays.lights.lights.shape[0], "camera": 12,
+            "vnormals": arrays.vnormals.size}
+
+
+def spot_gradient(scene: Scene, arrays: SceneArrays, light: SpotLight, lightpos: np.ndarray) -> np.ndarray:
+    """(4, 4) float64: the gradient of a spot light's ``to_world`` from its record's adjoints in ``lightpos`` (the
+    position's, the axis's): the translation column, and the third column (the axis is its direction) through the
+    normalisation; the other columns move nothing the kernels see (untextured)."""
+    out = np.zeros((4, 4))
+    record = light_record(scene, arrays, light)
+    if record < 0:
+        return out
+    g = np.asarray(lightpos[LIGHTPOS_STRIDE * record:LIGHTPOS_STRIDE * record + 6], np.float64)
+    z = spot_pose(light)[:3, 2]
+    a = z / np.linalg.norm(z)
+    out[:3, 3] = g[:3]
+    out[:3, 2] = (g[3:] - a * (a @ g[3:])) / np.linalg.norm(z)
+    return out
+
+
+def spot_tangent(scene: Scene, arrays: SceneArrays, light: SpotLight, tangent: np.ndarray, lightpos: np.ndarray
+                 ) -> None:
+    """Writes into ``lightpos`` (the tangent buffer) the motion of a spot light's position and axis along a tangent
+    (4, 4) of its ``to_world``: :func:`spot_gradient`'s forward mode."""
+    record = light_record(scene, arrays, light)
+    if record < 0:
+        return
+    t = np.asarray(tangent, np.float64).reshape(4, 4)
+    z = spot_pose(light)[:3, 2]
+    a = z / np.linalg.norm(z)
+    dz = t[:3, 2]
+    lightpos[LIGHTPOS_STRIDE * record:LIGHTPOS_STRIDE * record + 3] = t[:3, 3]
+    lightpos[LIGHTPOS_STRIDE * record + 3:LIGHTPOS_STRIDE * record + 6] = (dz - a * (a @ dz)) / np.linalg.norm(z)

@@ -58,9 +58,11 @@ NOT_DIFFERENTIABLE = {
     "conductor": "complex IOR of a conductor: not differentiated yet",
     "transmission": "dielectric reflectance and transmittance: not differentiated yet",
     "checkerboard": "checkerboard colours: not differentiated (only bitmap texels are)",
-    "geometry": "where a spot light or an instance is: update() moves it (the BVH refitted or rebuilt, no kernel "
-                "compiled again); render_backward differentiates meshes' vertex_positions and to_world, point "
-                "lights' positions and the sensor, not these yet (docs/differentiable.md)",
+    "geometry": "where an instance is: update() moves it (the BVH refitted or rebuilt, no kernel compiled again); "
+                "render_backward differentiates meshes' vertex_positions and to_world, point and spot lights' "
+                "positions and the sensor, not instances yet (docs/differentiable.md)",
+    "spot_texture": "a textured spot light's frame: the texture's motion over the cone is not differentiated; "
+                    "update() moves it",
     "point": "point light intensity: not differentiated yet",
     "spot": "spot light intensity: not differentiated yet",
     "directional": "directional light irradiance: not differentiated yet",
@@ -99,13 +101,10 @@ def flat_shaded(mesh: Mesh, tolerance: float = 1e-4) -> bool:
 
 def moving_mesh_reason(scene: Scene, mesh: Mesh) -> str:
     """Why the gradient of where ``mesh`` is (its vertex_positions, its to_world) is not computed, or "" when it is:
-    the interior term (cl/gradients/geometry.h) holds for flat-shaded, untextured meshes of scenes without
-    instances."""
+    the interior term (cl/gradients/geometry.h) holds for untextured meshes, flat or smooth-shaded (through the
+    vertex normals update() writes: pyclpt/gradients/normals.py), of scenes without instances."""
     if scene.instances:
         return "instanced"
-    if not flat_shaded(mesh):
-        return ("a mesh with vertex normals (smooth shading): the interior term of moving geometry is implemented "
-                "for flat-shaded meshes (mesh.normals = None shades it flat); update() moves it")
     mat = scene.materials[mesh.material]
     if _textured(mat) or mesh.emission_texture is not None:
         return ("a textured mesh: the texture's motion under the pixels is not differentiated (the interior term of "
@@ -295,13 +294,7 @@ class _Walker:
     def mesh(self, mesh: Mesh) -> None:
         positions, pose = placement.mesh_accessors(mesh)
         reason = moving_mesh_reason(self.scene, mesh)
-        if not reason and mesh.normals is not None:  # update() recomputes them, angle-weighted: smooth
-            deform = ("the vertices of a mesh with vertex normals: update() recomputes the normals (smooth "
-                      "shading), whose motion the interior term does not follow (mesh.normals = None shades it "
-                      "flat); its to_world is differentiated")
-        else:
-            deform = reason
-        self.add(f"{mesh.name}.vertex_positions", "" if deform else "geometry", positions, mesh, deform, "geometry")
+        self.add(f"{mesh.name}.vertex_positions", "" if reason else "geometry", positions, mesh, reason, "geometry")
         self.add(f"{mesh.name}.to_world", "" if reason else "geometry", pose, mesh, reason, "geometry")
         if mesh.emission is not None and mesh.emission_texture is not None:
             self.add(f"{mesh.name}.emitter.radiance.value", "", _rgb_param(mesh, "emission"), mesh,
@@ -332,7 +325,9 @@ class _Walker:
                 self.add(f"{name}.intensity.value", "", _rgb_param(light, "intensity"), light,
                          "spot" if isinstance(light, SpotLight) else "point")
             if isinstance(light, SpotLight):
-                self.add(f"{name}.to_world", "", placement.spot_accessors(light), light, "geometry")
+                reason = "instanced" if sc.instances else "spot_texture" if light.texture is not None else ""
+                self.add(f"{name}.to_world", "" if reason else "geometry", placement.spot_accessors(light), light,
+                         reason, "geometry")
             elif isinstance(light, PointLight):
                 reason = "instanced" if sc.instances else ""
                 self.add(f"{name}.position", "" if reason else "geometry", placement.point_accessors(light), light,

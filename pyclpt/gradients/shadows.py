@@ -238,6 +238,19 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
                          through * (1 - sigma)[:, None], p, normal, r_mesh, r_tri, r_bary, along[:, None] * n_r)
 
 
+def moving_light_names(scene: Scene) -> dict[str, int]:
+    """{parameter name: index in scene.lights} of the lights whose position moves hard shadows: point lights'
+    ``position``, spot lights' ``to_world`` (its translation)."""
+    out = {}
+    for k, light in enumerate(scene.lights):
+        name = scene.ids.get(f"light:{k}", f"light_{k}")
+        if isinstance(light, PointLight):
+            out[f"{name}.position"] = k
+        elif isinstance(light, SpotLight):
+            out[f"{name}.to_world"] = k
+    return out
+
+
 def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, samples: int = 65536,
                     seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
                     device: Device | str | None = None, stratified: bool = True) -> dict[str, np.ndarray]:
@@ -251,8 +264,7 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
     height, width = g.shape[:2]
     params = parameters if parameters is not None else traverse(scene)
     cameras = [n for n in names if n in sensor_names(scene)]
-    light_names = {f"{scene.ids.get(f'light:{k}', f'light_{k}')}.position": k
-                   for k, light in enumerate(scene.lights) if isinstance(light, PointLight)}
+    light_names = moving_light_names(scene)
     wanted = _meshes_of(scene, [n for n in names if n not in light_names])
     moving_all = bool(cameras) or any(n in light_names for n in names)
     meshes = range(len(scene.meshes)) if moving_all else sorted(wanted)
@@ -266,7 +278,12 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
     for name, k in light_names.items():
         if name in names:
             m = ss.light == k
-            out[name] = (weight[m, None] * ss.light_velocity[m]).sum(0).astype(np.float32)
+            g = (weight[m, None] * ss.light_velocity[m]).sum(0)
+            if name.endswith(".to_world"):  # a spot light's pose: its translation moves the outlines
+                pose = np.zeros((4, 4))
+                pose[:3, 3] = g
+                g = pose
+            out[name] = g.astype(np.float32)
     if wanted:  # as receivers: the outlines every occluder casts on them move with them
         rs = sample_shadow_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
                                  max_depth=max_depth, device=device, stratified=stratified, receivers=sorted(wanted))
@@ -599,8 +616,7 @@ def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wid
     width, height = width or scene.film.width, height or scene.film.height
     params = parameters if parameters is not None else traverse(scene)
     tan = np.asarray(tangent, np.float64)
-    light_names = {f"{scene.ids.get(f'light:{k}', f'light_{k}')}.position": k
-                   for k, light in enumerate(scene.lights) if isinstance(light, PointLight)}
+    light_names = moving_light_names(scene)
     camera = name in sensor_names(scene)
     if camera or name in light_names:
         ss = sample_shadow_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
@@ -609,7 +625,8 @@ def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wid
             velocity = sensor_velocity(scene, width, height, ss.point, ss.normal, name)
             dx = along(velocity, tan)
         else:
-            dx = np.where(ss.light == light_names[name], ss.light_velocity @ tan.reshape(3), 0.0)
+            move = tan.reshape(4, 4)[:3, 3] if name.endswith(".to_world") else tan.reshape(3)
+            dx = np.where(ss.light == light_names[name], ss.light_velocity @ move, 0.0)
     else:
         i, dp = vertex_motion(params, scene, name, tan)
         ss = sample_shadow_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,
