@@ -242,6 +242,41 @@ def test_progressive_sequence_equals_local(client):
         np.testing.assert_array_equal(a, b)  # the same adds in the same order
 
 
+def test_splatting_film_split_render_equals_local(client):
+    """A splatting film (gaussian, estimator="splat"): its image is a ratio of two sums, which the tasks
+    return apart and the merge pools, so the split render is the local one within the documented bound
+    (tiles too, each with its margin), and the running averages of a sequence and a denoised sequence
+    (each frame's own samples and G-buffer) bit for bit."""
+    from pyclpt.scene.model import ReconstructionFilter
+
+    scene = pyclpt.load("cornell-box")
+    scene.film.rfilter = ReconstructionFilter("gaussian", estimator="splat")
+    r = Renderer(scene, width=W, height=H, max_depth=3)
+    ref = r.render_sum(10, seed=6)
+    image = r.render(10, seed=6)
+    dr = DistributedRenderer(client, scene, width=W, height=H, max_depth=3)
+    total = dr.render_sum(10, seed=6, task_spp=3, tile=None, timeout=JOB_TIMEOUT)
+    assert len(dr.parts) == 4 and all(p.weights is not None for p in dr.parts)
+    assert _relative(total, ref) <= MAX_RELATIVE
+    np.testing.assert_allclose(dr.render(10, seed=6, task_spp=3, tile=None, timeout=JOB_TIMEOUT), image, rtol=1e-6)
+    assert _relative(dr.render_sum(10, seed=6, task_spp=4, tile=(7, 5), timeout=JOB_TIMEOUT), ref) <= MAX_RELATIVE
+    pr = pyclpt.ProgressiveRenderer(scene, width=W, height=H, max_depth=3, seed=2)
+    local = []
+    for _ in range(4):
+        pr.step()
+        local.append(pr.image())
+    for a, b in zip(dr.render_progressive(4, seed=2, task_spp=3, timeout=JOB_TIMEOUT), local, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # a denoised sequence: the frames' own samples and G-buffer, as the local denoiser gets them
+    pr = pyclpt.ProgressiveRenderer(scene, width=W, height=H, max_depth=3, seed=2, denoiser="svgf")
+    local = []
+    for _ in range(3):
+        pr.step()
+        local.append(pr.denoised())
+    for a, b in zip(dr.render_denoised(3, seed=2, denoiser="svgf", timeout=JOB_TIMEOUT), local, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_progressive_sequence_hands_frames_over_as_they_complete(client, monkeypatch):
     """With on_frame, each running-average frame is handed over (the CLI writes it) as soon as the samples
     before it are in: the first frame comes while most tasks are not even submitted (at most the window

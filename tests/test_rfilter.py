@@ -1,9 +1,12 @@
-"""Reconstruction filters (Mitsuba's ``rfilter``: box, tent, gaussian): the pixel offsets the device draws
-(cl/film/rfilter.h) against Mitsuba's filter definitions by chi-square, images against Mitsuba 3's render
-of tests/data/rfilter.xml, the megakernel equal to the wavefront and the gradient renderer's primal for
-every filter, the box unchanged, and the loaders' defaults and errors; the splatting film (estimator="splat"):
+"""Reconstruction filters (Mitsuba's ``rfilter``: box, tent, gaussian): the pixel offsets filter importance
+sampling draws (estimator="importance", cl/film/rfilter.h) against Mitsuba's filter definitions by chi-square,
+images of both estimators against Mitsuba 3's render of tests/data/rfilter.xml, the megakernel equal to the
+wavefront and the gradient renderer's primal for every filter, the box unchanged, and the loaders' defaults
+and errors; the splatting film (estimator="splat", the default):
 its gather's weights against numpy, a constant image kept, its weights' mean, the seed contract, crops, lower
-variance than filter importance sampling, gradients, the progressive renderer."""
+variance than filter importance sampling, gradients, the progressive renderer, split sample ranges merged
+exactly (pooled sums), its G-buffer and the denoisers' input (each pixel's own samples), its memory counted
+before a render."""
 from __future__ import annotations
 
 import logging
@@ -61,8 +64,16 @@ def device_offsets(device, rfilter: ReconstructionFilter, u: np.ndarray) -> np.n
     return out
 
 
-FILTERS = [ReconstructionFilter("tent"), ReconstructionFilter("tent", radius=1.7),
-           ReconstructionFilter("gaussian"), ReconstructionFilter("gaussian", stddev=0.3)]
+FILTERS = [ReconstructionFilter("tent", estimator="importance"),
+           ReconstructionFilter("tent", radius=1.7, estimator="importance"),
+           ReconstructionFilter("gaussian", estimator="importance"),
+           ReconstructionFilter("gaussian", stddev=0.3, estimator="importance")]
+
+
+def importance(scene: pyclpt.Scene) -> pyclpt.Scene:
+    """``scene`` with its filter importance sampled (estimator="importance"), in place."""
+    scene.film.rfilter.estimator = "importance"
+    return scene
 
 
 @pytest.mark.parametrize("rfilter", FILTERS, ids=lambda f: f"{f.kind}-{f.radius if f.kind == 'tent' else f.stddev}")
@@ -109,25 +120,33 @@ def test_gaussian_is_mitsuba3_cpu_polynomial():
 
 @pytest.fixture(scope="module")
 def rfilter_images() -> dict[str, np.ndarray]:
-    """tests/data/rfilter.xml with each filter at 1024 spp (64x48)."""
-    return {k: pyclpt.render(pyclpt.load(DATA / "rfilter.xml", filter=k), spp=1024, seed=3, progress=False)
-            for k in ("box", "tent", "gaussian")}
+    """tests/data/rfilter.xml with each filter at 1024 spp (64x48); tent and gaussian with either estimator
+    (``tent`` the default, splatting; ``tent-importance``)."""
+    images = {k: pyclpt.render(pyclpt.load(DATA / "rfilter.xml", filter=k), spp=1024, seed=3, progress=False)
+              for k in ("box", "tent", "gaussian")}
+    for k in ("tent", "gaussian"):
+        scene = importance(pyclpt.load(DATA / "rfilter.xml", filter=k))
+        images[f"{k}-importance"] = pyclpt.render(scene, spp=1024, seed=3, progress=False)
+    return images
 
 
+@pytest.mark.parametrize("estimator", ["splat", "importance"])
 @pytest.mark.parametrize("kind", ["tent", "gaussian"])
-def test_filter_matches_mitsuba(kind, rfilter_images):
+def test_filter_matches_mitsuba(kind, estimator, rfilter_images):
     """Mitsuba 3 rendering tests/data/rfilter.xml (tests/data/make_plugin_reference.py, 16384 spp): a
     checkerboard at a grazing angle and a slit narrower than a pixel. The mean within 1 %, pixel relative
-    MSE under 4e-3 at 1024 spp (measured 1.8e-3 for both, the noise of 1024 spp), while the box differs from
-    the same reference by more than 10 times that (measured 0.058 against the tent, 0.10 against the
-    gaussian) and the other filter by more than twice (0.010, 0.011)."""
+    MSE under 4e-3 at 1024 spp (importance sampling: measured 1.8e-3 for both, the noise of 1024 spp;
+    splatting, the default: 5.7e-4 and 5.4e-4), while the box differs from the same reference by more than 10 times
+    that (measured 0.058 against the tent, 0.10 against the gaussian) and the other filter by more than
+    twice (0.010, 0.011)."""
     ref = np.load(DATA / f"rfilter-{kind}-mitsuba.npy")
-    assert pyclpt.load(DATA / "rfilter.xml", filter=kind).film.rfilter.kind == kind
+    loaded = pyclpt.load(DATA / "rfilter.xml", filter=kind).film.rfilter
+    assert loaded.kind == kind and loaded.estimator == "splat"
 
     def rel_mse(img):
         return float(np.mean((img - ref) ** 2) / np.mean(ref ** 2))
 
-    img = rfilter_images[kind]
+    img = rfilter_images[kind if estimator == "splat" else f"{kind}-importance"]
     np.testing.assert_allclose(img.mean((0, 1)), ref.mean((0, 1)), rtol=0.01)
     tolerance = 4e-3
     assert rel_mse(img) < tolerance, rel_mse(img)
@@ -138,7 +157,8 @@ def test_filter_matches_mitsuba(kind, rfilter_images):
 
 @pytest.mark.parametrize("kind", ["box", "tent", "gaussian"])
 def test_megakernel_equals_wavefront_and_gradient_primal(kind, each_device):
-    scene = pyclpt.load(DATA / "rfilter.xml", filter=kind)
+    """Filter importance sampling (the splatting film's: test_splat_megakernel_equals_wavefront_...)."""
+    scene = importance(pyclpt.load(DATA / "rfilter.xml", filter=kind))
     opts = dict(spp=2, seed=5, width=16, height=12, max_depth=3, progress=False, device=each_device)
     mega = pyclpt.render(scene, **opts)
     np.testing.assert_array_equal(mega, pyclpt.render(scene, integrator="wavefront", **opts))
@@ -214,12 +234,12 @@ def test_renderer_keeps_its_filter_kind(device):
     """The filter's kind is a -D specialisation: another kind needs a new renderer (as a camera's kind);
     its parameters are constants, read again with the camera."""
     scene = object_under_sky({"type": "diffuse"}, radiance=1.0)
-    scene.film.rfilter = ReconstructionFilter("gaussian")
+    scene.film.rfilter = ReconstructionFilter("gaussian", estimator="importance")
     buffers = SceneBuffers(scene, device)
     assert buffers.defines["SCENE_FILTER"] == 2
-    scene.film.rfilter = ReconstructionFilter("gaussian", stddev=0.3)
+    scene.film.rfilter = ReconstructionFilter("gaussian", stddev=0.3, estimator="importance")
     buffers.refresh_camera()
-    scene.film.rfilter = ReconstructionFilter("tent")
+    scene.film.rfilter = ReconstructionFilter("tent", estimator="importance")
     with pytest.raises(ValueError, match="reconstruction filter changed kind"):
         buffers.refresh_camera()
 
@@ -360,7 +380,7 @@ def test_splat_has_less_variance_than_importance_sampling():
         return stack.var(axis=0, ddof=1).mean() / np.mean(stack.mean(axis=0) ** 2)
 
     for kind, bound in (("tent", 0.7), ("gaussian", 0.55)):
-        ratio = rel_var(ReconstructionFilter(kind, estimator="splat")) / rel_var(ReconstructionFilter(kind))
+        ratio = rel_var(ReconstructionFilter(kind)) / rel_var(ReconstructionFilter(kind, estimator="importance"))
         assert ratio < bound, (kind, ratio)
 
 
@@ -411,7 +431,7 @@ def test_splat_crop_is_the_image_window(device, integrator):
 
 def test_progressive_renderer_splats():
     """The progressive renderer's frames go through the gather (seed and sample index passed on): its
-    image is pyclpt.render's; a splatting film refuses a G-buffer by name."""
+    image is pyclpt.render's; its frame image (the denoisers' input) is the frame's own samples."""
     scene = object_under_sky({"type": "diffuse"}, radiance=1.0)
     scene.film = pyclpt.Film(10, 8, ReconstructionFilter("tent", radius=1.3, estimator="splat"))
     pr = pyclpt.ProgressiveRenderer(scene, seed=4, max_depth=2)
@@ -419,7 +439,149 @@ def test_progressive_renderer_splats():
     np.testing.assert_array_equal(pr.image(), pyclpt.render(scene, spp=3, seed=4, max_depth=2, progress=False))
     one = pyclpt.ProgressiveRenderer(scene, seed=4, max_depth=2)
     one.step(1)
-    assert one.frame_image().shape == (8, 10, 3)  # the frame's splatted image of the window
-    np.testing.assert_array_equal(one.frame_image(), one.image())
-    with pytest.raises(ValueError, match="splatting film .* no G-buffer"):
-        pyclpt.render(scene, spp=1, max_depth=2, aovs=["albedo"], progress=False)
+    film = one.renderer.film
+    assert one.frame_image().shape == (8, 10, 3)  # the frame's own samples in the window, before the gather
+    np.testing.assert_array_equal(one.frame_image(), film.read_own_frame(0))
+    k = film.pad
+    assert k == 1
+    np.testing.assert_array_equal(film.read_own_frame(0), _raw_frame(film)[k:k + 8, k:k + 10])
+    assert not np.array_equal(one.frame_image(), one.image())  # the image is splatted
+
+
+def _raw_frame(film) -> np.ndarray:
+    """Frame 0 of a film's buffer as the integrators wrote it, margin included."""
+    out = np.empty((film.height, film.width, 3), np.float32)
+    cl.enqueue_copy(film.device.queue, out, film.frame)
+    return out
+
+
+def _settings(**kw) -> tuple:
+    from pyclpt.distributed.tasks import RENDERER_SETTINGS
+
+    values = {**dict(integrator="megakernel", layout="soa", max_depth=None, width=None, height=None, wave_size=None,
+                     precision="double"), **kw}
+    return tuple((k, values[k]) for k in RENDERER_SETTINGS)
+
+
+@pytest.mark.parametrize("kind", ["tent", "gaussian"])
+def test_splat_split_ranges_merge_exactly(kind):
+    """Split sample ranges (the tasks a cluster's workers run, here in this process) merge into the one-shot
+    render: each returns its sums of weighted radiance and of weights, which the merge pools, within the
+    documented bound of tests/test_distributed.py (relative 1e-12 on the double sum), the image within
+    float rounding; averaging the ranges' ratios would be off by far more. Tiles too, and per-sample
+    parts give the progressive renderer's images bit for bit."""
+    from pyclpt.distributed.merge import merge, merge_tiles, running_averages
+    from pyclpt.distributed.tasks import RenderTask, SceneSource
+    from pyclpt.distributed.worker import run_task
+    from pyclpt.film.crop import Crop
+    from pyclpt.rendering.renderer import Renderer
+
+    scene = pyclpt.load(DATA / "rfilter.xml", filter=kind)
+    scene.film.rfilter = ReconstructionFilter(kind, estimator="splat")
+    w, h, spp, seed = 16, 12, 7, 3
+    r = Renderer(scene, width=w, height=h, max_depth=3)
+    ref = r.render_sum(spp, seed)
+    image = r.render(spp, seed)
+    source, settings = SceneSource.of(scene), _settings(width=w, height=h, max_depth=3)
+    ranges = [(0, 3), (3, 1), (4, 3)]
+    parts = [run_task(RenderTask(source, settings, seed, s, n)) for s, n in ranges]
+    assert all(p.weights is not None and p.weights.shape == (h, w) for p in parts)
+    total, _ = merge(parts[::-1], spp)
+    rel = np.abs(total - ref) / np.abs(ref).clip(1e-300)
+    assert rel.max() <= 1e-12, rel.max()
+    np.testing.assert_allclose((total / spp).astype(np.float32), image, rtol=1e-6)
+    ratios = sum(r.render_sum(n, seed, first_sample=s) for s, n in ranges)  # per-range ratios, not pooled
+    assert (np.abs(ratios - ref) / np.abs(ref).clip(1e-300)).max() > 1e-3
+    # tiles (each with its margin) x ranges
+    crops = [Crop(0, 0, 9, 12), Crop(9, 0, 7, 5), Crop(9, 5, 7, 7)]
+    tiled = [run_task(RenderTask(source, settings, seed, s, n, crop=c)) for c in crops for s, n in ranges]
+    total, _ = merge_tiles(tiled, spp, w, h)
+    assert (np.abs(total - ref) / np.abs(ref).clip(1e-300)).max() <= 1e-12
+    # per-sample parts: the progressive renderer's running images
+    pr = pyclpt.ProgressiveRenderer(scene, seed=seed, width=w, height=h, max_depth=3)
+    local = []
+    for _ in range(4):
+        pr.step()
+        local.append(pr.image())
+    per = [run_task(RenderTask(source, settings, seed, s, n, per_sample=True)) for s, n in [(0, 3), (3, 1)]]
+    assert per[0].frame_weights.shape == (3, h, w)
+    for a, b in zip(running_averages(per, 4), local):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("integrator", ["megakernel", "wavefront"])
+def test_splat_gbuffer_is_each_pixels_own_samples(device, integrator):
+    """A splatting film records the G-buffer of its window, each pixel's mean over its own samples (the
+    margin's left out): the same as the box's in expectation (not shifted, not blurred across edges),
+    megakernel = wavefront, a crop window's exactly the whole image's; the image is still splatted."""
+    from pyclpt.rendering.renderer import Renderer
+
+    names = ["albedo", "normal", "depth", "prim_id"]
+    scene = pyclpt.load(DATA / "rfilter.xml", filter="gaussian")
+    scene.film.rfilter = ReconstructionFilter("gaussian", estimator="splat")
+    r = Renderer(scene, integrator=integrator, width=20, height=14, max_depth=3, device=device, aovs=names)
+    image = r.render(48, seed=4)
+    splat = r.aovs()
+    assert {k: v.shape[:2] for k, v in splat.items()} == dict.fromkeys(names, (14, 20))
+    mega = Renderer(scene, width=20, height=14, max_depth=3, device=device, aovs=names)
+    np.testing.assert_array_equal(mega.render(48, seed=4), image)
+    for name, value in mega.aovs().items():
+        np.testing.assert_array_equal(value, splat[name], err_msg=name)
+    boxed_scene = pyclpt.load(DATA / "rfilter.xml", filter="box")
+    box = Renderer(boxed_scene, width=20, height=14, max_depth=3, device=device, aovs=names)
+    box.render(48, seed=4)
+    boxed = box.aovs()
+    for name in ("albedo", "depth"):  # the same in expectation; shifted by the margin (2, 2), far apart
+        err = np.abs(splat[name] - boxed[name]).mean()
+        shifted = np.abs(splat[name][2:, 2:] - boxed[name][:-2, :-2]).mean()
+        assert err < 0.5 * shifted, (name, err, shifted)
+    full = r.render(3, seed=4, first_sample=1)
+    aovs = r.aovs()
+    crop = r.cropped((3, 2, 9, 7))
+    np.testing.assert_array_equal(crop.render(3, seed=4, first_sample=1), full[2:9, 3:12])
+    for name, value in crop.aovs().items():
+        np.testing.assert_array_equal(value, aovs[name][2:9, 3:12], err_msg=name)
+
+
+@pytest.mark.parametrize("mode", ["svgf", "oidn"])
+def test_splat_denoisers_read_each_pixels_own_samples(mode):
+    """With a splatting film the denoisers get the pixels' own samples (uncorrelated between pixels, as
+    they expect) with the G-buffer of those samples: svgf the frame cropped to the window, oidn their
+    average; the plain image is still the splatted one, pyclpt.render's."""
+    scene = object_under_sky({"type": "diffuse"}, radiance=1.0)
+    scene.film = pyclpt.Film(12, 9, ReconstructionFilter("gaussian", estimator="splat"))
+    try:
+        pr = pyclpt.ProgressiveRenderer(scene, seed=4, max_depth=2, denoiser=mode)
+    except (ImportError, RuntimeError) as exc:  # oidn: needs its library
+        pytest.skip(f"{mode}: {exc}")
+    frames = []
+    for _ in range(3):
+        pr.step()
+        frames.append(pr.frame_image())
+    film = pr.renderer.film
+    assert film.pad == 2
+    np.testing.assert_array_equal(frames[-1], _raw_frame(film)[2:11, 2:14])
+    np.testing.assert_array_equal(pr.image(), pyclpt.render(scene, spp=3, seed=4, max_depth=2, progress=False))
+    np.testing.assert_allclose(film.denoiser_image(), np.mean(frames, axis=0), rtol=1e-6)
+    out = pr.denoised()
+    assert out.shape == (9, 12, 3) and np.isfinite(out).all()
+
+
+@pytest.mark.parametrize("aovs", [False, True])
+def test_render_memory_counts_the_splatting_film(device, monkeypatch, aovs):
+    """The memory check before a render (pyclpt/rendering/memory.py) counts a splatting film's buffers: the
+    frames with their margin, the gather's, the weights' accumulator, the G-buffer's records of the margined
+    frames and the denoisers' frames; what the film allocates, to the few bytes of its counters."""
+    import pyclpt.device.context as context
+    from pyclpt.film.film import Film
+    from pyclpt.rendering.memory import batch_frames, render_memory
+
+    scene = pyclpt.load(DATA / "rfilter.xml", filter="gaussian")
+    made = []
+    check = context.check_alloc
+    monkeypatch.setattr(context, "check_alloc", lambda d, n, what, *a: made.append(int(n)) or check(d, n, what, *a))
+    Film(device, 64, 48, precision="double", batch=batch_frames(64 * 48, None), aovs=aovs, rfilter=scene.film.rfilter)
+    parts = render_memory(scene, 64, 48, precision="double", integrator="megakernel", aovs=aovs)
+    counted = sum(v for k, v in parts.items() if not k.startswith("scene"))
+    assert "splatting film" in parts and ("denoiser frames" in parts) == aovs
+    assert counted <= sum(made) <= counted + 64

@@ -1,11 +1,12 @@
 """The film's reconstruction filter -> the -DSCENE_FILTER specialisation and the CONST_FILTER_* constants of
 ``cl/scene/scene.h``, which ``cl/film/rfilter.h`` samples the camera ray's offset in the pixel from.
 
-Filter importance sampling: each camera ray's offset from its pixel's centre is drawn, per axis, from the
-normalised filter w(x) / integral(w), and its sample weight is 1, so the plain average of a pixel's samples
-estimates integral(w L) / integral(w), what Mitsuba's film converges to when it splats every sample
-with weight w(x) w(y) and divides by the sum of the weights. (``estimator="splat"``: that splatting film
-itself, pyclpt/film/splat.py; the camera ray then gets the box's jitter.)
+Filter importance sampling (``ReconstructionFilter(kind, estimator="importance")``): each camera ray's offset
+from its pixel's centre is drawn, per axis, from the normalised filter w(x) / integral(w), and its sample
+weight is 1, so the plain average of a pixel's samples estimates integral(w L) / integral(w), what Mitsuba's
+film converges to when it splats every sample with weight w(x) w(y) and divides by the sum of the weights.
+(``estimator="splat"``, the default: that splatting film itself, pyclpt/film/splat.py; the camera ray then
+gets the box's jitter.)
 
 - ``box``: uniform in [-0.5, 0.5) (the jitter as it always was; no -D, the same code);
 - ``tent`` (radius r): the inverse of its CDF, closed form;

@@ -29,7 +29,15 @@ from pyclpt.common.checks import check_int, check_optional_bool, check_optional_
 from pyclpt.denoise import Denoiser, DenoiserSettings
 from pyclpt.device.context import Device
 from pyclpt.distributed.cluster import import_distributed
-from pyclpt.distributed.merge import PartialSum, average, merge, merge_tiles, running_averages
+from pyclpt.distributed.merge import (
+    PartialSum,
+    RunningAverage,
+    average,
+    merge,
+    merge_tiles,
+    running_averages,
+    splat_average,
+)
 from pyclpt.distributed.tasks import (
     RENDERER_SETTINGS,
     RenderTask,
@@ -246,7 +254,8 @@ class DistributedRenderer:
             raise TypeError("cameras must be a non-empty sequence of pyclpt.Camera")
         tasks = [self._task(seed, first_sample, spp, camera=c, frame=k) for k, c in enumerate(cameras)]
         parts = self._run(tasks, progress, f"{self.source.name}: {len(tasks)} frames", timeout=timeout)
-        return [average(p.total, spp) for p in parts]
+        return [average(p.total, spp) if p.weights is None else splat_average(p.total, p.weights, spp)
+                for p in parts]
 
     def render_progressive(self, spp: int, seed: int = 0, *, task_spp: int | None = None,
                            progress: bool | None = None, timeout: float | None = None,
@@ -271,7 +280,8 @@ class DistributedRenderer:
         task_spp = min(task_spp, PROGRESSIVE_TASK_SPP)
         tasks = [self._task(seed, s, n, per_sample=True) for s, n in split_samples(spp, task_spp)]
         waiting: dict[int, PartialSum] = {}  # tasks arrived before the one whose frames come next
-        state = {"next": 0, "frame": 0, "total": None}
+        state = {"next": 0}
+        acc = RunningAverage()
         self.held_tasks = 0  # the most tasks held at once (arrived, not yet added): bounded by the window
 
         def add_in_order(i: int, part: PartialSum) -> None:
@@ -279,12 +289,11 @@ class DistributedRenderer:
             self.held_tasks = max(self.held_tasks, len(waiting))
             while state["next"] in waiting:
                 ready = waiting.pop(state["next"])
-                for frame in ready.frames:
-                    total = state["total"]
-                    state["total"] = frame.astype(np.float64) if total is None else total + frame
-                    state["frame"] += 1
-                    on_frame(state["frame"] - 1, average(state["total"], state["frame"]))
-                ready.frames = None  # added: only the task's record stays
+                fw = ready.frame_weights
+                for k, frame in enumerate(ready.frames):
+                    image = acc.add(frame, None if fw is None else fw[k])
+                    on_frame(acc.count - 1, image)
+                ready.frames = ready.frame_weights = None  # added: only the task's record stays
                 state["next"] += 1
 
         self._run(tasks, progress, f"{self.source.name}: {spp} frames", timeout=timeout, on_result=add_in_order,

@@ -140,15 +140,17 @@ def run_task(task: RenderTask, source: SceneSource | None = None) -> PartialSum:
             r.scene_buffers.refresh_camera(previous=task.previous)
         try:
             t0 = time.perf_counter()
-            total = frames = gbuffer = None
+            total = frames = gbuffer = weights = frame_weights = None
             if task.gbuffer:  # a frame of a denoised sequence: its own samples and G-buffer, the denoiser's input
                 r.render(task.count, task.seed, first_sample=task.first_sample)
-                frames, gbuffer = r.film.read_frame(0)[None], r.film.aov.read()
-            elif task.per_sample:
-                frames = np.stack([r.render(1, task.seed, first_sample=task.first_sample + k)
-                                   for k in range(task.count)])
+                frames, gbuffer = r.film.read_own_frame(0)[None], r.film.aov.read()
+            elif task.per_sample:  # each sample's sums (a splatting film's: weighted radiance and weights)
+                sums = [r.render_sums(1, task.seed, first_sample=task.first_sample + k) for k in range(task.count)]
+                frames = np.stack([t.astype(np.float32) for t, _ in sums])  # one float32 frame: exact
+                if sums[0][1] is not None:
+                    frame_weights = np.stack([w.astype(np.float32) for _, w in sums])
             else:
-                total = r.render_sum(task.count, task.seed, first_sample=task.first_sample)
+                total, weights = r.render_sums(task.count, task.seed, first_sample=task.first_sample)
             seconds = time.perf_counter() - t0
             dropped = r.stats.dropped_samples
         finally:
@@ -156,4 +158,5 @@ def run_task(task: RenderTask, source: SceneSource | None = None) -> PartialSum:
                 r.scene.camera = scene_camera
                 r.scene_buffers.refresh_camera(previous=None)
     return PartialSum(task.first_sample, task.count, total, frame=task.frame, dropped=dropped,
-                      worker=worker_name(), seconds=seconds, frames=frames, crop=task.crop, gbuffer=gbuffer)
+                      worker=worker_name(), seconds=seconds, frames=frames, crop=task.crop, gbuffer=gbuffer,
+                      weights=weights, frame_weights=frame_weights)

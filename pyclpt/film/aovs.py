@@ -75,14 +75,21 @@ def check_aovs(aovs: object) -> tuple[str, ...]:
 
 
 class AovFilm:
-    """The G-buffer of a film of ``pixels`` pixels and ``batch`` frames a batch, on the device."""
+    """The G-buffer of a film of ``pixels`` pixels and ``batch`` frames a batch, on the device. ``pad``: the
+    integrators render (and record) a margin of that many pixels around the film's width x height (a
+    splatting film's, :mod:`pyclpt.film.splat`); the G-buffer is the window's, each pixel the mean over its
+    own samples, the margin's records unused (why not splatted: docs/architecture.md, "Pixel
+    filters")."""
 
-    def __init__(self, device: Device, width: int, height: int, batch: int) -> None:
+    def __init__(self, device: Device, width: int, height: int, batch: int, pad: int = 0) -> None:
         self.device = device
         self.width, self.height = width, height
         self.pixels = width * height
+        self.pad = pad
+        self.traced_width = width + 2 * pad
+        self.frame_pixels = self.traced_width * (height + 2 * pad)  # the records of a frame
         self.batch = batch
-        self.slot_count = self.pixels * batch
+        self.slot_count = self.frame_pixels * batch
         self.slots = alloc(device, 4 * AOV_COUNT * self.slot_count, f"G-buffer records {width}x{height}x{batch}")
         self.sum = alloc(device, 4 * AOV_COUNT * self.pixels, f"G-buffer sums {width}x{height}")
         self.mean = alloc(device, 4 * AOV_COUNT * self.pixels, f"G-buffer {width}x{height}")
@@ -121,7 +128,9 @@ class AovFilm:
         total = self.frames + count
         ev = self._kernel(self.device.queue, (self.pixels,), None, self.slots, np.int32(self.slot_count),
                           np.int32(self.pixels),
-                          np.int32(count), np.int32(self.frames == 0), np.int32(total), self.sum, self.mean)
+                          np.int32(count), np.int32(self.frames == 0), np.int32(total), self.sum, self.mean,
+                          np.int32(self.frame_pixels), np.int32(self.width), np.int32(self.traced_width),
+                          np.int32(self.pad))
         self.frames = total
         self.clear_slots()
         return ev

@@ -11,7 +11,12 @@ a plain add, so no kernel that commits a path needs an atomic), and
 
 A film whose reconstruction filter splats (``ReconstructionFilter(estimator="splat")``,
 :mod:`pyclpt.film.splat`) runs its gather pass over each batch before the accumulator: the accumulator
-then sums the weighted radiance, a second one the weights, and :meth:`Film.image` is their ratio.
+then sums the weighted radiance, a second one the weights, and :meth:`Film.image` is their ratio. Split
+sample ranges (distributed tasks) merge exactly by pooling both sums (:meth:`Film.sums`,
+:func:`pyclpt.distributed.merge.merge`), never their per-range ratios. Its G-buffer and the frame the
+real-time denoisers read (:meth:`Film.denoiser_frame`), and the average OIDN reads
+(:meth:`Film.denoiser_image`), are each window pixel's own samples, not splatted (docs/architecture.md, "Pixel
+filters").
 """
 from __future__ import annotations
 
@@ -66,9 +71,6 @@ class Film:
             width, height = self.crop.width, self.crop.height
         self.out_width, self.out_height = width, height
         self.pad = rfilter.splat_reach if splats(rfilter) else 0
-        if self.pad and aovs:
-            raise ValueError("a splatting film (ReconstructionFilter estimator='splat') records no G-buffer yet: "
-                             "render AOVs with estimator='importance'")
         x0, y0 = (self.crop.x, self.crop.y) if self.crop is not None else (0, 0)
         #: the window the integrators render: the film's with its margin, possibly beyond the image
         self.traced = Crop(x0 - self.pad, y0 - self.pad, width + 2 * self.pad, height + 2 * self.pad)
@@ -87,8 +89,16 @@ class Film:
         if splats(rfilter):
             self.splat = SplatFilm(device, rfilter, self.out_width, self.out_height, batch, self.image_width, x0, y0,
                                    precision=precision, **accumulator_options)
-        # the G-buffer, when the integrators record one (-DAOVS: pyclpt/film/aovs.py)
-        self.aov = AovFilm(device, width, height, batch) if aovs else None
+        # the G-buffer, when the integrators record one (-DAOVS: pyclpt/film/aovs.py); of the window's pixels
+        self.aov = AovFilm(device, self.out_width, self.out_height, batch, pad=self.pad) if aovs else None
+        # a splatting film with a G-buffer: its frames cropped to the window (frame 0: the real-time
+        # denoisers' input, denoiser_frame) and their average (OIDN's, denoiser_image)
+        self._own = self.own_accumulator = None
+        if self.pad and aovs:
+            ow, oh = self.out_width, self.out_height
+            self._own = alloc(device, 4 * 3 * ow * oh * batch, f"denoiser frames {ow}x{oh}x{batch}")
+            self.own_accumulator = Accumulator(device, ow, oh, channels=3, precision=precision, input_type="float",
+                                               **accumulator_options)
         self._no_aovs = None if aovs else alloc(device, 4, "no G-buffer")
         self.clear()
 
@@ -121,6 +131,8 @@ class Film:
         self.accumulator.reset()
         if self.splat is not None:
             self.splat.accumulator.reset()
+        if self.own_accumulator is not None:
+            self.own_accumulator.reset()
         fill_buffer(q, self.frame, np.float32(0), 0, 4 * self.pixels * 3 * self.batch)
         fill_buffer(q, self.dropped, np.int32(0), 0, 4)
         fill_buffer(q, self.drop_marks, np.uint8(0), 0, self.pixels * self.batch)
@@ -148,7 +160,20 @@ class Film:
             sp.accumulator.configure(**wanted)
         sp.gather(self.frame, count, seed, first_sample)
         sp.accumulator.add_batch(sp.weights, count)
+        if self.own_accumulator is not None:
+            if self.own_accumulator.options != self.accumulator.options:
+                self.own_accumulator.configure(**self.accumulator.options)
+            self.own_accumulator.add_batch(self._crop_frames(count), count)
         return self.accumulator.add_batch(sp.out, count)
+
+    def _crop_frames(self, count: int) -> cl.Buffer:
+        """The first ``count`` frames cropped to the window (the margin left out), into the denoiser's
+        frames, which it returns."""
+        row, trow = 12 * self.out_width, 12 * self.width
+        cl.enqueue_copy(self.device.queue, self._own, self.frame, src_origin=(12 * self.pad, self.pad, 0),
+                        dst_origin=(0, 0, 0), region=(row, self.out_height, count),
+                        src_pitches=(trow, trow * self.height), dst_pitches=(row, row * self.out_height))
+        return self._own
 
     def add_frame(self, seed: int = 0, sample: int = 0) -> cl.Event | None:
         """Add the first frame of the buffer to the accumulation (None when the accumulator has stopped)."""
@@ -162,11 +187,45 @@ class Film:
         self.accumulator = old.accumulator
         if self.splat is not None and old.splat is not None:
             self.splat.accumulator = old.splat.accumulator
+        if self.own_accumulator is not None and old.own_accumulator is not None:
+            self.own_accumulator = old.own_accumulator
 
     def warm_up(self) -> None:
         self.accumulator.warm_up()
         if self.splat is not None:
             self.splat.accumulator.warm_up()
+        if self.own_accumulator is not None:
+            self.own_accumulator.warm_up()
+
+    def denoiser_frame(self) -> cl.Buffer:
+        """Frame 0's own samples of the window, one per pixel, interleaved RGB float32 on the device: what the
+        real-time denoisers read with the G-buffer (:attr:`aov` ``.mean``). A film without a margin: the
+        frame buffer itself; a splatting film: its frame cropped to the window, not splatted (a splatted
+        frame's noise is correlated between neighbours, which the denoisers do not expect; its G-buffer is
+        of the same samples)."""
+        if self.pad == 0:
+            return self.frame
+        if self._own is None:
+            raise ValueError("this film records no G-buffer: it has no denoiser frame")
+        return self._crop_frames(1)
+
+    def denoiser_image(self) -> np.ndarray:
+        """The average OIDN denoises with the G-buffer's averaged guides, (H, W, 3) float32: :meth:`image`,
+        except for a splatting film, whose window pixels' own samples it averages (the splatted image's
+        noise is correlated between neighbours; OIDN does not support weighted pixel sampling)."""
+        if self.own_accumulator is None:
+            if self.pad:
+                raise ValueError("this film records no G-buffer: it has no denoiser image")
+            return self.image()
+        return self.own_accumulator.image()
+
+    def read_own_frame(self, j: int = 0) -> np.ndarray:
+        """Frame ``j``'s own samples of the window, (H, W, 3) float32: :meth:`read_frame` without a margin; a
+        splatting film's samples before the gather (frame 0: :meth:`denoiser_frame`)."""
+        out = np.empty((self.height, self.width, 3), np.float32)
+        cl.enqueue_copy(self.device.queue, out, self.frame, src_offset=4 * 3 * self.pixels * j)
+        p = self.pad
+        return np.ascontiguousarray(out[p:p + self.out_height, p:p + self.out_width])
 
     def read_frame(self, j: int = 0) -> np.ndarray:
         """Frame ``j`` of the buffer, (H, W, 3) float32 (a splatting film: that frame's splatted image of its
@@ -191,9 +250,20 @@ class Film:
         w = self.splat.accumulator.image()
         return np.divide(image, w, out=np.zeros_like(image), where=w > 0)
 
+    def sums(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """What sample ranges merge by: the accumulator's sum as it keeps it, (H, W, 3) float64, and None; a
+        splatting film: the sum of its weighted radiance and that of its weights, (H, W) float64, the image
+        being their ratio. Both add over split sample ranges, so pooled they give the one-shot image up
+        to the rounding of the adds that join them (:func:`pyclpt.distributed.merge.merge`)."""
+        total = self.accumulator.sum()
+        if self.splat is None:
+            return total, None
+        return total, self.splat.accumulator.sum()[..., 0]
+
     def sum(self) -> np.ndarray:
         """The sum of the frames added so far as the accumulator keeps it, (H, W, 3) float64 (a splatting
-        film: its image, sum w L / sum w, in float64, times the frames added)."""
+        film: its image, sum w L / sum w, in float64, times the frames added: per range a ratio, which
+        does not add up over split ranges; :meth:`sums` does)."""
         total = self.accumulator.sum()
         if self.splat is None:
             return total

@@ -1,5 +1,5 @@
 """The splatting film: Mitsuba's estimator for the tent and gaussian reconstruction filters
-(``ReconstructionFilter(estimator="splat")``), deterministic.
+(``ReconstructionFilter(estimator="splat")``, their default), deterministic.
 
 Each camera ray is drawn uniformly in its pixel (the box's jitter) and its radiance goes to its film slot
 as any sample's; after a batch, ``cl/film/splat.cl`` lets every pixel p sum, per frame, the samples of the
@@ -15,6 +15,10 @@ The film renders a margin of :func:`reach` pixels around its window (``Film.pad`
 beyond it: the pixels at the image's edge get the samples beyond it, as Mitsuba's ``sample_border = true``,
 and a cropped film's pixels are exactly the whole image's. Its pixels are keyed by their index in the image
 padded by the margin (``CONST_FILM_PAD``, ``film_pixel`` in ``cl/integrators/path.h``).
+
+Split sample ranges merge by their two sums, pooled (``Film.sums``, :mod:`pyclpt.distributed.merge`); the
+G-buffer and the denoisers' input are each window pixel's own samples, not splatted (``Film.denoiser_frame``,
+docs/architecture.md, "Pixel filters").
 """
 from __future__ import annotations
 

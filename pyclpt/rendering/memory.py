@@ -83,20 +83,29 @@ def render_memory(scene: Scene, width: int, height: int, *, precision: str, inte
     docstring); ``scene_buffers`` False: the scene's buffers are there already (another renderer's)."""
     pixels = width * height
     batch = batch_frames(pixels, wave_size)
+    # a splatting film (pyclpt/film/splat.py) renders a margin of pad pixels around its window
+    pad = scene.film.rfilter.splat_reach
+    tw, th = width + 2 * pad, height + 2 * pad
+    traced = tw * th
+    value = SUM_VALUE_BYTES.get(precision, 8)
     parts = {
-        f"frame buffer {width}x{height}" + (f", {batch} frames" if batch > 1 else ""): 12 * pixels * batch,
-        "dropped-sample marks": pixels * batch,
-        f"accumulation sum ({precision})": SUM_VALUE_BYTES.get(precision, 8) * 3 * pixels,
+        f"frame buffer {tw}x{th}" + (f", {batch} frames" if batch > 1 else ""): 12 * traced * batch,
+        "dropped-sample marks": traced * batch,
+        f"accumulation sum ({precision})": value * 3 * pixels,
         "accumulated image": 12 * pixels,
         "scene buffers (estimate)": scene_bytes(scene) if scene_buffers else 0,
     }
+    if pad:  # its gathered frames, their weights, the per-axis weights, the weights' accumulator
+        parts["splatting film"] = (16 * pixels + 8 * (2 * pad + 1) * traced) * batch + (value + 4) * pixels
     if aovs:  # pyclpt/film/aovs.py: a record per film slot, the per-pixel sums and means
-        parts["G-buffer"] = 4 * AOV_COUNT * pixels * (batch + 2)
+        parts["G-buffer"] = 4 * AOV_COUNT * (traced * batch + 2 * pixels)
+        if pad:  # the denoisers' frames (the window's own samples) and their accumulator
+            parts["denoiser frames"] = 12 * pixels * batch + (3 * value + 12) * pixels
     if integrator == "wavefront":
         from pyclpt.integrators.path_state import bytes_per_path
         from pyclpt.integrators.wavefront import DEFAULT_WAVE_SIZE, Q_COUNT, QUEUE_BYTES_PER_PATH
 
-        capacity = min(wave_size or DEFAULT_WAVE_SIZE, pixels * batch)
+        capacity = min(wave_size or DEFAULT_WAVE_SIZE, traced * batch)
         parts[f"path state and queues ({capacity} paths)"] = (capacity * (bytes_per_path() + QUEUE_BYTES_PER_PATH)
                                                               + 4 * (Q_COUNT + 1) * (max_depth + 2))
     return parts

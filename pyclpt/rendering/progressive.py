@@ -366,10 +366,10 @@ class ProgressiveRenderer:
         film.add_frame(self.seed, self.sample_index)
         if self.denoiser is not None:
             if self.denoiser_mode == "oidn":  # the offline anchor: the plain average and its averaged guides
-                guides = self.renderer.aovs(["albedo", "normal"])
-                self.denoiser.denoise(self.image(), albedo=guides["albedo"], normal=guides["normal"])
+                guides = self.renderer.aovs(["albedo", "normal"])  # (a splatting film: its own samples' average)
+                self.denoiser.denoise(film.denoiser_image(), albedo=guides["albedo"], normal=guides["normal"])
             else:
-                self.denoiser.denoise_buffers(film.frame, film.aov.mean)
+                self.denoiser.denoise_buffers(film.denoiser_frame(), film.aov.mean)
         self._last_camera = dataclasses.replace(self.scene.camera, to_world=np.array(self.scene.camera.to_world))
         self.sample_index += 1
         self.frame_index += 1
@@ -380,8 +380,9 @@ class ProgressiveRenderer:
         return self.renderer.film.image()
 
     def frame_image(self) -> np.ndarray:
-        """The last frame's own samples (one per pixel), (H, W, 3) float32: the denoiser's input."""
-        return self.renderer.film.read_frame(0)
+        """The last frame's own samples (one per pixel), (H, W, 3) float32: the real-time denoisers' input
+        (a splatting film's before its gather: :meth:`Film.denoiser_frame <pyclpt.film.film.Film.denoiser_frame>`)."""
+        return self.renderer.film.read_own_frame(0)
 
     def denoised(self) -> np.ndarray:
         """The denoiser's output for the last frame, (H, W, 3) float32."""

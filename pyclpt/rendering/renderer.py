@@ -197,11 +197,24 @@ class Renderer:
         """The sum of samples [first_sample, first_sample + spp) of every pixel as the film's accumulator
         keeps it, (H, W, 3) float64 (with ``precision="double"``: the float32 samples added in sample
         order in double). Partial sums of a split sample range add up to :meth:`render`'s sum up to the
-        rounding of double (:mod:`pyclpt.distributed` merges them)."""
+        rounding of double (:mod:`pyclpt.distributed` merges them); a splatting film's is its image times
+        spp, a ratio per range: split ranges merge by :meth:`render_sums`."""
         start = self._render_samples(spp, seed, progress, first_sample)
         total = self.film.sum()
         self.collect_stats(spp, time.perf_counter() - start)
         return total
+
+    def render_sums(self, spp: int, seed: int = 0, progress: bool | None = None,
+                    first_sample: int = 0) -> tuple[np.ndarray, np.ndarray | None]:
+        """What a split sample range merges by (:meth:`Film.sums <pyclpt.film.film.Film.sums>`): the sum of
+        samples [first_sample, first_sample + spp) as :meth:`render_sum` and None; a splatting film
+        (:mod:`pyclpt.film.splat`): the sums of its weighted radiance, (H, W, 3) float64, and of its
+        weights, (H, W) float64, which :func:`pyclpt.distributed.merge.merge` pools over the ranges (their
+        per-range ratio, :meth:`render_sum`, does not add up)."""
+        start = self._render_samples(spp, seed, progress, first_sample)
+        sums = self.film.sums()
+        self.collect_stats(spp, time.perf_counter() - start)
+        return sums
 
     def _render_samples(self, spp: int, seed: int, progress: bool | None, first_sample: int) -> float:
         """Clear the film and accumulate samples [first_sample, first_sample + spp); returns the start time."""
