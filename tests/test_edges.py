@@ -158,3 +158,29 @@ def test_recover_a_shape_from_five_views():
     h = inverse_shape.recover(steps=40, width=24, height=24, samples=4096, rings=8, segments=16, lr=0.04)
     assert h["vertex_error"][-1] < 0.6 * h["vertex_error"][0], h["vertex_error"][::10]
     assert h["losses"][-1] < 0.2 * h["losses"][0]
+
+
+@pytest.mark.parametrize("kind, size", [("box", 0.0), ("tent", 1.0), ("tent", 1.5), ("gaussian", 0.5),
+                                        ("gaussian", 0.3)])
+def test_filter_weights_reach_every_pixel_of_the_filter(kind, size):
+    """_filter_weights (ceil(2 radius) pixels a row from the first centre inside the radius) gives every pixel
+    the dense evaluation of the filter gives, near the borders too: points anywhere, pixels on integer and
+    half-integer offsets."""
+    from pyclpt.buffers.rfilter import filter_eval
+
+    rf = pyclpt.ReconstructionFilter(kind, **({"radius": size} if kind == "tent" else
+                                             {"stddev": size} if kind == "gaussian" else {}))
+    w, h = 7, 5
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(-1, [w + 1, h + 1], (400, 2)), rng.integers(0, 6, (40, 2)) * 0.5])
+    pixels, weights, _ = edges._filter_weights(rf, x, w, h)
+    got = np.zeros((len(x), h * w))
+    np.add.at(got, (np.repeat(np.arange(len(x)), pixels.shape[1]), np.maximum(pixels, 0).ravel()),
+              np.where(pixels >= 0, weights, 0.0).ravel())
+    radius = {"box": 0.5, "tent": rf.radius, "gaussian": 4.0 * rf.stddev}[kind]
+    grid = np.linspace(-radius, radius, 40001)
+    norm = float(np.trapezoid(filter_eval(rf, grid), grid)) if kind != "box" else 1.0
+    wx = filter_eval(rf, x[:, :1] - (np.arange(w) + 0.5)) / norm  # (N, w)
+    wy = filter_eval(rf, x[:, 1:] - (np.arange(h) + 0.5)) / norm  # (N, h)
+    dense = (wy[:, :, None] * wx[:, None, :]).reshape(len(x), -1)
+    np.testing.assert_allclose(got, dense, rtol=0, atol=1e-12)

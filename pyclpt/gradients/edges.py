@@ -197,9 +197,10 @@ def _filter_weights(rfilter: ReconstructionFilter, x: np.ndarray, width: int, he
     radius = {"box": 0.5, "tent": rfilter.radius, "gaussian": 4.0 * rfilter.stddev}[rfilter.kind]
     grid = np.linspace(-radius, radius, 40001)
     norm = float(np.trapezoid(filter_eval(rfilter, grid), grid)) if rfilter.kind != "box" else 1.0
-    r = int(math.ceil(radius))
-    offs = np.arange(-r, r + 1)
-    base = np.floor(x).astype(np.int64)
+    # the pixels whose centres j + 1/2 are within the radius, a < j < a + 2 radius with a = x - radius - 1/2:
+    # at most ceil(2 radius) a row (1 for the box, 2 for a unit tent, 4 for Mitsuba's gaussian), from floor(a) + 1
+    offs = np.arange(max(int(math.ceil(2.0 * radius)), 1))
+    base = np.floor(x - radius - 0.5).astype(np.int64) + 1
     px = base[:, :1] + offs[None, :]  # (N, R) candidate columns
     py = base[:, 1:] + offs[None, :]
     wx = filter_eval(rfilter, x[:, :1] - (px + 0.5)) / norm
@@ -339,8 +340,9 @@ def sample_weights(pixels: np.ndarray, weights: np.ndarray, image_grad: np.ndarr
     """(N,) dLoss/dImage at each sample's pixels through its filter weights, dotted with its jump (N, 3): what
     a unit normal motion of the sample's point adds to the loss."""
     gflat = np.asarray(image_grad, np.float64).reshape(-1, 3)
-    gw = np.einsum("nk,nkc->nc", weights, gflat[np.maximum(pixels, 0)] * (pixels >= 0)[..., None])
-    return np.einsum("nc,nc->n", gw, jump)
+    at = np.maximum(pixels, 0)  # a pixel outside the image has weight 0 (_filter_weights)
+    w = np.where(pixels >= 0, weights, 0.0)
+    return sum(np.einsum("nk,nk->n", w, gflat[:, c][at]) * jump[:, c] for c in range(3))
 
 
 def scatter_to_vertices(params: SceneParameters, scene: Scene, i: int, names: Sequence[str], v0: np.ndarray,
