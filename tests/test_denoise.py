@@ -325,11 +325,14 @@ def _atrous_reference(src: np.ndarray, geo: np.ndarray, step: int, s: DenoiserSe
             nq, _ = shifted(nrm, dy * step, dx * step)
             cos = np.maximum((nrm * nq).sum(axis=-1), 0.0)
             wn = np.where(known, cos ** s.phi_normal, 1.0)
-            # symmetric in p and q as the history grows (history length 8 -> 32)
-            sym = np.clip((length - 8.0) / 24.0, 0.0, 1.0) if length is not None else 0.0
-            var_pq = gvar + (np.minimum(gvar, np.maximum(vq, 0.25 * gvar)) - gvar) * sym
-            sigma_l = s.phi_color * np.sqrt(var_pq + 1e-10)
-            e = -np.abs(lum - cq @ LUM) / sigma_l - np.abs(z - zq) / (sigma_z * np.hypot(dx, dy))
+            # symmetric in p and q as the history grows (history length 2 -> 8)
+            sym = np.clip((length - 2.0) / 6.0, 0.0, 1.0) if length is not None else 0.0
+            # 1 / sigma: p's, times (v_q / g)^(-1/2) (clamped to [1/4, 1]) ramped in by sym, the
+            # root by the kernel's polynomial (rsqrt_quarter_to_one)
+            r = np.clip(vq / (gvar + 1e-10), 0.25, 1.0)
+            f = (((3.64376563 * r - 11.45154359) * r + 14.07266626) * r - 8.7170127) * r + 3.4562242
+            inv_sigma_l = (1.0 + (f - 1.0) * sym) / (s.phi_color * np.sqrt(gvar + 1e-10))
+            e = -np.abs(lum - cq @ LUM) * inv_sigma_l - np.abs(z - zq) / (sigma_z * np.hypot(dx, dy))
             wq = np.where(inside & (zq > 0), bk[abs(dx)] * bk[abs(dy)] * wn * np.exp(e), 0.0)
             sw += wq
             sum_c += wq[..., None] * cq

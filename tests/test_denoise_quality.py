@@ -1,7 +1,8 @@
 """Issue 29's perceptual and lag goals in small, on real renders of the built-in cornell-box at 64x64
-(docs/denoising.md, "Perceptual quality at 8 frames" and "The light change, in the same frame"):
-the denoised 8th frame's FLIP and relMSE against a converged render, and how soon the histories
-follow a light switched to a quarter. Each bound fails with the settings and passes of before."""
+(docs/denoising.md, "Perceptual quality at 8 frames", "The light change, in the same frame" and
+"Energy at 8 frames"): the denoised 8th frame's FLIP and relMSE against a converged render, its
+energy against the plain average's, and how soon the histories follow a light switched to a
+quarter. Each bound fails with the settings and passes of before."""
 from __future__ import annotations
 
 import sys
@@ -62,9 +63,12 @@ def _denoise(device, frames, settings: DenoiserSettings | None = None) -> list[n
 
 def test_flip_and_relmse_at_8_frames_on_the_cornell_box(device, reference):
     """FLIP (LDR, the evaluation's metric) of the denoised 8th frame against the 1024-spp reference:
-    0.101 with the defaults, 0.119 with those of before (the code of before gave 0.119 too; against
-    a 4096-spp reference OIDN's is 0.075); relMSE 0.28 of the plain average's, 0.34 before. Fewer
-    a-trous iterations, a looser firefly clamp and clip box."""
+    0.0949 with the defaults, 0.105 with those of before (against a 4096-spp reference OIDN's is
+    0.075); relMSE 0.273 of the plain average's, 0.293 before. Fewer a-trous iterations, a looser
+    firefly clamp and clip box. The code before the energy-preserving changes of issue 29 (the
+    a-trous weight symmetric from 2 frames of history on, the firefly clamp against the
+    neighbourhood's temporal moments: docs/denoising.md, "Energy at 8 frames") gave FLIP 0.101,
+    relMSE 0.280 (and 0.119, 0.336 with the settings of before); the FLIP bound fails there."""
     pytest.importorskip("flip_evaluator")
     from bench.evaluations import denoise_metrics as M
 
@@ -74,10 +78,23 @@ def test_flip_and_relmse_at_8_frames_on_the_cornell_box(device, reference):
     plain = np.mean([c for c, _ in frames], axis=0)
     flip_now, flip_before = M.flip(now, reference), M.flip(before, reference)
     assert flip_now < 0.92 * flip_before, (flip_now, flip_before)
-    assert flip_now < 0.11, flip_now
+    assert flip_now < 0.098, flip_now
     ratio_now, ratio_before = relmse(now, reference) / relmse(plain, reference), \
         relmse(before, reference) / relmse(plain, reference)
-    assert ratio_now < 0.3 and ratio_now < 0.92 * ratio_before, (ratio_now, ratio_before)
+    assert ratio_now < 0.3 and ratio_now < 0.95 * ratio_before, (ratio_now, ratio_before)
+
+
+def test_the_8th_frame_keeps_the_energy(device):
+    """The channel means of the denoised 8th frame within 0.5 % of the plain 8-frame average's (the
+    issue's 32-frame goal, reached at 8): 0.998 / 0.999 / 0.999. Before, 0.987 / 0.992 / 0.993: on a
+    history under 8 frames the a-trous luminance weight was p's own variance's, so a noisy bright
+    pixel gave its energy to quiet dark neighbours that took none in, and the firefly clamp cut the
+    1-sample tail against a single pixel's moments (docs/denoising.md, "Energy at 8 frames")."""
+    frames = _frames(device, 8)
+    now = _denoise(device, frames)[-1]
+    plain = np.mean([c for c, _ in frames], axis=0)
+    ratio = now.reshape(-1, 3).mean(axis=0) / plain.reshape(-1, 3).mean(axis=0)
+    assert np.all(np.abs(ratio - 1.0) < 0.005), ratio
 
 
 def test_a_light_change_is_followed_in_its_own_frame(device, reference):

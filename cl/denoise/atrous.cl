@@ -13,11 +13,13 @@
  * (g3x3: the 3x3 Gaussian 1/4, 1/8, 1/16 of the variance around p, renormalised over the surface
  * pixels inside the image: a background pixel's variance, never divided by its history, would
  * loosen its neighbours' weights; on a history's first frame each neighbour's variance capped at
- * VARIANCE_CAP x p's, see vcap). s ramps from 0 at a history of SYMMETRIC_FROM (8) frames to 1 at
- * SYMMETRIC_FULL (32): on a long history the weight is (nearly) symmetric in p and q, so a noisy
- * pixel beside quiet ones no longer gives its energy away while they take none in (what darkened
- * the converged image: docs/denoising.md, "Energy"); on a short one, whose variance is a spatial
- * estimate, p's own keeps a bright neighbour's noise out. The centre counts with weight 1;
+ * VARIANCE_CAP x p's, see vcap). s ramps from 0 at a history of SYMMETRIC_FROM (2) frames to 1 at
+ * SYMMETRIC_FULL (8): on a history of a few frames the weight is (nearly) symmetric in p and q, so
+ * a noisy pixel beside quiet ones no longer gives its energy away while they take none in (what
+ * darkened the converged image: docs/denoising.md, "Energy"; from 8 to 32 frames, as it was
+ * ramped before, it still darkened frame 8 by 0.6 to 1.2 % on the cornell-box: "Energy at 8
+ * frames"); on a history's first two frames, whose variance is a spatial estimate, p's own keeps
+ * a bright neighbour's noise out. The centre counts with weight 1;
  * taps outside the image or on the background count 0. The illumination is averaged with the weights
  * w, the variance with w^2 (/ (sum w)^2): the variance of the filtered value. Background pixels
  * (depth 0) pass through.
@@ -27,8 +29,8 @@
  * Produces: dst[c * pixels + p] (padded), the same four channels filtered. */
 #include "denoise/svgf.h"
 
-#define SYMMETRIC_FROM 8.0f
-#define SYMMETRIC_FULL 32.0f
+#define SYMMETRIC_FROM 2.0f
+#define SYMMETRIC_FULL 8.0f
 #define VARIANCE_CAP 4.0f /* see vcap below */
 
 /* r^(-1/2) for r in [1/4, 1]: a degree-4 least-squares polynomial (relative error 0.4 %; a weight

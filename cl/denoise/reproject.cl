@@ -2,15 +2,22 @@
  * history of NRD's RELAX. One work-item per pixel, 2D range; after demodulate.
  *
  * 1. The frame's sample (demodulate's illumination) firefly-clamped: its luminance is scaled down to
- *    at most sqrt(N) x the larger of firefly_ratio x a spatial reference (the larger of the mean
+ *    at most sqrt(N) x the largest of firefly_ratio x a spatial reference (the larger of the mean
  *    luminance of its neighbours in the 3x3 around p inside the image, centre excluded, and, where
  *    the history is valid, the reprojected history's luminance) and, where the history is valid,
- *    the pixel's own temporal moments, mean + firefly_sigma x sigma (NRD RELAX's idea). N is the
- *    history length after this frame: the clamp relaxes as the history grows, so that what it
- *    removes vanishes against the accumulated mean (firefly_ratio 0: no clamp; no reference at all,
- *    a pixel without neighbours or history: no clamp). The moments take the clamped luminance where
- *    the history is valid, else the sample's own (an isolated pixel whose neighbours are black is
- *    clamped to 0 on its first frame, but its moments keep it, and it converges).
+ *    the pixel's own temporal moments, mean + firefly_sigma x sigma (NRD RELAX's idea), and its
+ *    mean + POOLED_SIGMA x firefly_sigma x the neighbourhood's sigma (the previous frame's
+ *    variances averaged over the 3x3 around the previous position, same material, histories no
+ *    longer than p's): a pixel that has not drawn the rare bright samples of its neighbourhood's
+ *    1-sample distribution yet is not clamped when it does (the clamp against its own moments
+ *    alone took 0.2 to 0.4 % of the cornell-box's energy at frame 8, all of it from the bright tail).
+ *    N is the history length after this frame: the clamp relaxes as the history grows, so that what
+ *    it removes vanishes against the accumulated mean (firefly_ratio 0: no clamp; no reference at
+ *    all, a pixel without neighbours or history: no clamp). The fast history and the moments take
+ *    the sample clamped without the neighbourhood's term (more of the tail in the fast histories
+ *    widened the anti-lag's test and slowed the living room's light change by a frame); the moments
+ *    take it where the history is valid, else the sample's own (an isolated pixel whose neighbours
+ *    are black is clamped to 0 on its first frame, but its moments keep it, and it converges).
  * 2. The previous frame's history at p + motion: the 2x2 bilinear taps around it, each accepted only
  *    if inside the image, holding a history (length >= 1) and the same surface (consistent(): same
  *    material id; both background, or both surfaces with |z - z_prev| <= depth_threshold x (GEO_GRAD
@@ -46,6 +53,12 @@
  *           (luminance mean and mean of squares), len (N, a float), emis (the emission history);
  *           all padded. */
 #include "denoise/svgf.h"
+
+/* The firefly clamp's neighbourhood term is mean + POOLED_SIGMA x firefly_sigma x the pooled sigma:
+ * at 1 (6 sigma) the living room's light change was followed a frame later (the clamp let more of
+ * the 1-sample tail into the fast histories, which loosened the anti-lag's test); 0.5 keeps its lag
+ * (docs/denoising.md, "Energy at 8 frames"). */
+#define POOLED_SIGMA 0.5f
 
 /* Whether pixel q of the previous frame is the surface that the current pixel (depth z, unit
  * normal nrm, material mat; z = 0: background) shows. */
@@ -199,18 +212,45 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     vec3 hist = v3_scale(h.color, inv), hist_fast = v3_scale(h.fast, inv);
     float N = valid ? m_min(m_floor(h.len * inv + 0.5f) + 1.0f, max_history) : 1.0f;
 
+    /* the neighbourhood's temporal spread: the mean of the previous frame's luminance variances
+     * (m2 - m1^2) over the 3x3 pixels around the rounded previous position that hold a history of
+     * p's material no longer than p's (a history cut by a light change does not take its uncut
+     * neighbours' spread); the spread of their means does not count */
+    float nvar = 0.0f, nw = 0.0f;
+    int rx = (int)m_floor(px + 0.5f), ry = (int)m_floor(py + 0.5f);
+    UNROLL for (int dy = -1; dy <= 1; ++dy) {
+        UNROLL for (int dx = -1; dx <= 1; ++dx) {
+            int tx = rx + dx, ty = ry + dy;
+            bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
+            int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
+            float lq = len_prev[q];
+            bool use = inside & (lq >= 1.0f) & (lq <= N) & (as_int(geo_prev[GEO_MATERIAL * n + q]) == mat);
+            float w = use ? 1.0f : 0.0f;
+            float m1q = moments_prev[q];
+            nvar += w * m_max(moments_prev[n + q] - m1q * m1q, 0.0f);
+            nw += w;
+        }
+    }
+    float nsigma = m_sqrt(nvar / m_max(nw, 1.0f));
+
     /* firefly clamp */
     float l = luminance(s);
     float mu = h.m1 * inv, sigma = m_sqrt(m_max(h.m2 * inv - mu * mu, 0.0f));
     float reference = m_max(around, valid ? luminance(hist) : 0.0f);
-    float cap = m_sqrt(N) * m_max(firefly_ratio * reference, valid ? mu + firefly_sigma * sigma : 0.0f);
-    bool clamped = firefly_ratio > 0.0f && (count > 0.0f || valid) && l > cap;
+    float own = valid ? mu + firefly_sigma * sigma : 0.0f;
+    float pooled = valid ? mu + POOLED_SIGMA * firefly_sigma * nsigma : 0.0f;
+    float cap_own = m_sqrt(N) * m_max(firefly_ratio * reference, own);
+    float cap = m_sqrt(N) * m_max(firefly_ratio * reference, m_max(own, pooled));
+    bool clamp_on = firefly_ratio > 0.0f && (count > 0.0f || valid);
+    bool clamped = clamp_on && l > cap;
+    vec3 s_own = v3_scale(s, (clamp_on && l > cap_own) ? cap_own / l : 1.0f);
     s = v3_scale(s, clamped ? cap / l : 1.0f);
-    l = valid ? luminance(s) : l; /* the moments: clamped but on a new history (nothing to compare with) */
+    /* the moments: clamped by the pixel's own cap but on a new history (nothing to compare with) */
+    l = (valid && clamp_on) ? m_min(l, cap_own) : l;
 
     /* accumulation (N = 1: the sample alone) */
     float am = m_max(moments_alpha_min, 1.0f / N), af = m_max(fast_alpha, 1.0f / N);
-    store_planar3(fast, n, p, lerp3(hist_fast, s, af));
+    store_planar3(fast, n, p, lerp3(hist_fast, s_own, af));
     moments[p] = lerpf(h.m1 * inv, l, am);
     moments[n + p] = lerpf(h.m2 * inv, l * l, am);
     len[p] = N;

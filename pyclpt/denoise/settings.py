@@ -82,7 +82,10 @@ class DenoiserSettings:
     firefly_ratio: float = 8.0
     #: The firefly clamp's temporal term: mean + firefly_sigma x sigma of the pixel's luminance moments
     #: (before the sqrt(N) relaxation). On the cornell-box at 64x64, 1, 2 and 3 give the same relMSE
-    #: within 2 % at 8 and 32 frames; 6 with firefly_ratio 8 (see there).
+    #: within 2 % at 8 and 32 frames; 6 with firefly_ratio 8 (see there). Half of it also scales the
+    #: neighbourhood's term, mean + firefly_sigma / 2 x the sigma of the 3x3 neighbours' moments
+    #: (cl/denoise/reproject.cl), so that a pixel keeps the rare bright samples its neighbours have
+    #: drawn (docs/denoising.md, "Energy at 8 frames").
     firefly_sigma: float = 6.0
     #: A-trous iterations (steps 1, 2, 4, ...): the filter reaches 2 (2^iterations - 1) pixels; at most
     #: 8. Falcor's 5 was the largest single cost of FLIP at 8 frames (issue 29, docs/denoising.md):
