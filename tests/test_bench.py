@@ -110,9 +110,11 @@ def test_quick_report_figures_are_sane(quick):
         assert all(k["ms"] >= 0 for k in r["kernels"])
         assert math.isclose(sum(k["ms"] for k in r["kernels"]),
                             sum(r["frames_device_ms"]) / len(r["frames_device_ms"]), rel_tol=1e-6)
-        # rays: every pixel shoots a camera ray; depth 1 traces nothing else (no bounce, no light sample)
+        # rays: every pixel shoots a camera ray, and so does each of a splatting film's margin (its tent or
+        # gaussian reaches into the image from there); depth 1 traces nothing else (no bounce, no light sample)
         c = r["counts"]
-        assert c["camera"] == r["pixels"] == r["width"] * r["height"]
+        assert r["pixels"] == r["width"] * r["height"] and r["traced"] >= r["pixels"]
+        assert c["camera"] == r["traced"]
         assert c["total"] == c["camera"] + c["extension"] + c["shadow"] >= r["pixels"]
         if r["depth"] == 1:
             assert c["extension"] == 0 and c["shadow"] == 0
@@ -140,7 +142,7 @@ def test_quick_report_figures_are_sane(quick):
             assert d["speedup"] == 1.0
         # occupancy: paths alive never grow, and the queues add up
         b = r["bounces"]
-        assert b[0]["rays"] == r["pixels"] and b[0]["bounce"] == 0
+        assert b[0]["rays"] == r["traced"] and b[0]["bounce"] == 0
         for x, y in zip(b, b[1:]):
             assert x["rays"] == x["hits"] + x["misses"]
             assert y["rays"] <= x["hits"]

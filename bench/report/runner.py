@@ -204,6 +204,7 @@ def measure_depth(scene: pyclpt.Scene, methods: list[str], depth: int, width: in
         res.update(scene=scene.name, method=m, integrator=integrator,
                    layout=layout if integrator == "wavefront" else None, depth=depth, width=r.width,
                    height=r.height, pixels=r.width * r.height, repeats=repeats, warmup=warmup,
+                   traced=r.film.width * r.film.height,  # a splatting film's margin too (pyclpt/film/splat.py)
                    memory=dict(r.stats.memory), counts_source="measured" if res["counts"] else None, **info[m])
         if spp:
             res["spp_run"] = spp_runs[m]
