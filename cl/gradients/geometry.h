@@ -186,13 +186,21 @@ static inline float geo_spot_falloff(const Scene* sc, int light, vec3 wi, vec3* 
 /* ---- reverse mode ------------------------------------------------------------------------------------ */
 
 /* A triangle's vertex normals n0, n1, n2 and their interpolation m at the vertex's barycentrics (the shading
- * normal is m / |m|); false for a triangle without vertex normals (flat: the shading normal is its own). */
+ * normal is m / |m|); false for a triangle without vertex normals (flat: the shading normal is its own), and,
+ * under -DGEO_NORMALS_FOLLOW_FACES (nothing differentiated moves a mesh's vertices apart: poses, lights, the
+ * camera, which carry a face's normal and its vertex normals alike), for one whose three vertex normals are
+ * the same and along its own (a cube's, a rectangle's face): flat to the derivative, nothing scattered to its
+ * vertex normals. */
 static inline bool geo_vertex_normals(const Scene* sc, const GeoVertex* v, vec3* n0, vec3* n1, vec3* n2, vec3* m) {
     if (!(sc->tri_info[2 * v->id] & TRI_HAS_NORMALS)) return false;
     __global const int* vi = sc->tri_vidx + 3 * v->id;
     *n0 = rgb_at(sc->vnormals + 3 * vi[0], sc->unit);
     *n1 = rgb_at(sc->vnormals + 3 * vi[1], sc->unit);
     *n2 = rgb_at(sc->vnormals + 3 * vi[2], sc->unit);
+#ifdef GEO_NORMALS_FOLLOW_FACES
+    if (v3_is_zero(v3_sub(*n0, *n1)) && v3_is_zero(v3_sub(*n0, *n2)) && m_dot(*n0, v->n) >= (1.0f - 1e-5f) * m_length(*n0))
+        return false;
+#endif
     *m = v3_add(v3_add(v3_scale(*n0, 1.0f - v->b1 - v->b2), v3_scale(*n1, v->b1)), v3_scale(*n2, v->b2));
     float len = m_length(*m);
     return len > 0.0f && m_isfinite(len);

@@ -117,7 +117,7 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     shift = int(np.ceil(np.log2(peak))) if peak > 1.0 else 0
     if shift:
         grad = np.ldexp(grad, -shift).astype(np.float32)
-    buffers = replay.backward(grad, spp, seed, {p.kind for p in chosen})
+    buffers = replay.backward(grad, spp, seed, _kinds(chosen))
     if replay.dropped:
         log.warning("%s: render_backward dropped %d paths with NaN/inf radiance", scene.name, replay.dropped)
     out = {}
@@ -194,6 +194,15 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
     if bounce and any(isinstance(light, (PointLight, SpotLight)) for light in scene.lights):
         image += shadow_boundary_forward(scene, name, tangent, samples=samples, **common)
     return image
+
+
+def _kinds(chosen: Sequence[Parameter]) -> set[str]:
+    """The kernels' specialisation for the parameters ``chosen``: their kinds, and ``rigid`` where geometry is
+    differentiated but no mesh's vertex_positions (then a face's vertex normals equal to its own stay so)."""
+    kinds = {p.kind for p in chosen}
+    if kinds & {"geometry", "camera"} and not any(p.name.endswith(".vertex_positions") for p in chosen):
+        kinds.add("rigid")
+    return kinds
 
 
 def _normals(p: Parameter, table: SceneParameters, value: np.ndarray, chain: Callable[..., np.ndarray]
@@ -285,7 +294,7 @@ def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Ite
     else:
         parameter_slots(scene, replay.scene.arrays, p).scatter(tangent, d)
     geometry = p.kind in ("geometry", "camera")
-    image = replay.forward({b: tangent[b] for b in BUFFERS}, spp, seed, kinds=[p.kind])
+    image = replay.forward({b: tangent[b] for b in BUFFERS}, spp, seed, kinds=_kinds([p]))
     if replay.dropped:
         log.warning("%s: render_forward dropped %d NaN/inf samples", scene.name, replay.dropped)
     if geometry and boundary:

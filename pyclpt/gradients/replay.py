@@ -33,7 +33,9 @@ LAUNCH = 1 << 18  # paths per launch (film slots)
 LOCAL_SIZE = 64
 BSDF_DIFF_STEP = 1.0 / 64.0  # cl/gradients/bsdf_derivative.h: the relative step of the roughness derivative
 GRAD_DEFINES = {"color": "GRAD_COLOR", "spec": "GRAD_SPEC", "alpha": "GRAD_ALPHA", "emission": "GRAD_EMISSION",
-                "env": "GRAD_ENV", "geometry": "GRAD_GEOMETRY", "camera": "GRAD_CAMERA"}
+                "env": "GRAD_ENV", "geometry": "GRAD_GEOMETRY", "camera": "GRAD_CAMERA",
+                # with geometry: no mesh's vertices are moved apart (cl/gradients/geometry.h, geo_vertex_normals)
+                "rigid": "GEO_NORMALS_FOLLOW_FACES"}
 
 
 def moved_alpha_records(scene: Scene, step: float = BSDF_DIFF_STEP) -> tuple[np.ndarray, np.ndarray]:
@@ -163,7 +165,7 @@ class PathReplay:
     def backward(self, image_grad: np.ndarray, spp: int, seed: int, kinds: Iterable[str]) -> dict[str, np.ndarray]:
         """Reverse mode: the adjoints of every parameter of ``kinds`` (params.h) for dLoss/dImage
         ``image_grad`` (H, W, 3), as host copies of the gradient buffers by name (layout.py)."""
-        kinds = [k for k in kinds if k in KINDS]
+        kinds = [k for k in kinds if k in KINDS or k == "rigid"]
         kernel = self.kernel("backward", kinds)
         grads = self._buffers()
         if self.film.splat is not None:  # per pixel, over its mean sum of weights per frame (backward.cl)
@@ -254,7 +256,7 @@ class PathReplay:
         """Forward mode: the derivative of the image (H, W, 3) along ``tangent`` (host arrays by buffer
         name, layout.py); ``kinds``: ``geometry`` when the tangent moves vertices or lights, ``camera`` when it moves
         the camera (-DGRAD_GEOMETRY, -DGRAD_CAMERA: the interior term of cl/gradients/geometry.h)."""
-        kernel = self.kernel("forward", [k for k in kinds if k in ("geometry", "camera")])
+        kernel = self.kernel("forward", [k for k in kinds if k in ("geometry", "camera", "rigid")])
         bufs = self._buffers()
         for name in BUFFERS:
             data = np.ascontiguousarray(tangent[name], np.float32)
