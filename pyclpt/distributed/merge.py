@@ -125,10 +125,12 @@ def average(total: np.ndarray, spp: int) -> np.ndarray:
     return (total / float(spp)).astype(np.float32)
 
 
-def splat_average(total: np.ndarray, weights: np.ndarray, n: int) -> np.ndarray:
+def splat_average(total: np.ndarray, weights: np.ndarray | None, n: int) -> np.ndarray:
     """A splatting film's image from its sums over ``n`` samples, (H, W, 3) float32, as
     :meth:`pyclpt.film.film.Film.image` resolves it: each sum's average rounded to float, then their ratio
-    (0 where no weight)."""
+    (0 where no weight); ``weights`` None (a film that does not splat): :func:`average`."""
+    if weights is None:
+        return average(total, n)
     num, w = average(total, n), average(np.asarray(weights)[..., None], n)
     return np.divide(num, w, out=np.zeros_like(num), where=w > 0)
 
@@ -149,8 +151,6 @@ class RunningAverage:
         if weights is not None:
             self.weights = weights.astype(np.float64) if self.weights is None else self.weights + weights
         self.count += 1
-        if weights is None:
-            return average(self.total, self.count)
         return splat_average(self.total, self.weights, self.count)
 
     def add_part(self, part: PartialSum) -> list[np.ndarray]:

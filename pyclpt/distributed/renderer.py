@@ -254,8 +254,7 @@ class DistributedRenderer:
             raise TypeError("cameras must be a non-empty sequence of pyclpt.Camera")
         tasks = [self._task(seed, first_sample, spp, camera=c, frame=k) for k, c in enumerate(cameras)]
         parts = self._run(tasks, progress, f"{self.source.name}: {len(tasks)} frames", timeout=timeout)
-        return [average(p.total, spp) if p.weights is None else splat_average(p.total, p.weights, spp)
-                for p in parts]
+        return [splat_average(p.total, p.weights, spp) for p in parts]
 
     def render_progressive(self, spp: int, seed: int = 0, *, task_spp: int | None = None,
                            progress: bool | None = None, timeout: float | None = None,
@@ -289,10 +288,9 @@ class DistributedRenderer:
             self.held_tasks = max(self.held_tasks, len(waiting))
             while state["next"] in waiting:
                 ready = waiting.pop(state["next"])
-                fw = ready.frame_weights
-                for k, frame in enumerate(ready.frames):
-                    image = acc.add(frame, None if fw is None else fw[k])
-                    on_frame(acc.count - 1, image)
+                first = acc.count
+                for k, image in enumerate(acc.add_part(ready)):
+                    on_frame(first + k, image)
                 ready.frames = ready.frame_weights = None  # added: only the task's record stays
                 state["next"] += 1
 
