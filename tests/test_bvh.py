@@ -669,3 +669,33 @@ def test_leaf_packets_match_scalar_leaves(tracer, mesh, width, leaves):
         np.testing.assert_array_equal(ptuv.view(np.int32), tuv.view(np.int32))
         np.testing.assert_array_equal(pprim, prim)
         np.testing.assert_array_equal(pany, anyhit)
+
+
+@pytest.mark.parametrize("mesh", ["soup", "sphere_grid"])
+@pytest.mark.parametrize("width,packets", [(4, False), (8, False), (8, True)], ids=["w4", "w8", "w8-packets"])
+def test_any_hit_answer_does_not_depend_on_the_visit_order(tracer, mesh, width, packets):
+    """Any-hit traversal visits a node's children in child order (cl/scene/bvh.h BVH_ANY_SORT 0, the
+    default): it answers exactly as the sorted, nearest-first order (BVH_ANY_SORT 1) does, on random and
+    edge rays, unbounded and with a finite tmax, and agrees with closest hit."""
+    import copy
+
+    from pyclpt.device.context import default_device
+    from pyclpt.device.program import build_program
+
+    pos, idx = MESHES[mesh]()
+    bvh = build_bvh(pos, idx, use_cache=False, settings=BuildSettings(width=width))
+    defines = {"BVH_WIDTH": width, "BVH_LEAF_PACKETS": int(packets), "BVH_ANY_SORT": 1}
+    sorted_tracer = copy.copy(tracer)
+    prog = build_program(default_device(), source=KERNELS, name=f"test_bvh_any_sorted_w{width}_{packets}",
+                         defines=defines)
+    sorted_tracer.progs = {**tracer.progs, width: prog}
+    sorted_tracer.packet_progs = {**tracer.packet_progs, width: prog}
+    r_org, r_dir = random_rays(pos, 8000, seed=29)
+    e_org, e_dir = edge_rays(pos, bvh, 8000)
+    org, dirs = np.concatenate([r_org, e_org]), np.concatenate([r_dir, e_dir])
+    for tmax in (np.inf, float(np.linalg.norm(pos.max(0) - pos.min(0))) / 4):
+        _, prim, anyhit = tracer.trace(bvh, org, dirs, tmax, packets=packets)
+        _, _, sorted_any = sorted_tracer.trace(bvh, org, dirs, tmax, packets=packets)
+        assert 0.05 < anyhit.mean() < 0.95
+        np.testing.assert_array_equal(anyhit, sorted_any)
+        np.testing.assert_array_equal(anyhit, prim >= 0)

@@ -434,6 +434,59 @@ def test_spot_and_directional_match_mitsuba():
     assert rel_mse < 5e-4, rel_mse
 
 
+# Mitsuba 3's relMSE on tests/data/delta-emitters.xml at 256 spp against its 16384-spp reference, mean of seeds
+# 1-4 (llvm_ad_rgb 3.9.1: python -m bench.evaluations.light_noise --mitsuba F --spp 256 --seeds 4)
+DELTA_EMITTERS_MITSUBA_RELMSE = 1.842e-3
+
+
+def test_distant_lights_do_not_starve_the_others():
+    """Light selection (pyclpt/buffers/lights.py, SELECTION): a directional light's power estimate (through the
+    whole scene's cross-section) dwarfs the spot's, and choosing by power alone left the spot's footprint with
+    a tenth of the samples: 7x Mitsuba's relMSE at equal spp. The default rule gives the distant light its
+    uniform share: within 1.2x of Mitsuba's, and under half of what power alone gives."""
+    from pyclpt.buffers import lights
+
+    ref = np.load(DATA / "delta-emitters-mitsuba.npy").astype(np.float64)
+    scene = pyclpt.load(DATA / "delta-emitters.xml")
+
+    def rel_mse() -> float:
+        return float(np.mean([np.mean((render(scene, spp=256, seed=s)[..., :3] - ref) ** 2) for s in (1, 2)])
+                     / np.mean(ref ** 2))
+
+    now = rel_mse()
+    assert lights.SELECTION == "distant-uniform"
+    try:
+        lights.SELECTION = "power"
+        by_power = rel_mse()
+    finally:
+        lights.SELECTION = "distant-uniform"
+    assert now < 1.2 * DELTA_EMITTERS_MITSUBA_RELMSE, now
+    assert now < 0.5 * by_power, (now, by_power)
+
+
+def test_light_selection_rules():
+    """selection_pmf: per rule, the probabilities of two triangles of one shape (power 1 and 3), a point light
+    (power 4) and a directional light (power 100)."""
+    from pyclpt.buffers.lights import selection_pmf
+
+    power = np.array([1.0, 3.0, 4.0, 100.0])
+    group = np.array([0, 0, 1, 2])
+    distant = np.array([False, False, False, True])
+    np.testing.assert_allclose(selection_pmf(power, group, distant, "power"), power / 108)
+    np.testing.assert_allclose(selection_pmf(power, group, distant, "uniform"), [1 / 12, 3 / 12, 1 / 3, 1 / 3])
+    np.testing.assert_allclose(selection_pmf(power, group, distant), [1 / 12, 3 / 12, 1 / 3, 1 / 3])
+    np.testing.assert_allclose(selection_pmf(power, group, distant), selection_pmf(power, group, distant,
+                                                                                   "distant-uniform"))
+    # two distant lights and one finite emitter of any power: a third each
+    np.testing.assert_allclose(selection_pmf(np.array([1e-3, 5.0, 9.0]), np.arange(3), np.array([False, True, True])),
+                               [1 / 3, 1 / 3, 1 / 3])
+    # finite emitters only: power; powers beyond double range: alike
+    np.testing.assert_allclose(selection_pmf(power[:3], group[:3], distant[:3]), power[:3] / 8)
+    np.testing.assert_allclose(selection_pmf(np.array([np.inf, 1.0]), np.arange(2), np.zeros(2, bool)), [0.5, 0.5])
+    with pytest.raises(ValueError, match="light selection rule 'bogus'"):
+        selection_pmf(power, group, distant, "bogus")
+
+
 def test_delta_emitters_load_with_mitsuba_defaults_and_names(tmp_path):
     xml = """<scene version="0.6.0">
       <emitter type="spot"><spectrum name="intensity" value="2"/><float name="cutoffAngle" value="40"/>
@@ -459,7 +512,7 @@ def test_delta_emitters_load_with_mitsuba_defaults_and_names(tmp_path):
 
 
 def test_point_light_with_environment():
-    """Two emitters of different kinds chosen by power: the quad under a constant map (one-sided,
+    """Two emitters of different kinds (a distant one and a finite one): the quad under a constant map (one-sided,
     so albedo * Le) plus the point light's albedo / pi * I cos / d^2."""
     pos, intensity = np.array([0.0, 0.0, 2.0]), np.array([6.0, 6.0, 6.0])
     env = Envmap(np.full((6, 12, 3), 0.8, np.float32), name="grey")
@@ -503,8 +556,11 @@ def test_pack_lights_records_and_power():
     assert la.env_light == 3
     assert la.lights[-1, LIGHT_CDF] == 1.0 and np.all(np.diff(la.lights[:, LIGHT_CDF]) > 0)
     pmf = la.lights[:, LIGHT_PMF]
-    # power: area 2 * 2 -> 8 for the quad's two triangles, 4 pi for the point light
+    # three emitters (the quad, the point light, the map): the distant map is chosen as uniformly, 1/3; the
+    # finite ones share the rest by power: area 2 * 2 -> 8 for the quad's two triangles, 4 pi for the point light
+    assert pmf[3] == pytest.approx(1 / 3, rel=1e-6)
     assert pmf[2] / pmf[:2].sum() == pytest.approx(4 * np.pi / 8.0, rel=1e-5)
+    assert pmf[:3].sum() == pytest.approx(2 / 3, rel=1e-6)
     offset = la.lights[2, LIGHT_PRIM:LIGHT_PRIM + 1].view(np.int32)[0]
     np.testing.assert_array_equal(la.light_data[offset:offset + 3], [0, 1, 2])
 

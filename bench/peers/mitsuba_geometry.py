@@ -43,7 +43,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import platform
 import subprocess
 import sys
@@ -250,7 +249,9 @@ def mitsuba_side(a: argparse.Namespace) -> dict:
 
 
 def run_mitsuba(python: str, a: argparse.Namespace) -> dict:
-    env = dict(os.environ)
+    from pyclpt.common import env as envvars  # the pyclpt side only: Mitsuba's environment has no pyclpt
+
+    env = envvars.child_environment()
     env.setdefault("DRJIT_LIBLLVM_PATH", LLVM)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "mitsuba.json"
@@ -421,7 +422,7 @@ def page(results: dict, mine: dict, theirs: dict, a: argparse.Namespace) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mitsuba-side", action="store_true", help="run Mitsuba's side here and print JSON")
-    ap.add_argument("--mitsuba-python", default=os.environ.get("PYCLPT_MITSUBA_PYTHON"),
+    ap.add_argument("--mitsuba-python", default=None,
                     help="the python of an environment with mitsuba (default $PYCLPT_MITSUBA_PYTHON)")
     ap.add_argument("--scenes", nargs="+", choices=SCENES, default=list(SCENES))
     ap.add_argument("--seeds", type=int, default=16)
@@ -449,6 +450,9 @@ def main(argv: list[str] | None = None) -> int:
         else:
             print(text)
         return 0
+    from pyclpt.common import env as envvars  # the pyclpt side from here: Mitsuba's environment has no pyclpt
+
+    a.mitsuba_python = a.mitsuba_python or envvars.get("PYCLPT_MITSUBA_PYTHON")
     t0 = t1 = t2 = time.perf_counter()
     if a.from_json:
         raw = json.loads(a.from_json.read_text())
@@ -467,7 +471,7 @@ def main(argv: list[str] | None = None) -> int:
         if not a.mitsuba_json:
             theirs["wall_s"] = t1 - t0
         mine["wall_s"] = t2 - t1
-    mine.setdefault("device", f"PYCLPT_DEVICE={os.environ['PYCLPT_DEVICE']}" if os.environ.get("PYCLPT_DEVICE")
+    mine.setdefault("device", f"PYCLPT_DEVICE={envvars.get('PYCLPT_DEVICE')}" if envvars.get("PYCLPT_DEVICE")
                     else "the default OpenCL device")
     results = {name: {motion: {"pyclpt": mine["scenes"][name]["motions"][motion]["sums"],
                                "mitsuba": theirs["scenes"][name]["motions"][motion]["sums"],

@@ -55,7 +55,7 @@ from pyclpt.scene.library import scenes_root
 
 KERNELS = r"""
 #include "scene/bvh.h"
-__kernel void closest(__global const float* nodes, __global const float* tris,
+__kernel SCALAR_KERNEL void closest(__global const float* nodes, __global const float* tris,
                       __global const float* org, __global const float* dir,
                       __global float* out_t, __global int* out_prim) {
     int i = get_global_id(0);
@@ -64,7 +64,7 @@ __kernel void closest(__global const float* nodes, __global const float* tris,
     out_t[i] = ok ? h.t : -1.0f;
     out_prim[i] = h.prim;
 }
-__kernel void any_hit(__global const float* nodes, __global const float* tris,
+__kernel SCALAR_KERNEL void any_hit(__global const float* nodes, __global const float* tris,
                       __global const float* org, __global const float* dir,
                       __global const float* tmax, __global int* out_any) {
     int i = get_global_id(0);
@@ -90,14 +90,14 @@ def load_scene(name: str):
 class Tracer:
     """The bench kernels compiled for every node width; traces one width's BVH."""
 
-    def __init__(self, device: str | None = None) -> None:
+    def __init__(self, device: str | None = None, defines: dict | None = None) -> None:
         from pyclpt.device.context import get_device
         from pyclpt.device.program import build_program
 
         self.dev = get_device(device)
         self.ctx, self.queue = self.dev.context, self.dev.queue
         self.progs = {w: build_program(self.dev, source=KERNELS, name=f"bench_bvh_w{w}",
-                                       defines={"BVH_WIDTH": w, "BVH_LEAF_PACKETS": self.packets(w)})
+                                       defines={"BVH_WIDTH": w, "BVH_LEAF_PACKETS": self.packets(w), **(defines or {})})
                       for w in WIDTHS}
 
     @staticmethod

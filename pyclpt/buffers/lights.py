@@ -2,9 +2,15 @@
 per-resolution constants (camera, environment) of ``cl/scene/scene.h``.
 
 Emitters are the emissive triangles (leaf order), then the scene's other lights (point,
-directional, spot, in their order), then the environment (constant or map); one is chosen by a
-CDF proportional to an estimate of its power:
-
+directional, spot, in their order), then the environment (constant or map). One is chosen by the
+rule ``SELECTION`` names (:func:`selection_pmf`); the default, "distant-uniform": each distant emitter
+(directional light, environment) is as likely as in Mitsuba 3's uniform choice (1 / the number of
+emitters, an emitting shape counting once), and the finite emitters (shapes, point and spot lights)
+share the rest in proportion to an estimate of their power. A distant emitter's power is what crosses
+the scene's bounding sphere, which says little of what it sends where the camera looks (measured: 3x
+to 7x Mitsuba's noise where power alone chose, bench/evaluations/light_noise.py); a finite emitter's
+estimate is its emitted power, which uniform choice would throw away (1.4x the noise on the 13 lights
+of the shared staircase2). The estimates:
 - triangle: area * luminance of the radiance (times the mean of its texture, when it has one);
 - point light (intensity I, W/sr): 4 pi * luminance(I);
 - directional light (irradiance E): pi r^2 * luminance(E), r the radius of the scene's bounding
@@ -30,6 +36,12 @@ import numpy as np
 from pyclpt.buffers.materials import TextureTable
 from pyclpt.buffers.rfilter import CONST_FILTER_RADIUS, FILTER_CONSTS, filter_consts
 from pyclpt.scene.model import Bitmap, Camera, Checkerboard, DirectionalLight, Envmap, Scene, SpotLight
+
+#: How an emitter is chosen (:func:`selection_pmf`): "distant-uniform" (the default, the module docstring),
+#: "power" or "uniform" (Mitsuba 3's rule). Measured against Mitsuba 3: bench/evaluations/light_noise.py,
+#: docs/architecture.md "Light selection".
+SELECTION = "distant-uniform"
+SELECTIONS = ("distant-uniform", "power", "uniform")
 
 LIGHT_STRIDE = 12
 CONST_COUNT = 169  # CONST_COUNT of cl/scene/scene.h
@@ -200,6 +212,10 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
     tri_light[emissive] = np.arange(len(emissive), dtype=np.int32)
     records: list[np.ndarray] = []  # the emitters after the triangles
     power: list[float] = list(area * lum)
+    # the emitter each record belongs to (a triangle's mesh, else itself) and whether it is distant
+    group: list[int] = list(tri_mesh[emissive]) if tri_mesh is not None else list(range(len(emissive)))
+    next_group = (max(group) + 1) if group else 0
+    distant: list[bool] = [False] * len(group)
     data: list[np.ndarray] = []
     data_size = 0
 
@@ -249,6 +265,9 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
         rec[LIGHT_RADIANCE:LIGHT_RADIANCE + 3] = value
         records.append(rec)
         power.append(p)
+        group.append(next_group)
+        next_group += 1
+        distant.append(isinstance(light, DirectionalLight))
 
     env_light = -1
     env = scene.environment
@@ -262,6 +281,8 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
             env_light = len(tri_records) + len(records)
             records.append(rec)
             power.append(np.pi * np.pi * radius**2 * mean_radiance)
+            group.append(next_group)
+            distant.append(True)
     elif env is not None and max(env) > 0:
         rec = np.zeros(LIGHT_STRIDE, np.float32)
         rec[LIGHT_PRIM] = _int_bits(-1)
@@ -271,19 +292,43 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
         env_light = len(tri_records) + len(records)
         records.append(rec)
         power.append(np.pi * np.pi * radius**2 * max(luminance(env), float(np.mean(env, dtype=np.float64))))
+        group.append(next_group)
+        distant.append(True)
 
     lights = np.concatenate([tri_records, *[r[None] for r in records]])
     if len(lights):
-        power_arr = np.asarray(power, np.float64)
-        if not np.all(np.isfinite(power_arr)):  # powers beyond double range: choose uniformly
-            power_arr = np.ones_like(power_arr)
-        pmf = power_arr / power_arr.sum()
+        pmf = selection_pmf(np.asarray(power, np.float64), np.asarray(group, np.int64), np.asarray(distant, bool),
+                            SELECTION)
         cdf = np.cumsum(pmf)
         cdf[-1] = 1.0
         lights[:, LIGHT_PMF] = pmf
         lights[:, LIGHT_CDF] = cdf
     light_data = np.concatenate(data) if data else np.zeros(1, np.float32)
     return LightArrays(lights, light_data, env_light, tri_light, has_textures)
+
+
+def selection_pmf(power: np.ndarray, group: np.ndarray, distant: np.ndarray, rule: str = "distant-uniform"
+                  ) -> np.ndarray:
+    """The probability of choosing each emitter record, by ``rule`` (the module docstring): "power", in
+    proportion to ``power``; "uniform", each emitter (``group``: the emitter of each record) alike and an
+    emitter's records in proportion to their power; "distant-uniform", each ``distant`` record (its own
+    emitter) as under "uniform" and the others the rest in proportion to their power. Powers beyond
+    double range count alike."""
+    if rule not in SELECTIONS:
+        raise ValueError(f"light selection rule {rule!r}: expected one of {', '.join(SELECTIONS)}")
+    if not np.all(np.isfinite(power)) or not power.sum() > 0:
+        power = np.ones_like(power)
+    if rule == "power":
+        return power / power.sum()
+    _, emitter = np.unique(group, return_inverse=True)
+    count = int(emitter.max()) + 1
+    if rule == "uniform":
+        return power / np.bincount(emitter, weights=power)[emitter] / count
+    pmf = np.where(distant, 1.0 / count, 0.0)
+    finite = power * ~distant
+    if finite.sum() > 0:
+        pmf += finite / finite.sum() * (1.0 - np.count_nonzero(distant) / count)
+    return pmf
 
 
 def camera_consts(scene: Scene, lights: LightArrays, width: int, height: int,
