@@ -308,6 +308,18 @@ def test_embree_ceiling_on_the_cornell_box(cornell_box):
     assert A.ceiling_mrays(e) > 0
 
 
+def test_embree_gap_traces_what_embree_traces():
+    """bench/studies/embree_gap.py (docs/bvh.md, "Against Embree"): the kernels and Embree trace the same camera,
+    bounce and shadow rays of the built-in box and give the same answers, with a rate for each."""
+    gap = pytest.importorskip("bench.studies.embree_gap", reason="a source checkout's bench/studies")
+    from bench.studies.bvh_traversal import Tracer
+
+    r = gap.measure(Tracer(), "cornell-box", 48, 1, 1, threads=2)
+    assert r["mismatches"] == {"camera": 0, "bounce": 0, "shadow": 0}
+    assert r["rays"]["camera"] == 48 * 48 and r["rays"]["bounce"] == r["rays"]["shadow"] > 1000
+    assert all(v > 0 and math.isfinite(v) for v in r["mrays_per_s"].values())
+
+
 def test_isa_section_of_the_report(tmp_path):
     """`pyclpt bench --isa`: the GPU ISA check's table, budgets and plot in the report; without the tools, the
     reason in their place."""
