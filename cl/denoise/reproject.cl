@@ -2,22 +2,28 @@
  * history of NRD's RELAX. One work-item per pixel, 2D range; after demodulate.
  *
  * 1. The frame's sample (demodulate's illumination) firefly-clamped: its luminance is scaled down to
- *    at most sqrt(N) x the largest of firefly_ratio x a spatial reference (the larger of the mean
- *    luminance of its neighbours in the 3x3 around p inside the image, centre excluded, and, where
- *    the history is valid, the reprojected history's luminance) and, where the history is valid,
- *    the pixel's own temporal moments, mean + firefly_sigma x sigma (NRD RELAX's idea), and its
- *    mean + POOLED_SIGMA x firefly_sigma x the neighbourhood's sigma (the previous frame's
+ *    at most sqrt(N) x the largest of firefly_ratio x a spatial reference (the largest of the mean
+ *    luminance of its neighbours in the 3x3 around p inside the image, centre excluded, the mean of
+ *    their temporal means (the moments' m1 over the same 3x3 as the neighbourhood's sigma below)
+ *    and, where the history is valid, the reprojected history's luminance) and, where the history is
+ *    valid, the pixel's own temporal moments, mean + firefly_sigma x sigma (NRD RELAX's idea), and
+ *    its mean + POOLED_SIGMA x firefly_sigma x the neighbourhood's sigma (the previous frame's
  *    variances averaged over the 3x3 around the previous position, same material, histories no
  *    longer than p's): a pixel that has not drawn the rare bright samples of its neighbourhood's
- *    1-sample distribution yet is not clamped when it does (the clamp against its own moments
- *    alone took 0.2 to 0.4 % of the cornell-box's energy at frame 8, all of it from the bright tail).
- *    N is the history length after this frame: the clamp relaxes as the history grows, so that what
- *    it removes vanishes against the accumulated mean (firefly_ratio 0: no clamp; no reference at
- *    all, a pixel without neighbours or history: no clamp). The fast history and the moments take
- *    the sample clamped without the neighbourhood's term (more of the tail in the fast histories
- *    widened the anti-lag's test and slowed the living room's light change by a frame); the moments
- *    take it where the history is valid, else the sample's own (an isolated pixel whose neighbours
- *    are black is clamped to 0 on its first frame, but its moments keep it, and it converges).
+ *    1-sample distribution yet is not clamped when it does (the clamp against its own moments alone
+ *    took 0.2 to 0.4 % of the cornell-box's energy at frame 8, all of it from the bright tail). N is
+ *    the history length after this frame: the clamp relaxes as the history grows, so that what it
+ *    removes vanishes against the accumulated mean (firefly_ratio 0: no clamp; no reference at all,
+ *    a pixel without neighbours or history: no clamp). The fast history takes the same clamped
+ *    sample as the long one: clamped without the neighbourhood's terms, it held less of the 1-sample
+ *    tail than the long history, and where that tail carries the light (the living room's window
+ *    light, a few bright samples among black ones) the anti-lag read the difference as a change of
+ *    the lighting and restarted 38 % of the static room's histories by frame 8 (docs/denoising.md,
+ *    "Sparse light"). The neighbours' temporal means in the reference are for a pixel whose own
+ *    history and whose neighbours in this frame are black: without them its rare bright sample was
+ *    clamped to 0 and its light lost. The moments take the sample clamped without the neighbourhood's sigma
+ *    where the history is valid, else the sample's own (an isolated pixel whose neighbours are black
+ *    is clamped to 0 on its first frame, but its moments keep it, and it converges).
  * 2. The previous frame's history at p + motion: the 2x2 bilinear taps around it, each accepted only
  *    if inside the image, holding a history (length >= 1) and the same surface (consistent(): same
  *    material id; both background, or both surfaces with |z - z_prev| <= depth_threshold x (GEO_GRAD
@@ -215,8 +221,9 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     /* the neighbourhood's temporal spread: the mean of the previous frame's luminance variances
      * (m2 - m1^2) over the 3x3 pixels around the rounded previous position that hold a history of
      * p's material no longer than p's (a history cut by a light change does not take its uncut
-     * neighbours' spread); the spread of their means does not count */
-    float nvar = 0.0f, nw = 0.0f;
+     * neighbours' spread); the spread of their means does not count. And the mean of their means
+     * m1, part of the clamp's spatial reference. */
+    float nvar = 0.0f, nmean = 0.0f, nw = 0.0f;
     int rx = (int)m_floor(px + 0.5f), ry = (int)m_floor(py + 0.5f);
     UNROLL for (int dy = -1; dy <= 1; ++dy) {
         UNROLL for (int dx = -1; dx <= 1; ++dx) {
@@ -228,29 +235,30 @@ __kernel void reproject(__global const float* sample, __global const float* emis
             float w = use ? 1.0f : 0.0f;
             float m1q = moments_prev[q];
             nvar += w * m_max(moments_prev[n + q] - m1q * m1q, 0.0f);
+            nmean += w * m1q;
             nw += w;
         }
     }
     float nsigma = m_sqrt(nvar / m_max(nw, 1.0f));
+    nmean /= m_max(nw, 1.0f);
 
     /* firefly clamp */
     float l = luminance(s);
     float mu = h.m1 * inv, sigma = m_sqrt(m_max(h.m2 * inv - mu * mu, 0.0f));
-    float reference = m_max(around, valid ? luminance(hist) : 0.0f);
+    float reference = m_max(m_max(around, nmean), valid ? luminance(hist) : 0.0f);
     float own = valid ? mu + firefly_sigma * sigma : 0.0f;
     float pooled = valid ? mu + POOLED_SIGMA * firefly_sigma * nsigma : 0.0f;
     float cap_own = m_sqrt(N) * m_max(firefly_ratio * reference, own);
     float cap = m_sqrt(N) * m_max(firefly_ratio * reference, m_max(own, pooled));
     bool clamp_on = firefly_ratio > 0.0f && (count > 0.0f || valid);
     bool clamped = clamp_on && l > cap;
-    vec3 s_own = v3_scale(s, (clamp_on && l > cap_own) ? cap_own / l : 1.0f);
     s = v3_scale(s, clamped ? cap / l : 1.0f);
     /* the moments: clamped by the pixel's own cap but on a new history (nothing to compare with) */
     l = (valid && clamp_on) ? m_min(l, cap_own) : l;
 
     /* accumulation (N = 1: the sample alone) */
     float am = m_max(moments_alpha_min, 1.0f / N), af = m_max(fast_alpha, 1.0f / N);
-    store_planar3(fast, n, p, lerp3(hist_fast, s_own, af));
+    store_planar3(fast, n, p, lerp3(hist_fast, s, af));
     moments[p] = lerpf(h.m1 * inv, l, am);
     moments[n + p] = lerpf(h.m2 * inv, l * l, am);
     len[p] = N;

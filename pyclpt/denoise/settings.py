@@ -67,18 +67,19 @@ class DenoiserSettings:
     #: cornell-box's error in the frame of a light change from 0.447 to 0.052 (120x120).
     antilag: float = 3.5
     #: The firefly clamp (cl/denoise/reproject.cl): the frame's demodulated luminance is clamped to
-    #: sqrt(N) x the larger of firefly_ratio x a spatial reference (the larger of its 3x3 neighbours'
-    #: mean, centre excluded, and the history's luminance) and the pixel's own temporal moments, mean +
-    #: firefly_sigma x sigma; N the history length after this frame, so the clamp relaxes as the history
-    #: grows and the denoised mean converges to the accumulated one. No clamp where there is no
-    #: reference at all (a 1x1 image's first frame). 0: no clamp (a 1000x firefly then spreads over the
-    #: whole filter footprint). The fixed clamp of before (firefly_ratio x the reference, not relaxed)
-    #: removed 1.1 to 2.1 % of the image's energy on the cornell-box at 64x64 after 32 frames, the
-    #: relaxed one 0.1 to 0.2 % (tests/test_denoise_energy.py). The ratio 4 was chosen on real renders
-    #: at 1 sample per pixel and frame (docs/denoising-passes.md, "The firefly clamp on real renders")
-    #: and raised to 8 with firefly_sigma 6 for issue 29's FLIP goal: at 8 frames the clamp at 4 still
-    #: took enough of the 1-sample tail to darken the cornell-box visibly (FLIP 0.0758 at 120x120
-    #: with iterations 3, 0.0694 at 8 and firefly_sigma 6, 0.0630 without a clamp; docs/denoising.md).
+    #: sqrt(N) x the larger of firefly_ratio x a spatial reference (the largest of its 3x3 neighbours'
+    #: mean, centre excluded, their temporal means and the history's luminance) and the pixel's own
+    #: temporal moments, mean + firefly_sigma x sigma; N the history length after this frame, so the
+    #: clamp relaxes as the history grows and the denoised mean converges to the accumulated one. No
+    #: clamp where there is no reference at all (a 1x1 image's first frame). 0: no clamp (a 1000x
+    #: firefly then spreads over the whole filter footprint). The fixed clamp of before (firefly_ratio
+    #: x the reference, not relaxed) removed 1.1 to 2.1 % of the image's energy on the cornell-box at
+    #: 64x64 after 32 frames, the relaxed one 0.1 to 0.2 % (tests/test_denoise_energy.py). The ratio 4
+    #: was chosen on real renders at 1 sample per pixel and frame (docs/denoising-passes.md, "The
+    #: firefly clamp on real renders") and raised to 8 with firefly_sigma 6 for issue 29's FLIP goal:
+    #: at 8 frames the clamp at 4 still took enough of the 1-sample tail to darken the cornell-box
+    #: visibly (FLIP 0.0758 at 120x120 with iterations 3, 0.0694 at 8 and firefly_sigma 6, 0.0630
+    #: without a clamp; docs/denoising.md).
     firefly_ratio: float = 8.0
     #: The firefly clamp's temporal term: mean + firefly_sigma x sigma of the pixel's luminance moments
     #: (before the sqrt(N) relaxation). On the cornell-box at 64x64, 1, 2 and 3 give the same relMSE
