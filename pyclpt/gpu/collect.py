@@ -47,9 +47,11 @@ def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wav
             Renderer(scene, integrator=integrator, layout=layout, aovs=aovs, **kw)
     for precision in PRECISIONS if every_variant else ():
         Renderer(scene, precision=precision, **kw)
-    for kind in ("tent", "gaussian") if every_variant else ():  # the splatting film's kernels (film/splat.cl)
-        splat = ReconstructionFilter(kind, estimator="splat")
-        Renderer(dataclasses.replace(scene, film=dataclasses.replace(scene.film, rfilter=splat)), **kw)
+    for kind in ("tent", "gaussian") if every_variant else ():
+        # the splatting film's kernels (film/splat.cl) and the camera's filter importance sampling (film/rfilter.h)
+        for estimator in ("splat", "importance"):
+            rfilter = ReconstructionFilter(kind, estimator=estimator)
+            Renderer(dataclasses.replace(scene, film=dataclasses.replace(scene.film, rfilter=rfilter)), **kw)
     for denoiser in ("svgf", "blend") if every_variant else ():
         ProgressiveRenderer(scene, denoiser=denoiser, **kw)
     r = Renderer(scene, **kw)
