@@ -51,6 +51,7 @@ class Mutant:
     issue: bool = False  # one of the mutants of issue 16 (must be killed)
 
 
+T_INST = "tests/test_instance_gradients.py"
 T_ANALYTIC_QUAD = "tests/test_analytic.py::test_direct_light_from_a_quad_matches_the_form_factor"
 T_ANALYTIC_SKY = "tests/test_analytic.py::test_quad_light_and_sky_share_the_floor"
 T_FRONT_ONLY = "tests/test_analytic.py::test_area_lights_emit_from_their_front_only"
@@ -322,6 +323,36 @@ MUTANTS: list[Mutant] = [
     Mutant("geometry-camera-origin-fixed", "vec3 u = v3_add(tangent3(tg->camera), v3_scale(v->dd, v->t));",
            "vec3 u = v3_scale(v->dd, v->t);", ("tests/test_interior.py::test_moving_camera",),
            "forward mode: the camera's hits do not follow its origin"),
+    # ---- issue 25: instances' to_world (cl/gradients/geometry.h -DGRAD_INSTANCES, pyclpt/gradients/flatten.py) ----
+    Mutant("geometry-instance-points-translate-only",
+           "vec3 x0 = geo_local_vertex(sc, v->id, 0), x1 = geo_local_vertex(sc, v->id, 1), x2 = "
+           "geo_local_vertex(sc, v->id, 2);", "vec3 x0 = v3_splat(0.0f), x1 = x0, x2 = x0;",
+           (f"{T_INST}::test_instance_to_world_interior",),
+           "an instance's points move with its translation only, not by dA x (reverse mode)"),
+    Mutant("geometry-instance-points-translate-only-forward",
+           "d = v3_add(v3_add(d, geo_inst_apply(c, geo_local_vertex(sc, v->id, j))), tangent3(c + 9));",
+           "d = v3_add(d, tangent3(c + 9));", (f"{T_INST}::test_instance_to_world_interior",),
+           "the same in forward mode"),
+    Mutant("geometry-instance-normals-still",
+           "vec3 w0 = geo_vnormal(sc, v, vi[0]), w1 = geo_vnormal(sc, v, vi[1]), w2 = geo_vnormal(sc, v, vi[2]);",
+           "vec3 w0 = v3_splat(0.0f), w1 = w0, w2 = w0;", (f"{T_INST}::test_instance_to_world_interior[smooth]",),
+           "an instance's vertex normals do not turn with the inverse transpose of its to_world (reverse mode)"),
+    Mutant("geometry-instance-normals-still-forward", "vec3 w = geo_vnormal(sc, v, k); /* -N dA^T w */",
+           "vec3 w = v3_splat(0.0f);", (f"{T_INST}::test_instance_to_world_interior[smooth]",),
+           "the same in forward mode"),
+    Mutant("geometry-instance-mirror-ignored", "gn = v3_add(gn, v3_scale(v->gs, geo_flip(sc, v)));",
+           "gn = v3_add(gn, v->gs);", (f"{T_INST}::test_instance_to_world_mirrored",),
+           "a mirroring instance's flat shading normal taken along its world edges' cross product (reverse mode)"),
+    Mutant("geometry-instance-mirror-ignored-forward", "v->ds = v3_scale(v->dn, geo_flip(sc, v));", "v->ds = v->dn;",
+           (f"{T_INST}::test_instance_to_world_mirrored",), "the same in forward mode"),
+    Mutant("geometry-instance-boundary-pose-identity", "poses[f\"{name}.to_world\"] = m.copy()",
+           "poses[f\"{name}.to_world\"] = np.eye(4)",
+           (f"{T_INST}::test_instanced_scene_gradients_equal_the_plain_scene",),
+           "the flattened instance's outlines moved as world points (pose I), not by dT T^-1 x", root="host"),
+    Mutant("geometry-instance-boundary-mirror-winding",
+           "indices=mesh.indices[:, ::-1].copy() if np.linalg.det(m[:3, :3]) < 0 else mesh.indices))",
+           "indices=mesh.indices))", (f"{T_INST}::test_mirrored_instance_outline",),
+           "a flattened mirroring instance keeps its winding: its outline seen from its back", root="host"),
     Mutant("soft-boundary-occluder-side-counted", "radiance = np.where((pm == i)[..., None], 0.0, "
            "radiance.astype(np.float64))", "radiance = radiance.astype(np.float64)",
            ("tests/test_interior.py::test_receiver_moving_under_a_soft_shadow",),

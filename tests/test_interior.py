@@ -305,7 +305,7 @@ def test_normals_update_writes_are_differentiated():
 
 
 def test_what_is_not_differentiated_says_why():
-    """Textured meshes, instanced scenes and thin lenses are listed with the reason; render_backward refuses
+    """Textured meshes (plain or instanced) and thin lenses are listed with the reason; render_backward refuses
     them; the default parameter set leaves geometry out (it is named to be differentiated)."""
     scene = _floor_scene()
     params = pyclpt.traverse(scene)
@@ -320,13 +320,22 @@ def test_what_is_not_differentiated_says_why():
     lens = _floor_scene()
     lens.camera = dataclasses.replace(lens.camera, kind="thinlens", aperture_radius=0.05, focus_distance=3.0)
     assert "perspective" in pyclpt.traverse(lens).unsupported()["sensor.to_world"]
-    instanced = pyclpt.load_dict({
+    instanced = pyclpt.load_dict({  # instances are differentiated (tests/test_instance_gradients.py) unless textured
         "type": "scene", "floor": {"type": "rectangle"},
         "group": {"type": "shapegroup", "id": "group", "ball": {"type": "sphere", "radius": 0.5}},
-        "left": {"type": "instance", "shape": {"type": "ref", "id": "group"}, "to_world": tf.translate([-1, 0, 0])}})
-    reasons = pyclpt.traverse(instanced).unsupported()
-    for name in ("floor.to_world", "left.to_world", "sensor.to_world"):
-        assert "instance" in reasons[name], (name, reasons[name])
+        "left": {"type": "instance", "shape": {"type": "ref", "id": "group"}, "to_world": tf.translate([-1, 0, 0])},
+        "tgroup": {"type": "shapegroup", "id": "tgroup",
+                   "box": {"type": "cube", "bsdf": {"type": "diffuse", "reflectance": {"type": "checkerboard"}}}},
+        "right": {"type": "instance", "shape": {"type": "ref", "id": "tgroup"}, "to_world": tf.translate([1, 0, 0])}})
+    params = pyclpt.traverse(instanced)
+    for name in ("floor.to_world", "left.to_world"):
+        assert name in params.differentiable, (name, params.unsupported().get(name))
+    assert "textured" in params.unsupported()["right.to_world"]
+    instanced.groups["tgroup"].meshes[0].material = instanced.materials.index(instanced.materials[0])
+    instanced.materials = [instanced.materials[0]]
+    params = pyclpt.traverse(instanced)
+    for name in ("floor.to_world", "left.to_world", "right.to_world", "sensor.to_world"):
+        assert name in params.differentiable, (name, params.unsupported().get(name))
 
 
 def _lit_square(m: np.ndarray | None = None) -> pyclpt.Scene:

@@ -93,14 +93,16 @@ def _convert(mi, node):
     return node
 
 
-def load_json(mi, path: Path, a: argparse.Namespace):
+def load_json(mi, path: Path, a: argparse.Namespace, optimize: bool = True):
+    """The scene of a pyclpt JSON file as Mitsuba 3 loads it (see the module docstring); ``optimize`` False: each
+    shape stays its own (Mitsuba merges the meshes that share a BSDF otherwise)."""
     d = _convert(mi, json.loads(path.read_text()))
     d["integrator"] = {"type": "path", "max_depth": a.max_depth, "rr_depth": a.rr_depth}
     sensor = d["sensor"]
     sensor["film"] = {"type": "hdrfilm", "width": a.width, "height": a.height, "pixel_format": "rgb",
                       "rfilter": {"type": "box"}}
     sensor["sampler"] = {"type": "independent", "sample_count": a.spp}
-    return mi.load_dict(d)
+    return mi.load_dict(d) if optimize else mi.load_dict(d, optimize=False)
 
 
 # Parameters of Mitsuba 0.5/0.6 plug-ins that Mitsuba 3 no longer has (it refuses unused ones): dropped.

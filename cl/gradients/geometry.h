@@ -32,16 +32,24 @@
  * name; the host chains them to the positions through the normals update() computes) and, for a sliding point,
  * with its barycentrics: the point moves over its triangle by D = dx - sum b_j dv_j (in the plane), so
  * db1 = D . (e2 x n) / |e1 x e2| and db2 = D . (n x e1) / |e1 x e2|. The area-form cosines keep the triangle's
- * normal. The host refuses bump maps and anisotropic frames on a moving mesh, instanced scenes, and spot
- * lights' falloff (pyclpt/gradients/). */
+ * normal. The host refuses bump maps and anisotropic frames on a moving mesh (pyclpt/gradients/). */
 #ifndef PYCLPT_GRADIENT_GEOMETRY_H
 #define PYCLPT_GRADIENT_GEOMETRY_H
 
 #include "gradients/params.h"
 
-#ifdef SCENE_HAS_INSTANCES
-#error "GRAD_GEOMETRY: the interior term of moving geometry is not implemented for instanced scenes"
-#endif
+/* Instanced scenes (-DSCENE_HAS_INSTANCES): a hit's prim is the packed id of scene/instances.h; a GeoVertex keeps
+ * its leaf-order triangle (id) and its instance record (rec; -1: the identity, an emitter's triangle), and every
+ * triangle quantity is taken to world space through the record: the vertices x by A x + t (A, t: the record's
+ * object-to-world), edges by A, vertex normals by N = A^-T (unnormalised: the shading normal N m / |N m| is
+ * surface_at's). The world adjoints of a triangle's vertices (g_j) and vertex normals (h_j) go back to object space
+ * (A^T g_j to grad_verts, N^T h_j to grad_vnormals: the shapegroup's meshes, summed over its instances; the plain
+ * meshes' record is the identity) and, with -DGRAD_INSTANCES (an instance's to_world differentiated), to the
+ * record's 12 floats of grad_inst (GEO_INST_STRIDE: the columns of A, then t): x moves by dA x + dt, so
+ * dA += g_j x_j^T, dt += g_j; N n moves by -N dA^T (N n), so dA -= (N n_j) (N^T h_j)^T. Forward mode reads the
+ * same 12 floats as dA, dt. A mirroring record (det A < 0) turns surface_at's geometric normal against the world
+ * edges' cross product: geo_flip. */
+#define GEO_INST_STRIDE 12
 
 #define GEO_FD_STEP 1e-3f
 
@@ -60,6 +68,7 @@ typedef struct {
     float b1, b2; /* barycentrics (u, v) on the triangle */
     int kind;   /* GEO_* */
     int id;     /* leaf-order triangle, or the light record of a GEO_POINT */
+    int rec;    /* instanced scenes: the triangle's instance record (-1: none, the identity) */
     vec3 gx, gn, gs; /* reverse mode: the adjoints of the position, the triangle's normal, the shading normal */
     float gj;   /*               and of the log of the area Jacobian */
     vec3 dx, dn, ds; /* forward mode: their tangents */
@@ -75,9 +84,163 @@ static inline GeoVertex geo_fixed(vec3 p) {
     v.n = v.d = v.gx = v.gn = v.gs = v.dx = v.dn = v.ds = v.gwi = v.dd = v3_splat(0.0f);
     v.b1 = v.b2 = v.gj = v.dj = v.t = v.sx = v.sy = 0.0f;
     v.kind = GEO_FIXED;
-    v.id = -1;
+    v.id = v.rec = -1;
     v.camera = 0;
     return v;
+}
+
+
+/* ---- triangles in world space (instanced scenes: through the vertex's instance record) ------------------ */
+
+/* The instance record of v's triangle (0: none, the identity). */
+static inline __global const float* geo_record(const Scene* sc, const GeoVertex* v) {
+#ifdef SCENE_HAS_INSTANCES
+    return v->rec >= 0 ? inst_record(sc->nodes, v->rec) : 0;
+#else
+    return 0;
+#endif
+}
+
+/* Vertex j (0, 1, 2) of leaf-order triangle tri, in its mesh's (object) space. */
+static inline vec3 geo_local_vertex(const Scene* sc, int tri, int j) {
+    __global const float* t = sc->tris + 9 * tri;
+    vec3 v0 = rgb_at(t, sc->unit);
+    return j == 0 ? v0 : v3_add(v0, rgb_at(t + 3 * j, sc->unit));
+}
+
+/* The world edges e1 = v1 - v0, e2 = v2 - v0 of v's triangle. */
+static inline void geo_edges(const Scene* sc, const GeoVertex* v, vec3* e1, vec3* e2) {
+    __global const float* t = sc->tris + 9 * v->id;
+    *e1 = rgb_at(t + 3, sc->unit);
+    *e2 = rgb_at(t + 6, sc->unit);
+#ifdef SCENE_HAS_INSTANCES
+    __global const float* r = geo_record(sc, v);
+    if (r) {
+        *e1 = inst_vector(r + INST_O2W, *e1);
+        *e2 = inst_vector(r + INST_O2W, *e2);
+    }
+#endif
+}
+
+/* -1 where surface_at's geometric normal is against e1 x e2 (a mirroring instance), else 1. */
+static inline float geo_flip(const Scene* sc, const GeoVertex* v) {
+#ifdef SCENE_HAS_INSTANCES
+    __global const float* r = geo_record(sc, v);
+    if (r) {
+        __global const float* m = r + INST_O2W;
+        float det = m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) +
+                    m[2] * (m[4] * m[9] - m[5] * m[8]);
+        return det < 0.0f ? -1.0f : 1.0f;
+    }
+#endif
+    return 1.0f;
+}
+
+/* Vertex normal k (an index into vnormals) of v's triangle in world space, unnormalised (N n). */
+static inline vec3 geo_vnormal(const Scene* sc, const GeoVertex* v, int k) {
+    vec3 n = rgb_at(sc->vnormals + 3 * k, sc->unit);
+#ifdef SCENE_HAS_INSTANCES
+    __global const float* r = geo_record(sc, v);
+    if (r) n = inst_normal(r + INST_NORMAL, n);
+#endif
+    return n;
+}
+
+#ifdef SCENE_HAS_INSTANCES
+/* M^T g for the 3x3 part of a row-major matrix whose rows are `stride` floats apart. */
+static inline vec3 geo_transposed(__global const float* m, int stride, vec3 g) {
+    return v3(m[0] * g.x + m[stride] * g.y + m[2 * stride] * g.z, m[1] * g.x + m[stride + 1] * g.y + m[2 * stride + 1] * g.z,
+              m[2] * g.x + m[stride + 2] * g.y + m[2 * stride + 2] * g.z);
+}
+
+/* sum_c col_c u_c over the first three columns of a record's 12 floats of grad_inst (dA u). */
+static inline vec3 geo_inst_apply(__global const float* c, vec3 u) {
+    return v3_add(v3_add(v3_scale(tangent3(c), u.x), v3_scale(tangent3(c + 3), u.y)), v3_scale(tangent3(c + 6), u.z));
+}
+#endif
+
+/* Reverse mode: the world adjoints g0, g1, g2 of v's triangle's vertices to grad_verts (object space) and, with
+ * -DGRAD_INSTANCES, to its record's grad_inst. */
+static inline void geo_put_vertices(const Scene* sc, Grads* gr, const GeoVertex* v, vec3 g0, vec3 g1, vec3 g2) {
+    __global const int* vi = sc->tri_vidx + 3 * v->id;
+#ifdef SCENE_HAS_INSTANCES
+    __global const float* r = geo_record(sc, v);
+    if (r) {
+#ifdef GRAD_INSTANCES
+        vec3 x0 = geo_local_vertex(sc, v->id, 0), x1 = geo_local_vertex(sc, v->id, 1), x2 = geo_local_vertex(sc, v->id, 2);
+        __global float* gi = gr->inst + GEO_INST_STRIDE * v->rec;
+        grad_put3(gr, gi, v3_add(v3_add(v3_scale(g0, x0.x), v3_scale(g1, x1.x)), v3_scale(g2, x2.x)));
+        grad_put3(gr, gi + 3, v3_add(v3_add(v3_scale(g0, x0.y), v3_scale(g1, x1.y)), v3_scale(g2, x2.y)));
+        grad_put3(gr, gi + 6, v3_add(v3_add(v3_scale(g0, x0.z), v3_scale(g1, x1.z)), v3_scale(g2, x2.z)));
+        grad_put3(gr, gi + 9, v3_add(v3_add(g0, g1), g2));
+#endif
+        g0 = geo_transposed(r + INST_O2W, 4, g0);
+        g1 = geo_transposed(r + INST_O2W, 4, g1);
+        g2 = geo_transposed(r + INST_O2W, 4, g2);
+    }
+#endif
+    grad_put3(gr, gr->verts + 3 * vi[0], g0);
+    grad_put3(gr, gr->verts + 3 * vi[1], g1);
+    grad_put3(gr, gr->verts + 3 * vi[2], g2);
+}
+
+/* Reverse mode: the world adjoints h0, h1, h2 of v's triangle's (unnormalised) vertex normals to grad_vnormals
+ * (object space) and, with -DGRAD_INSTANCES, to its record's grad_inst. */
+static inline void geo_put_vnormals(const Scene* sc, Grads* gr, const GeoVertex* v, vec3 h0, vec3 h1, vec3 h2) {
+    __global const int* vi = sc->tri_vidx + 3 * v->id;
+#ifdef SCENE_HAS_INSTANCES
+    __global const float* r = geo_record(sc, v);
+    if (r) {
+        __global const float* nm = r + INST_NORMAL;
+        h0 = geo_transposed(nm, 3, h0);
+        h1 = geo_transposed(nm, 3, h1);
+        h2 = geo_transposed(nm, 3, h2);
+#ifdef GRAD_INSTANCES
+        vec3 w0 = geo_vnormal(sc, v, vi[0]), w1 = geo_vnormal(sc, v, vi[1]), w2 = geo_vnormal(sc, v, vi[2]);
+        __global float* gi = gr->inst + GEO_INST_STRIDE * v->rec;
+        grad_put3(gr, gi, v3_neg(v3_add(v3_add(v3_scale(w0, h0.x), v3_scale(w1, h1.x)), v3_scale(w2, h2.x))));
+        grad_put3(gr, gi + 3, v3_neg(v3_add(v3_add(v3_scale(w0, h0.y), v3_scale(w1, h1.y)), v3_scale(w2, h2.y))));
+        grad_put3(gr, gi + 6, v3_neg(v3_add(v3_add(v3_scale(w0, h0.z), v3_scale(w1, h1.z)), v3_scale(w2, h2.z))));
+#endif
+    }
+#endif
+    grad_put3(gr, gr->vnormals + 3 * vi[0], h0);
+    grad_put3(gr, gr->vnormals + 3 * vi[1], h1);
+    grad_put3(gr, gr->vnormals + 3 * vi[2], h2);
+}
+
+/* Forward mode: the world tangent of vertex j of v's triangle (vertex index k). */
+static inline vec3 geo_vertex_tangent(const Scene* sc, const Grads* tg, const GeoVertex* v, int j, int k) {
+    vec3 d = tangent3(tg->verts + 3 * k);
+#ifdef SCENE_HAS_INSTANCES
+    __global const float* r = geo_record(sc, v);
+    if (r) {
+        d = inst_vector(r + INST_O2W, d);
+#ifdef GRAD_INSTANCES
+        __global const float* c = tg->inst + GEO_INST_STRIDE * v->rec;
+        d = v3_add(v3_add(d, geo_inst_apply(c, geo_local_vertex(sc, v->id, j))), tangent3(c + 9));
+#endif
+    }
+#endif
+    return d;
+}
+
+/* Forward mode: the world tangent of the (unnormalised) vertex normal k of v's triangle. */
+static inline vec3 geo_vnormal_tangent(const Scene* sc, const Grads* tg, const GeoVertex* v, int k) {
+    vec3 d = tangent3(tg->vnormals + 3 * k);
+#ifdef SCENE_HAS_INSTANCES
+    __global const float* r = geo_record(sc, v);
+    if (r) {
+        __global const float* nm = r + INST_NORMAL;
+        d = inst_normal(nm, d);
+#ifdef GRAD_INSTANCES
+        __global const float* c = tg->inst + GEO_INST_STRIDE * v->rec;
+        vec3 w = geo_vnormal(sc, v, k); /* -N dA^T w */
+        d = v3_sub(d, inst_normal(nm, v3(m_dot(tangent3(c), w), m_dot(tangent3(c + 3), w), m_dot(tangent3(c + 6), w))));
+#endif
+    }
+#endif
+    return d;
 }
 
 #ifdef GRAD_CAMERA
@@ -131,17 +294,30 @@ static inline void geo_camera_motion(const Scene* sc, const Grads* tg, GeoVertex
 }
 #endif
 
-/* The point at barycentrics (b1, b2) of leaf-order triangle prim, attached or sliding along d. */
-static inline GeoVertex geo_on_triangle(const Scene* sc, int prim, float b1, float b2, vec3 p, int kind, vec3 d) {
+/* The point at barycentrics (b1, b2) of leaf-order triangle tri in instance record rec (-1: none), attached or
+ * sliding along d. */
+static inline GeoVertex geo_on_leaf(const Scene* sc, int tri, int rec, float b1, float b2, vec3 p, int kind, vec3 d) {
     GeoVertex v = geo_fixed(p);
-    __global const float* t = sc->tris + 9 * prim;
-    v.n = m_normalize(m_cross(rgb_at(t + 3, sc->unit), rgb_at(t + 6, sc->unit)));
     v.b1 = b1;
     v.b2 = b2;
     v.kind = kind;
-    v.id = prim;
+    v.id = tri;
+    v.rec = rec;
     v.d = d;
+    vec3 e1, e2;
+    geo_edges(sc, &v, &e1, &e2);
+    v.n = m_normalize(m_cross(e1, e2));
     return v;
+}
+
+/* The point at barycentrics (b1, b2) of a hit's prim (instanced scenes: the packed id). */
+static inline GeoVertex geo_on_triangle(const Scene* sc, int prim, float b1, float b2, vec3 p, int kind, vec3 d) {
+#ifdef SCENE_HAS_INSTANCES
+    int bits = inst_tri_bits(sc->nodes);
+    return geo_on_leaf(sc, prim & ((1 << bits) - 1), prim >> bits, b1, b2, p, kind, d);
+#else
+    return geo_on_leaf(sc, prim, -1, b1, b2, p, kind, d);
+#endif
 }
 
 /* The far end of a light sample n taken at vertex gc with rng key (key, depth): an emissive triangle's point,
@@ -158,7 +334,7 @@ static inline bool geo_light_end(const Scene* sc, RngKey key, int depth, const N
         __global const float* t = sc->tris + 9 * prim;
         vec3 y = v3_add(v3_add(rgb_at(t, sc->unit), v3_scale(rgb_at(t + 3, sc->unit), u.x)),
                         v3_scale(rgb_at(t + 6, sc->unit), u.y));
-        *gy = geo_on_triangle(sc, prim, u.x, u.y, y, GEO_ATTACHED, v3_splat(0.0f));
+        *gy = geo_on_leaf(sc, prim, -1, u.x, u.y, y, GEO_ATTACHED, v3_splat(0.0f)); /* emitters: plain meshes */
         return true;
     }
     if (type != LIGHT_POINT && type != LIGHT_SPOT) return false;
@@ -194,9 +370,9 @@ static inline float geo_spot_falloff(const Scene* sc, int light, vec3 wi, vec3* 
 static inline bool geo_vertex_normals(const Scene* sc, const GeoVertex* v, vec3* n0, vec3* n1, vec3* n2, vec3* m) {
     if (!(sc->tri_info[2 * v->id] & TRI_HAS_NORMALS)) return false;
     __global const int* vi = sc->tri_vidx + 3 * v->id;
-    *n0 = rgb_at(sc->vnormals + 3 * vi[0], sc->unit);
-    *n1 = rgb_at(sc->vnormals + 3 * vi[1], sc->unit);
-    *n2 = rgb_at(sc->vnormals + 3 * vi[2], sc->unit);
+    *n0 = geo_vnormal(sc, v, vi[0]);
+    *n1 = geo_vnormal(sc, v, vi[1]);
+    *n2 = geo_vnormal(sc, v, vi[2]);
 #ifdef GEO_NORMALS_FOLLOW_FACES
     if (v3_is_zero(v3_sub(*n0, *n1)) && v3_is_zero(v3_sub(*n0, *n2)) && m_dot(*n0, v->n) >= (1.0f - 1e-5f) * m_length(*n0))
         return false;
@@ -213,13 +389,12 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
         return;
     }
     if (v->kind == GEO_FIXED) return;
-    __global const float* t = sc->tris + 9 * v->id;
-    vec3 e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
+    vec3 e1, e2;
+    geo_edges(sc, v, &e1, &e2);
     vec3 c = m_cross(e1, e2);
     float len = m_length(c);
     if (!(len > 0.0f)) return;
     vec3 n = v3_divs(c, len);
-    __global const int* vi = sc->tri_vidx + 3 * v->id;
     float b0 = 1.0f - v->b1 - v->b2;
     vec3 gx = v->gx, gn = v->gn, g_slide = v3_splat(0.0f);
     vec3 n0, n1, n2, m;
@@ -227,16 +402,14 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
         float lm = m_length(m);
         vec3 ns = v3_divs(m, lm);
         vec3 gm = v3_divs(v3_sub(v->gs, v3_scale(ns, m_dot(ns, v->gs))), lm);
-        grad_put3(gr, gr->vnormals + 3 * vi[0], v3_scale(gm, b0));
-        grad_put3(gr, gr->vnormals + 3 * vi[1], v3_scale(gm, v->b1));
-        grad_put3(gr, gr->vnormals + 3 * vi[2], v3_scale(gm, v->b2));
+        geo_put_vnormals(sc, gr, v, v3_scale(gm, b0), v3_scale(gm, v->b1), v3_scale(gm, v->b2));
         if (v->kind == GEO_SLIDING) { /* its barycentrics, through its motion over the triangle D = dx - dp */
             float g1 = m_dot(gm, v3_sub(n1, n0)), g2 = m_dot(gm, v3_sub(n2, n0));
             g_slide = v3_divs(v3_add(v3_scale(m_cross(e2, n), g1), v3_scale(m_cross(n, e1), g2)), len);
             gx = v3_add(gx, g_slide);
         }
     } else {
-        gn = v3_add(gn, v->gs); /* flat: the shading normal is the triangle's */
+        gn = v3_add(gn, v3_scale(v->gs, geo_flip(sc, v))); /* flat: the shading normal is the triangle's */
     }
 #ifdef GRAD_CAMERA
     if (v->camera) geo_camera_scatter(sc, gr, v, gx);
@@ -250,9 +423,8 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
     /* n = c / |c|, log J = log |c| + const: the adjoint of c */
     vec3 gc = v3_divs(v3_add(v3_sub(gn, v3_scale(n, m_dot(n, gn))), v3_scale(n, v->gj)), len);
     vec3 ge1 = m_cross(e2, gc), ge2 = m_cross(gc, e1);
-    grad_put3(gr, gr->verts + 3 * vi[0], v3_sub(v3_scale(gp, b0), v3_add(ge1, ge2)));
-    grad_put3(gr, gr->verts + 3 * vi[1], v3_add(v3_scale(gp, v->b1), ge1));
-    grad_put3(gr, gr->verts + 3 * vi[2], v3_add(v3_scale(gp, v->b2), ge2));
+    geo_put_vertices(sc, gr, v, v3_sub(v3_scale(gp, b0), v3_add(ge1, ge2)), v3_add(v3_scale(gp, v->b1), ge1),
+                     v3_add(v3_scale(gp, v->b2), ge2));
 }
 
 /* The adjoint g_w of the unit direction w = (b - a) / r and g_r of the distance r, to a's and b's positions. */
@@ -340,10 +512,11 @@ static inline void geo_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
         return;
     }
     if (v->kind == GEO_FIXED) return;
-    __global const float* t = sc->tris + 9 * v->id;
-    vec3 e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
+    vec3 e1, e2;
+    geo_edges(sc, v, &e1, &e2);
     __global const int* vi = sc->tri_vidx + 3 * v->id;
-    vec3 d0 = tangent3(tg->verts + 3 * vi[0]), d1 = tangent3(tg->verts + 3 * vi[1]), d2 = tangent3(tg->verts + 3 * vi[2]);
+    vec3 d0 = geo_vertex_tangent(sc, tg, v, 0, vi[0]), d1 = geo_vertex_tangent(sc, tg, v, 1, vi[1]),
+         d2 = geo_vertex_tangent(sc, tg, v, 2, vi[2]);
     vec3 c = m_cross(e1, e2);
     float len = m_length(c);
     if (!(len > 0.0f)) return;
@@ -363,24 +536,24 @@ static inline void geo_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
  * triangle's normal's (flat), or that of m / |m| through the vertex normals' tangents and, for a sliding point,
  * its barycentrics'. */
 static inline void geo_shading_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
-    v->ds = v->dn;
+    v->ds = v3_scale(v->dn, geo_flip(sc, v));
     vec3 n0, n1, n2, m;
     if ((v->kind != GEO_ATTACHED && v->kind != GEO_SLIDING) || !geo_vertex_normals(sc, v, &n0, &n1, &n2, &m)) return;
     __global const int* vi = sc->tri_vidx + 3 * v->id;
     float b0 = 1.0f - v->b1 - v->b2;
-    vec3 dm = v3_add(v3_add(v3_scale(tangent3(tg->vnormals + 3 * vi[0]), b0),
-                            v3_scale(tangent3(tg->vnormals + 3 * vi[1]), v->b1)),
-                     v3_scale(tangent3(tg->vnormals + 3 * vi[2]), v->b2));
+    vec3 dm = v3_add(v3_add(v3_scale(geo_vnormal_tangent(sc, tg, v, vi[0]), b0),
+                            v3_scale(geo_vnormal_tangent(sc, tg, v, vi[1]), v->b1)),
+                     v3_scale(geo_vnormal_tangent(sc, tg, v, vi[2]), v->b2));
     if (v->kind == GEO_SLIDING) {
-        __global const float* t = sc->tris + 9 * v->id;
-        vec3 e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
+        vec3 e1, e2;
+        geo_edges(sc, v, &e1, &e2);
         vec3 c = m_cross(e1, e2);
         float len = m_length(c);
         if (len > 0.0f) {
             vec3 n = v3_divs(c, len);
-            vec3 dp = v3_add(v3_add(v3_scale(tangent3(tg->verts + 3 * vi[0]), b0),
-                                    v3_scale(tangent3(tg->verts + 3 * vi[1]), v->b1)),
-                             v3_scale(tangent3(tg->verts + 3 * vi[2]), v->b2));
+            vec3 dp = v3_add(v3_add(v3_scale(geo_vertex_tangent(sc, tg, v, 0, vi[0]), b0),
+                                    v3_scale(geo_vertex_tangent(sc, tg, v, 1, vi[1]), v->b1)),
+                             v3_scale(geo_vertex_tangent(sc, tg, v, 2, vi[2]), v->b2));
             vec3 slide = v3_sub(v->dx, dp);
             float db1 = m_dot(slide, m_cross(e2, n)) / len, db2 = m_dot(slide, m_cross(n, e1)) / len;
             dm = v3_add(dm, v3_add(v3_scale(v3_sub(n1, n0), db1), v3_scale(v3_sub(n2, n0), db2)));

@@ -14,6 +14,8 @@
  *   camera 12 floats: the camera's origin and its basis F, R, U (-DGRAD_CAMERA, gradients/geometry.h)
  *   vnormals 3 floats per vertex (as verts): its vertex normal, before the interpolated normal is normalised
  *          (-DGRAD_GEOMETRY: triangles with vertex normals)
+ *   inst   12 floats per instance record (instanced scenes, -DGRAD_INSTANCES): its object-to-world's 3x3 by
+ *          columns, then its translation (gradients/geometry.h)
  * A textured reflectance is scale * texel values * the material's constant (1 unless changed): its
  * gradient goes to the texels (bilinear weights, texture.h tex_taps) and to the constant.
  *
@@ -22,7 +24,7 @@
  * plastics), GRAD_ALPHA (roughness of rough conductors, plastics and dielectrics), GRAD_EMISSION (area
  * lights' radiance), GRAD_ENV (the environment's radiance or texels), GRAD_GEOMETRY (where meshes' vertices
  * and point lights are: the interior term of gradients/geometry.h), GRAD_CAMERA (where the camera is; implies
- * GRAD_GEOMETRY).
+ * GRAD_GEOMETRY), GRAD_INSTANCES (where instances are: an instance's to_world; implies GRAD_GEOMETRY).
  * alpha_up, alpha_down: the material records packed again with alpha (1 +- BSDF_DIFF_STEP)
  * (pyclpt/gradients/replay.py), for the roughness derivative (bsdf_derivative.h).
  *
@@ -34,17 +36,18 @@
 
 #include "integrators/path.h"
 
-#if defined(GRAD_CAMERA) && !defined(GRAD_GEOMETRY)
+#if (defined(GRAD_CAMERA) || defined(GRAD_INSTANCES)) && !defined(GRAD_GEOMETRY)
 #define GRAD_GEOMETRY 1
 #endif
 
 #define GRAD_PARAMS                                                                                         \
     __global float *grad_mats, __global float *grad_lights, __global float *grad_tex8, __global float *grad_tex32, \
         __global float *grad_verts, __global float *grad_lightpos, __global float *grad_camera,                 \
-        __global float *grad_vnormals, __global const float *alpha_up, __global const float *alpha_down
+        __global float *grad_vnormals, __global float *grad_inst, __global const float *alpha_up,            \
+        __global const float *alpha_down
 #define GRAD_INIT                                                                                             \
     {grad_mats,     grad_lights, grad_tex8, grad_tex32, grad_verts, grad_lightpos, grad_camera, grad_vnormals,     \
-     alpha_up,      alpha_down,  {0},       {{0.0f}},   0}
+     grad_inst,     alpha_up,    alpha_down, {0},       {{0.0f}},   0}
 
 /* Adjoints a path adds to the same slots (its materials' colours, the light triangles it samples) are
  * summed in private memory first, in up to GRAD_CACHE slots, and added to the buffers once, when the
@@ -65,6 +68,7 @@ typedef struct {
     __global float* lightpos;
     __global float* camera;
     __global float* vnormals;
+    __global float* inst;
     __global const float* alpha_up;
     __global const float* alpha_down;
     __global float* pending_at[GRAD_CACHE]; /* three floats each */

@@ -74,6 +74,8 @@ class SceneArrays:
     # instanced scenes: then the top level and the instance records (pyclpt.accel.instances)
     geometry_defines: dict | None = None  # the instancing -D (SCENE_HAS_INSTANCES), None without instances
     instance_tri_bits: int | None = None  # instanced scenes: the packed hit id's triangle bits (AOV ids)
+    instance_order: np.ndarray | None = None  # instanced scenes: record -> index in scene.instances (the plain
+    # meshes' record: len(scene.instances))
     device_class: str = "cpu"  # the BVH layout's device class (pyclpt.accel.bvh.layout_settings)
 
     @property
@@ -170,11 +172,12 @@ def concat_meshes(meshes: list[Mesh]) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 def _instanced_bvh(scene: Scene, settings: BuildSettings,
-                   device_class: str) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool, int]:
+                   device_class: str) -> tuple[FlatBVH, np.ndarray, np.ndarray, bool, int, np.ndarray]:
     """Instanced scenes: one bottom-level BVH per instanced shapegroup (built once, cached) and one for the
     plain meshes (an instance with the identity transform), the top level over the instances
     (pyclpt.accel.instances). Returns the merged bottom levels, the bounds, the node buffer (with its
-    header), whether it has leaf packets and the packed hit id's triangle bits."""
+    header), whether it has leaf packets, the packed hit id's triangle bits and each record's instance (the plain
+    meshes': len(scene.instances))."""
     groups = instanced_groups(scene)
     blocks = [scene.groups[g].meshes for g in groups]
     which = [groups.index(i.group) for i in scene.instances]
@@ -192,7 +195,7 @@ def _instanced_bvh(scene: Scene, settings: BuildSettings,
     packets = _leaf_packets(inst.width, device_class)
     buf, _, _ = instanced_node_buffer(inst, packets)
     bounds = inst.bounds
-    return inst.blas, bounds, buf, packets, inst.tri_bits
+    return inst.blas, bounds, buf, packets, inst.tri_bits, inst.order
 
 
 def _leaf_packets(width: int, device_class: str) -> bool:
@@ -209,9 +212,9 @@ def pack_scene(scene: Scene, device_class: str = "cpu", refit: FlatBVH | None = 
     settings = layout_settings(device_class)  # also checks device_class
     scene.validate()  # every value, again: arrays changed in place, list items replaced since loading
     P, tris, vnormals, vuvs = concat_meshes(scene_meshes(scene))
-    geometry, tri_bits = None, None
+    geometry, tri_bits, records = None, None, None
     if scene.instances:
-        bvh, bounds, node_buffer, packets, tri_bits = _instanced_bvh(scene, settings, device_class)
+        bvh, bounds, node_buffer, packets, tri_bits, records = _instanced_bvh(scene, settings, device_class)
         geometry = {"SCENE_HAS_INSTANCES": True}
     else:
         bvh = build_bvh(P, tris, settings=settings) if refit is None else refit_bvh(refit, P, tris)
@@ -234,6 +237,7 @@ def pack_scene(scene: Scene, device_class: str = "cpu", refit: FlatBVH | None = 
         node_buffer=node_buffer,
         geometry_defines=geometry,
         instance_tri_bits=tri_bits,
+        instance_order=records,
         device_class=device_class,
     )
 
@@ -273,7 +277,8 @@ class SceneBuffers:
                           tri_vidx=old.tri_vidx, vnormals=old.vnormals, vuvs=old.vuvs, materials=mats.materials,
                           lights=lights, textures=mats.textures, bounds=old.bounds, defines=defines,
                           node_buffer=old.node_buffer, geometry_defines=old.geometry_defines,
-                          instance_tri_bits=old.instance_tri_bits, device_class=old.device_class)
+                          instance_tri_bits=old.instance_tri_bits, instance_order=old.instance_order,
+                          device_class=old.device_class)
         return self._adopt(new, "values")
 
     def _adopt(self, new: SceneArrays, what: str) -> list[str]:

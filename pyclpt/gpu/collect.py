@@ -56,8 +56,8 @@ def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wav
         ProgressiveRenderer(scene, denoiser=denoiser, **kw)
     r = Renderer(scene, **kw)
     replay = PathReplay(device, r.scene_buffers, SIZE, SIZE, 4)
-    # where things are is differentiated in scenes without instances (pyclpt.gradients.parameters)
-    kinds = [k for k in GRAD_DEFINES if k not in ("geometry", "camera") or not scene.instances]
+    # where things are, instances' to_world (-DGRAD_INSTANCES) in instanced scenes (pyclpt.gradients.parameters)
+    kinds = [k for k in GRAD_DEFINES if k != "instance" or scene.instances]
     for name in ("backward", "forward"):
         replay.kernel(name, kinds)
     replay.kernel("edge_radiance")  # the boundary term of primary visibility (pyclpt.gradients.edges)

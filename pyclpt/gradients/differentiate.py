@@ -9,12 +9,13 @@ differentiated, as in Mitsuba 3's ``prb``; nor is visibility (docs/differentiabl
 The scene's device copy, its compiled kernels and buffers are kept between calls
 (:mod:`pyclpt.gradients.session`); :func:`clear_cache` drops every copy.
 
-Geometry (``SHAPE.vertex_positions``, ``SHAPE.to_world``, a point light's ``position``, a spot light's
-``to_world``) is differentiated when
-named: the interior term by the replay (``cl/gradients/geometry.h``: the material form, shading that follows the
-moving surfaces) plus the boundary terms of camera silhouettes (:func:`pyclpt.gradients.edges.primary_boundary`),
+Geometry (``SHAPE.vertex_positions``, ``SHAPE.to_world``, ``INSTANCE.to_world``, a point light's ``position``, a
+spot light's ``to_world``) is differentiated when named, in scenes with or without instances: the interior term
+by the replay (``cl/gradients/geometry.h``: the material form, shading that follows the moving surfaces) plus the
+boundary terms of camera silhouettes (:func:`pyclpt.gradients.edges.primary_boundary`),
 of what the first surface seen receives (:func:`pyclpt.gradients.shadows.soft_shadow_boundary`) and of point
-lights' hard shadows (:func:`pyclpt.gradients.shadows.shadow_boundary`).
+lights' hard shadows (:func:`pyclpt.gradients.shadows.shadow_boundary`); an instanced scene's boundary terms are
+its flattened scene's (:mod:`pyclpt.gradients.flatten`).
 """
 from __future__ import annotations
 
@@ -33,9 +34,12 @@ from pyclpt.gradients.edges import (
     vertex_gradients,
     vertex_motion,
 )
+from pyclpt.gradients.flatten import flattened
 from pyclpt.gradients.layout import (
     BUFFERS,
     buffer_sizes,
+    instance_gradient,
+    instance_tangent,
     parameter_slots,
     spot_gradient,
     spot_tangent,
@@ -51,7 +55,7 @@ from pyclpt.gradients.shadows import (
     soft_shadow_boundary,
     soft_shadow_boundary_forward,
 )
-from pyclpt.scene.model import Mesh, PointLight, Scene, SpotLight
+from pyclpt.scene.model import Instance, Mesh, PointLight, Scene, SpotLight
 
 log = logging.getLogger("pyclpt")
 
@@ -137,6 +141,9 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
                 exact = exact + _normals(p, table, gn, normals_backward).reshape(exact.shape)
         elif p.kind == "geometry" and isinstance(p.target, SpotLight):  # its position and axis
             exact = np.ldexp(spot_gradient(scene, replay.scene.arrays, p.target, buffers["lightpos"]), shift)
+        elif p.kind == "geometry" and isinstance(p.target, Instance):  # its record's 12 floats
+            k = _instance_index(scene, p.target)
+            exact = np.ldexp(instance_gradient(replay.scene.arrays, k, buffers["inst"]), shift)
         else:
             exact = np.ldexp(parameter_slots(scene, replay.scene.arrays, p).gather(buffers), shift)
         _check_float32(exact, p.name, peak)
@@ -155,7 +162,13 @@ def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str]
     """The boundary terms of visibility for ``names`` (meshes' ``vertex_positions`` and ``to_world``, point lights'
     ``position``, the sensor's ``to_world`` and ``x_fov``): camera silhouettes, outlines in the light the first
     surfaces receive (soft shadows, at max_depth 2 or more) and point and spot lights' hard shadows; see the
-    module."""
+    module. An instanced scene's are its flattened scene's (:mod:`pyclpt.gradients.flatten`: instances' meshes in
+    world space; an instance's to_world the sum of its meshes' poses')."""
+    if scene.instances:
+        flat = flattened(scene)
+        terms = boundary_backward(flat.scene, image_grad, flat.names(names), flat.parameters(parameters), seed=seed,
+                                  max_depth=max_depth, device=device, samples=samples, spp=spp)
+        return flat.fold(names, terms)
     g = np.asarray(image_grad, np.float64)
     cameras = [n for n in names if n in sensor_names(scene)]
     lights = moving_light_names(scene)
@@ -182,6 +195,11 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
                      height: int, seed: int, max_depth: int, device: Device | str | None, samples: int = 65536,
                      spp: int = 4) -> np.ndarray:
     """Forward mode of :func:`boundary_backward`: the boundary terms of d image (H, W, 3) along ``tangent``."""
+    if scene.instances:
+        flat = flattened(scene)
+        return sum((boundary_forward(flat.scene, part, tangent, flat.parameters(parameters), width=width,
+                                     height=height, seed=seed, max_depth=max_depth, device=device, samples=samples,
+                                     spp=spp) for part in flat.names([name])), np.zeros((height, width, 3)))
     common = dict(width=width, height=height, seed=seed, max_depth=max_depth, parameters=parameters, device=device)
     image = np.zeros((height, width, 3), np.float64)
     camera = name in sensor_names(scene)
@@ -197,12 +215,20 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
 
 
 def _kinds(chosen: Sequence[Parameter]) -> set[str]:
-    """The kernels' specialisation for the parameters ``chosen``: their kinds, and ``rigid`` where geometry is
-    differentiated but no mesh's vertex_positions (then a face's vertex normals equal to its own stay so)."""
+    """The kernels' specialisation for the parameters ``chosen``: their kinds, ``rigid`` where geometry is
+    differentiated but no mesh's vertex_positions (then a face's vertex normals equal to its own stay so), and
+    ``instance`` where an instance's to_world is (-DGRAD_INSTANCES)."""
     kinds = {p.kind for p in chosen}
     if kinds & {"geometry", "camera"} and not any(p.name.endswith(".vertex_positions") for p in chosen):
         kinds.add("rigid")
+    if any(isinstance(p.target, Instance) for p in chosen):
+        kinds.add("instance")
     return kinds
+
+
+def _instance_index(scene: Scene, inst: Instance) -> int:
+    """The index of ``inst`` in ``scene.instances`` (by identity)."""
+    return next(k for k, other in enumerate(scene.instances) if other is inst)
 
 
 def _normals(p: Parameter, table: SceneParameters, value: np.ndarray, chain: Callable[..., np.ndarray]
@@ -291,6 +317,8 @@ def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Ite
             tangent["vnormals"][first:first + dp.size] = _normals(p, table, d, normals_forward).reshape(-1)
     elif p.kind == "geometry" and isinstance(p.target, SpotLight):
         spot_tangent(scene, replay.scene.arrays, p.target, d, tangent["lightpos"])
+    elif p.kind == "geometry" and isinstance(p.target, Instance):
+        instance_tangent(replay.scene.arrays, _instance_index(scene, p.target), d, tangent["inst"])
     else:
         parameter_slots(scene, replay.scene.arrays, p).scatter(tangent, d)
     geometry = p.kind in ("geometry", "camera")

@@ -11,7 +11,8 @@ things are (``-DGRAD_GEOMETRY``): ``verts``, 3 floats per vertex of the packed v
 axis: :func:`spot_gradient`), ``camera``, the camera's origin and basis (12 floats; ``-DGRAD_CAMERA``: the
 sensor's ``to_world`` and ``x_fov``, chained on the host), and ``vnormals``, 3 floats per vertex as ``verts``:
 its vertex normal (a smooth-shaded mesh's; chained on the host to the positions through the normals ``update()``
-computes, :mod:`pyclpt.gradients.normals`).
+computes, :mod:`pyclpt.gradients.normals`), and ``inst``, 12 floats per instance record of an instanced scene
+(``-DGRAD_INSTANCES``: an instance's ``to_world``, :func:`instance_gradient`).
 """
 from __future__ import annotations
 
@@ -38,7 +39,11 @@ from pyclpt.scene.model import Bitmap, Envmap, Mesh, PointLight, Scene, SpotLigh
 #: Floats per light record in ``lightpos`` (geometry.h's GEO_LIGHT_STRIDE): its position, a spot light's axis.
 LIGHTPOS_STRIDE = 6
 
-BUFFERS = ("mats", "lights", "tex8", "tex32", "verts", "lightpos", "camera", "vnormals")
+BUFFERS = ("mats", "lights", "tex8", "tex32", "verts", "lightpos", "camera", "vnormals", "inst")
+
+#: Floats per instance record in ``inst`` (geometry.h's GEO_INST_STRIDE): its to_world's 3x3 by columns, then its
+#: translation.
+INST_STRIDE = 12
 
 
 @dataclass
@@ -157,7 +162,34 @@ def buffer_sizes(arrays: SceneArrays) -> dict[str, int]:
     return {"mats": arrays.materials.size, "lights": arrays.lights.lights.size,
             "tex8": arrays.textures.texels8().size, "tex32": arrays.textures.texels32().size,
             "verts": arrays.vnormals.size, "lightpos": LIGHTPOS_STRIDE * arrays.lights.lights.shape[0], "camera": 12,
-            "vnormals": arrays.vnormals.size}
+            "vnormals": arrays.vnormals.size,
+            "inst": 0 if arrays.instance_order is None else INST_STRIDE * len(arrays.instance_order)}
+
+
+def instance_record(arrays: SceneArrays, k: int) -> int:
+    """The record (top-level leaf order) of ``scene.instances[k]`` in ``arrays`` (packed again at every update)."""
+    order = arrays.instance_order
+    if order is None:
+        raise ValueError("the scene has no instances")
+    return int(np.flatnonzero(np.asarray(order) == k)[0])
+
+
+def instance_gradient(arrays: SceneArrays, k: int, inst: np.ndarray) -> np.ndarray:
+    """(4, 4) float64: the gradient of ``scene.instances[k].to_world`` from its record's 12 floats in ``inst`` (the
+    3x3's columns, then the translation); the bottom row moves nothing."""
+    r = instance_record(arrays, k)
+    g = np.asarray(inst[INST_STRIDE * r:INST_STRIDE * (r + 1)], np.float64).reshape(4, 3)
+    out = np.zeros((4, 4))
+    out[:3, :4] = g.T
+    return out
+
+
+def instance_tangent(arrays: SceneArrays, k: int, tangent: np.ndarray, inst: np.ndarray) -> None:
+    """Writes into ``inst`` (the tangent buffer) a tangent (4, 4) of ``scene.instances[k].to_world``:
+    :func:`instance_gradient`'s forward mode."""
+    r = instance_record(arrays, k)
+    t = np.asarray(tangent, np.float64).reshape(4, 4)
+    inst[INST_STRIDE * r:INST_STRIDE * (r + 1)] = t[:3, :4].T.reshape(-1)
 
 
 def spot_gradient(scene: Scene, arrays: SceneArrays, light: SpotLight, lightpos: np.ndarray) -> np.ndarray:

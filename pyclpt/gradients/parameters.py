@@ -39,6 +39,7 @@ from pyclpt.scene.model import (
     Diffuse,
     DirectionalLight,
     Envmap,
+    Instance,
     Mask,
     Material,
     Mesh,
@@ -58,9 +59,9 @@ NOT_DIFFERENTIABLE = {
     "conductor": "complex IOR of a conductor: not differentiated yet",
     "transmission": "dielectric reflectance and transmittance: not differentiated yet",
     "checkerboard": "checkerboard colours: not differentiated (only bitmap texels are)",
-    "geometry": "where an instance is: update() moves it (the BVH refitted or rebuilt, no kernel compiled again); "
-                "render_backward differentiates meshes' vertex_positions and to_world, point and spot lights' "
-                "positions and the sensor, not instances yet (docs/differentiable.md)",
+    "geometry": "where things are: update() moves it (the BVH refitted or rebuilt, no kernel compiled again); "
+                "render_backward differentiates meshes' vertex_positions and to_world, instances' to_world, point "
+                "and spot lights' positions and the sensor (docs/differentiable.md)",
     "spot_texture": "a textured spot light's frame: the texture's motion over the cone is not differentiated; "
                     "update() moves it",
     "point": "point light intensity: not differentiated yet",
@@ -69,8 +70,6 @@ NOT_DIFFERENTIABLE = {
     "scale": "environment map scale: not differentiated (its texels are)",
     "mask": "opacity: changes visibility, not differentiated",
     "emission_texture": "the radiance of a textured area emitter: not differentiated yet",
-    "instanced": "an instanced scene: the interior term of moving geometry is implemented for scenes without "
-                 "instances; update() moves it",
     "anisotropic": "anisotropic roughness (alpha_u, alpha_v): not differentiated yet",
     "back": "the back BSDF of a twosided with two BSDFs: not differentiated yet",
 }
@@ -102,9 +101,8 @@ def flat_shaded(mesh: Mesh, tolerance: float = 1e-4) -> bool:
 def moving_mesh_reason(scene: Scene, mesh: Mesh) -> str:
     """Why the gradient of where ``mesh`` is (its vertex_positions, its to_world) is not computed, or "" when it is:
     the interior term (cl/gradients/geometry.h) holds for untextured meshes, flat or smooth-shaded (through the
-    vertex normals update() writes: pyclpt/gradients/normals.py), of scenes without instances."""
-    if scene.instances:
-        return "instanced"
+    vertex normals update() writes: pyclpt/gradients/normals.py), in scenes with or without instances (the boundary
+    terms see instances' triangles: pyclpt/gradients/flatten.py)."""
     mat = scene.materials[mesh.material]
     if _textured(mat) or mesh.emission_texture is not None:
         return ("a textured mesh: the texture's motion under the pixels is not differentiated (the interior term of "
@@ -115,12 +113,22 @@ def moving_mesh_reason(scene: Scene, mesh: Mesh) -> str:
     return ""
 
 
+def moving_instance_reason(scene: Scene, inst: Instance) -> str:
+    """Why the gradient of an instance's to_world is not computed, or "" when it is: the interior term
+    (cl/gradients/geometry.h, -DGRAD_INSTANCES: the records' 12 floats) holds for a group of untextured meshes, flat
+    or smooth-shaded, whose materials have no bump map, mask or anisotropic frame (as moving_mesh_reason's). Other
+    instances of the same group are other records: they stay where they are."""
+    for mesh in scene.groups[inst.group].meshes:
+        reason = moving_mesh_reason(scene, mesh)
+        if reason:
+            return reason
+    return ""
+
+
 def moving_camera_reason(scene: Scene) -> str:
     """Why the gradient of where the sensor is (its to_world, its x_fov) is not computed, or "" when it is: the
-    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole in a scene without instances, textures
-    or an environment map."""
-    if scene.instances:
-        return "instanced"
+    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole in a scene without textures
+    or an environment map (instances or not)."""
     if scene.camera.kind != "perspective":
         return (f"a {scene.camera.kind} camera: the gradients of where the sensor is are implemented for perspective "
                 f"(pinhole) cameras; update() moves it")
@@ -325,17 +333,19 @@ class _Walker:
                 self.add(f"{name}.intensity.value", "", _rgb_param(light, "intensity"), light,
                          "spot" if isinstance(light, SpotLight) else "point")
             if isinstance(light, SpotLight):
-                reason = "instanced" if sc.instances else "spot_texture" if light.texture is not None else ""
+                reason = "spot_texture" if light.texture is not None else ""
                 self.add(f"{name}.to_world", "" if reason else "geometry", placement.spot_accessors(light), light,
                          reason, "geometry")
             elif isinstance(light, PointLight):
-                reason = "instanced" if sc.instances else ""
+                reason = ""
                 self.add(f"{name}.position", "" if reason else "geometry", placement.point_accessors(light), light,
                          reason, "geometry")
         names = [i.name for i in sc.instances]
         for k, inst in enumerate(sc.instances):
             name = inst.name if names.count(inst.name) == 1 else f"{inst.name}_{k}"
-            self.add(f"{name}.to_world", "", placement.instance_accessors(inst), inst, "geometry", "geometry")
+            reason = moving_instance_reason(sc, inst)
+            self.add(f"{name}.to_world", "" if reason else "geometry", placement.instance_accessors(inst), inst,
+                     reason, "geometry")
         sensor = sc.ids.get("camera", "sensor")
         to_world, x_fov = placement.camera_accessors(sc)
         reason = moving_camera_reason(sc)

@@ -35,7 +35,9 @@ BSDF_DIFF_STEP = 1.0 / 64.0  # cl/gradients/bsdf_derivative.h: the relative step
 GRAD_DEFINES = {"color": "GRAD_COLOR", "spec": "GRAD_SPEC", "alpha": "GRAD_ALPHA", "emission": "GRAD_EMISSION",
                 "env": "GRAD_ENV", "geometry": "GRAD_GEOMETRY", "camera": "GRAD_CAMERA",
                 # with geometry: no mesh's vertices are moved apart (cl/gradients/geometry.h, geo_vertex_normals)
-                "rigid": "GEO_NORMALS_FOLLOW_FACES"}
+                "rigid": "GEO_NORMALS_FOLLOW_FACES",
+                # an instance's to_world: the records' 12 floats of grad_inst (cl/gradients/geometry.h)
+                "instance": "GRAD_INSTANCES"}
 
 
 def moved_alpha_records(scene: Scene, step: float = BSDF_DIFF_STEP) -> tuple[np.ndarray, np.ndarray]:
@@ -85,9 +87,6 @@ class PathReplay:
     def kernel(self, name: str, kinds: Iterable[str] = ()) -> cl.Kernel:
         """Kernel ``backward`` (specialised for the parameter kinds differentiated) or ``forward``."""
         kinds = tuple(sorted(set(kinds)))
-        if ("geometry" in kinds or "camera" in kinds) and self.scene.scene.instances:
-            raise ValueError(f"scene {self.scene.scene.name!r}: the interior term of moving geometry is not "
-                             f"implemented for instanced scenes")
         key = (name, *kinds)
         if key not in self._programs:
             start = time.perf_counter()
@@ -165,7 +164,7 @@ class PathReplay:
     def backward(self, image_grad: np.ndarray, spp: int, seed: int, kinds: Iterable[str]) -> dict[str, np.ndarray]:
         """Reverse mode: the adjoints of every parameter of ``kinds`` (params.h) for dLoss/dImage
         ``image_grad`` (H, W, 3), as host copies of the gradient buffers by name (layout.py)."""
-        kinds = [k for k in kinds if k in KINDS or k == "rigid"]
+        kinds = [k for k in kinds if k in KINDS or k in ("rigid", "instance")]
         kernel = self.kernel("backward", kinds)
         grads = self._buffers()
         if self.film.splat is not None:  # per pixel, over its mean sum of weights per frame (backward.cl)
@@ -256,7 +255,7 @@ class PathReplay:
         """Forward mode: the derivative of the image (H, W, 3) along ``tangent`` (host arrays by buffer
         name, layout.py); ``kinds``: ``geometry`` when the tangent moves vertices or lights, ``camera`` when it moves
         the camera (-DGRAD_GEOMETRY, -DGRAD_CAMERA: the interior term of cl/gradients/geometry.h)."""
-        kernel = self.kernel("forward", [k for k in kinds if k in ("geometry", "camera", "rigid")])
+        kernel = self.kernel("forward", [k for k in kinds if k in ("geometry", "camera", "rigid", "instance")])
         bufs = self._buffers()
         for name in BUFFERS:
             data = np.ascontiguousarray(tangent[name], np.float32)

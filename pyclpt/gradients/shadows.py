@@ -278,12 +278,12 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
     for name, k in light_names.items():
         if name in names:
             m = ss.light == k
-            g = (weight[m, None] * ss.light_velocity[m]).sum(0)
+            gl = (weight[m, None] * ss.light_velocity[m]).sum(0)  # not g: the receivers' weights below read it
             if name.endswith(".to_world"):  # a spot light's pose: its translation moves the outlines
                 pose = np.zeros((4, 4))
-                pose[:3, 3] = g
-                g = pose
-            out[name] = g.astype(np.float32)
+                pose[:3, 3] = gl
+                gl = pose
+            out[name] = gl.astype(np.float32)
     if wanted:  # as receivers: the outlines every occluder casts on them move with them
         rs = sample_shadow_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
                                  max_depth=max_depth, device=device, stratified=stratified, receivers=sorted(wanted))
