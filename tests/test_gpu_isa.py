@@ -29,7 +29,7 @@ EXTRA_SCENES = ("delta-emitters", "emitter-textures", "instances", "orthographic
 KERNELS = {"megakernel", "path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution",
            "sample_bsdf", "compact_count", "compact_scatter", "finish_paths", "accumulate_frame", "accumulate_batch",
            "resolve", "aov_accumulate", "count_dropped", "demodulate", "reproject", "clip_history", "antilag",
-           "variance", "atrous", "modulate", "blend", "backward", "forward", "edge_radiance",
+           "variance", "atrous", "modulate", "deficit", "deficit_gain", "blend", "backward", "forward", "edge_radiance",
            "incident_radiance", "splat_axes", "splat_gather"}
 
 

@@ -20,11 +20,15 @@
  * a light change then showed the old light one frame longer, and the restarted history was one
  * frame younger than a fresh run's ever after (docs/denoising.md, "The light change, in the same frame").
  *
- * Consumes: temporal[0..2] (reproject: this frame's sample, clamped); emission (demodulate: the
+ * The clamp's deficit history (clip_history) is cut the same way, towards this frame's deficit (the
+ * raw sample minus the clamped one).
+ *
+ * Consumes: temporal[0..2] (reproject: this frame's sample, clamped); sample (demodulate: the raw
+ *           sample); deficit (clip_history: the clamp's deficit history); emission (demodulate: the
  *           frame's emitted part); lag[c * pixels + p] (c < 3, clip_history: t); accum
  *           (clip_history: the long history), fast, moments, len, emis (reproject: the fast
  *           history, luminance moments, N, the emission history); all padded (svgf.h, PAD).
- * Produces: accum[c * pixels + p] (c < 3), fast (3), moments (2), len (N'), emis (3) of pixel p,
+ * Produces: accum[c * pixels + p] (c < 3), fast (3), moments (2), len (N'), emis (3), deficit (3) of pixel p,
  *           cut in place (each work-item writes its own pixel only, and reads no buffer it writes
  *           at another pixel). */
 #include "denoise/svgf.h"
@@ -33,8 +37,8 @@
 static inline float recut(float w, float w_cut) { return w < 1.0f ? (w_cut - w) / (1.0f - w) : 0.0f; }
 
 __kernel void antilag(__global const float* temporal, __global const float* emission, __global const float* lag,
-                      __global float* accum, __global float* fast, __global float* moments, __global float* len,
-                      __global float* emis, int width, int height,
+                      __global const float* sample, __global float* deficit, __global float* accum,
+                      __global float* fast, __global float* moments, __global float* len, __global float* emis, int width, int height,
                       float antilag, float alpha_min, float moments_alpha_min, float fast_alpha) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -43,6 +47,8 @@ __kernel void antilag(__global const float* temporal, __global const float* emis
     emission += PAD;
     emis += PAD;
     lag += PAD;
+    sample += PAD;
+    deficit += PAD;
     accum += PAD;
     fast += PAD;
     moments += PAD;
@@ -72,6 +78,9 @@ __kernel void antilag(__global const float* temporal, __global const float* emis
     store_planar3(accum, n, p, lerp3(planar3(accum, n, p), s, bc));
     store_planar3(fast, n, p, lerp3(planar3(fast, n, p), s, bf));
     store_planar3(emis, n, p, lerp3(planar3(emis, n, p), planar3(emission, n, p), bc));
+    vec3 ds = v3_sub(planar3(sample, n, p), s); /* the clamp's deficit of this frame's sample */
+    ds = v3(m_max(ds.x, 0.0f), m_max(ds.y, 0.0f), m_max(ds.z, 0.0f));
+    store_planar3(deficit, n, p, lerp3(planar3(deficit, n, p), ds, bc));
     moments[p] = lerpf(moments[p], l, bm);
     moments[n + p] = lerpf(moments[n + p], l * l, bm);
     len[p] = N_cut;

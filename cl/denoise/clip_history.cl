@@ -25,11 +25,13 @@
  * anti-lag) or fewer than 3 pixels hold a history.
  *
  * Consumes: temporal[0..2] (the sample) and temporal[3..5] (the reprojected long history) from
- *           reproject; fast[c * pixels + p] (this frame's fast history); len[p] (N); all
- *           padded (svgf.h, PAD).
+ *           reproject; fast[c * pixels + p] (this frame's fast history); len[p] (N); moments;
+ *           sample (demodulate: the raw sample, before the clamp); deficit (reproject: the clamp's
+ *           deficit history reprojected); all padded (svgf.h, PAD).
  * Produces: accum[c * pixels + p] (padded), c < 3: the long history of this frame (demodulated
  *           illumination); lag[c * pixels + p] (padded), c < 3: the anti-lag statistic above, read
- *           by the antilag pass. */
+ *           by the antilag pass; deficit[c * pixels + p] (padded), c < 3: the clamp's deficit history
+ *           of this frame (below; read by the deficit pass). */
 #include "denoise/svgf.h"
 
 #ifndef CLIP_RADIUS /* -DCLIP_RADIUS from pyclpt/denoise/svgf.py (DenoiserSettings.clip_radius) */
@@ -37,8 +39,9 @@
 #endif
 
 __kernel void clip_history(__global const float* temporal, __global const float* fast, __global const float* len,
-                           __global const float* moments, __global float* accum, __global float* lag, int width,
-                           int height, float alpha_min, float clip_gamma, float fast_var) {
+                           __global const float* moments, __global const float* sample, __global float* deficit,
+                           __global float* accum, __global float* lag, int width, int height, float alpha_min,
+                           float clip_gamma, float fast_var, float clip_noise) {
     int x = get_global_id(0), y = get_global_id(1), c = get_global_id(2);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;
@@ -47,6 +50,8 @@ __kernel void clip_history(__global const float* temporal, __global const float*
     len += PAD;
     moments += PAD;
     accum += PAD + c * n;
+    sample += PAD + c * n;
+    deficit += PAD + c * n;
     lag += PAD + c * n;
     __global const float* hl = temporal + 3 * n; /* the reprojected long history, channel c */
 
@@ -88,8 +93,10 @@ __kernel void clip_history(__global const float* temporal, __global const float*
     float spread = sigma < INFINITY ? g * sigma : INFINITY; /* not 0 x inf */
     /* the box always holds the pixel's own fast history: a history that agrees with its own recent
      * frames is never clipped (an isolated bright pixel among dark ones would be, by a 5x5 box) */
+    float h0 = h;
     h = clip_gamma >= 0.0f ? m_clamp(h, m_min(mean - spread, centre), m_max(mean + spread, centre)) : h;
-    float out = lerpf(h, s, m_max(alpha_min, 1.0f / len[p]));
+    float a = m_max(alpha_min, 1.0f / len[p]);
+    float out = lerpf(h, s, a);
     accum[p] = m_isfinite(out) ? out : s;
 
     /* the anti-lag statistic: |mean fast - mean long| / standard error of the mean fast, over the box's
@@ -105,4 +112,14 @@ __kernel void clip_history(__global const float* temporal, __global const float*
                + 1e-3f * (m_abs(centre + fmean) + m_abs(centre + hmean)) + 1e-20f;
     float t = m_abs(fmean - hmean) / se;
     lag[p] = (clip_gamma >= 0.0f && hcount > 2.5f && m_isfinite(t)) ? t : 0.0f;
+    /* the clamp's deficit history: what the firefly clamp took from this channel (the raw sample
+     * minus the clamped one), accumulated with the long history's weight. Where the clip lowered the
+     * long history for a change of the lighting (t over clip_noise), the deficit shrinks with it (the
+     * old light's deficit goes with the old light); where t stays at or under clip_noise, what the clip
+     * moved is the noise of a skewed 1-sample distribution (its box clips the bright side of a young
+     * history more often than the dark side) and joins the deficit, signed. */
+    bool noise = clip_noise > 0.0f && clip_gamma >= 0.0f && !(t > clip_noise);
+    float shrink = (h0 > 0.0f && !noise) ? m_clamp(h / h0, 0.0f, 1.0f) : 1.0f;
+    float dfc = lerpf(deficit[p] * shrink + (noise ? h0 - h : 0.0f), m_max(sample[p] - s, 0.0f), a);
+    deficit[p] = m_isfinite(dfc) ? dfc : 0.0f;
 }

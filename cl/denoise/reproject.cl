@@ -52,12 +52,14 @@
  *           depth, normal, material); aovs[c * pixels + p] (cl/film/aovs.h: the motion); the
  *           previous frame's geo_prev (GEO_*), hist_prev (long history colour, channels 0..2),
  *           fast_prev (3), moments_prev (2), len_prev (history length; 0 = none, after a reset),
- *           emis_prev (3, the emission history).
+ *           emis_prev (3, the emission history), deficit_prev (3, the clamp's deficit history of
+ *           clip_history).
  *           All but aovs padded (svgf.h, PAD).
  * Produces: geo[GEO_GRAD]; temporal[0..2] the sample clamped, temporal[3..5] the long history
  *           reprojected (0 at a disocclusion); fast (the fast history accumulated), moments
- *           (luminance mean and mean of squares), len (N, a float), emis (the emission history);
- *           all padded. */
+ *           (luminance mean and mean of squares), len (N, a float), emis (the emission history),
+ *           deficit (the clamp's deficit history reprojected with the same taps, blended by
+ *           clip_history); all padded. */
 #include "denoise/svgf.h"
 
 /* The firefly clamp's neighbourhood term is mean + POOLED_SIGMA x firefly_sigma x the pooled sigma:
@@ -83,16 +85,18 @@ static inline float depth_step(float z, float zn) { return zn > 0.0f ? m_abs(z -
 
 /* The previous frame's history, summed over accepted taps with their weights. */
 typedef struct {
-    vec3 color, fast, emis;
+    vec3 color, fast, emis, dfc;
     float m1, m2, len, weight;
 } history_t;
 
 static inline void add_tap(history_t* h, __global const float* hist_prev, __global const float* fast_prev,
                            __global const float* moments_prev, __global const float* len_prev,
-                           __global const float* emis_prev, int n, int q, float w) {
+                           __global const float* emis_prev, __global const float* deficit_prev, int n, int q,
+                           float w) {
     h->color = v3_add(h->color, v3_scale(planar3(hist_prev, n, q), w));
     h->fast = v3_add(h->fast, v3_scale(planar3(fast_prev, n, q), w));
     h->emis = v3_add(h->emis, v3_scale(planar3(emis_prev, n, q), w));
+    h->dfc = v3_add(h->dfc, v3_scale(planar3(deficit_prev, n, q), w));
     h->m1 += w * moments_prev[q];
     h->m2 += w * moments_prev[n + q];
     h->len += w * len_prev[q];
@@ -104,7 +108,7 @@ __kernel void reproject(__global const float* sample, __global const float* emis
                         __global const float* geo_prev, __global const float* hist_prev,
                         __global const float* fast_prev, __global const float* moments_prev,
                         __global const float* len_prev, __global const float* emis_prev,
-                        __global float* temporal,
+                        __global const float* deficit_prev, __global float* temporal, __global float* deficit,
                         __global float* fast, __global float* moments, __global float* len, __global float* emis,
                         int width, int height, float depth_threshold, float normal_threshold, float firefly_ratio,
                         float firefly_sigma, float max_history, float alpha_min, float moments_alpha_min,
@@ -116,6 +120,8 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     emission += PAD;
     emis_prev += PAD;
     emis += PAD;
+    deficit_prev += PAD;
+    deficit += PAD;
     geo += PAD;
     geo_prev += PAD;
     hist_prev += PAD;
@@ -185,20 +191,20 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     float fx0 = m_floor(px), fy0 = m_floor(py);
     float fx = px - fx0, fy = py - fy0;
     int x0 = (int)fx0, y0 = (int)fy0;
-    history_t h = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
+    history_t h = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
     UNROLL for (int t = 0; t < 4; ++t) {
         int tx = x0 + (t & 1), ty = y0 + (t >> 1);
         bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
         int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
         bool ok = inside & (len_prev[q] >= 1.0f) & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
         float bw = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
-        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, n, q, ok ? bw : 0.0f);
+        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, deficit_prev, n, q, ok ? bw : 0.0f);
     }
     /* none (a weight below 0.01): Falcor's fallback, the 3x3 pixels around the rounded position,
      * equally weighted; a branch, taken at disocclusions only */
     if (!(h.weight > 0.01f)) {
         int rx = (int)m_floor(px + 0.5f), ry = (int)m_floor(py + 0.5f);
-        history_t f = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
+        history_t f = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
         if (rx >= 0 && rx < width && ry >= 0 && ry < height) {
             for (int dy = -1; dy <= 1; ++dy) {
                 for (int dx = -1; dx <= 1; ++dx) {
@@ -207,7 +213,8 @@ __kernel void reproject(__global const float* sample, __global const float* emis
                     int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
                     bool ok = inside & (len_prev[q] >= 1.0f)
                               & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
-                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, n, q, ok ? 1.0f : 0.0f);
+                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, deficit_prev, n, q,
+                            ok ? 1.0f : 0.0f);
                 }
             }
         }
@@ -268,5 +275,6 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     store_planar3(emis, n, p, all_finite3(e_out) ? e_out : e);
     store_planar3(temporal, n, p, s);
     store_planar3(temporal + 3 * n, n, p, hist);
+    store_planar3(deficit, n, p, v3_scale(h.dfc, inv)); /* clip_history blends it */
     geo[GEO_GRAD * n + p] = grad;
 }

@@ -169,4 +169,17 @@ static inline float normal_agreement(vec3 a, vec3 b) {
     return (v3_is_zero(a) || v3_is_zero(b)) ? 1.0f : d;
 }
 
+/* The clamp's deficit (cl/denoise/deficit.cl, deficit_gain.cl, modulate.cl): the image is cut into
+ * DEFICIT_TILE x DEFICIT_TILE tiles (pyclpt/denoise/svgf.py, DEFICIT_TILE), each with the share of
+ * its light that the firefly clamp took, per channel; a tile's own share is at most DEFICIT_MAX
+ * (0.25 raised the living room's relMSE at frame 8 from 0.344 to 0.353 x the plain average's, 0.1
+ * lowered it to 0.332 and gave back a third less; docs/denoising.md), and what modulate gives back at
+ * most DEFICIT_MAX too. A share under DEFICIT_EPS is rounding (a noise-free history and its deficit-
+ * free twin differ by an ulp) and counts as 0, so that g is exactly 0 where nothing was clamped. */
+#define DEFICIT_TILE 16
+#define DEFICIT_MAX 0.2f
+#define DEFICIT_EPS 1e-4f
+
+static inline int deficit_tiles(int size) { return (size + DEFICIT_TILE - 1) / DEFICIT_TILE; }
+
 #endif

@@ -81,6 +81,12 @@ class DenoiserSettings:
     #: visibly (FLIP 0.0758 at 120x120 with iterations 3, 0.0694 at 8 and firefly_sigma 6, 0.0630
     #: without a clamp; docs/denoising.md).
     firefly_ratio: float = 8.0
+    #: Give the firefly clamp's deficit back (cl/denoise/deficit.cl, modulate.cl): what the clamp took
+    #: from the samples is accumulated per pixel as the long history is, its share of the light measured
+    #: per 16x16 tile, and modulate scales the filtered light up by the mean share of the 3x3 tiles
+    #: around, the largest left out (a lone firefly's tile gives nothing back). docs/denoising.md,
+    #: "The clamp's deficit given back".
+    give_back: bool = True
     #: The firefly clamp's temporal term: mean + firefly_sigma x sigma of the pixel's luminance moments
     #: (before the sqrt(N) relaxation). On the cornell-box at 64x64, 1, 2 and 3 give the same relMSE
     #: within 2 % at 8 and 32 frames; 6 with firefly_ratio 8 (see there). Half of it also scales the
@@ -166,6 +172,7 @@ class DenoiserSettings:
         self.max_history = check_int(self.max_history, f"{name}.max_history", lo=1, hi=1 << 20)
         self.variance_radius = check_int(self.variance_radius, f"{name}.variance_radius", lo=1, hi=3)
         self.variance_of_mean = check_bool(self.variance_of_mean, f"{name}.variance_of_mean")
+        self.give_back = check_bool(self.give_back, f"{name}.give_back")
         return self
 
     @property

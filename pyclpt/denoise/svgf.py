@@ -1,15 +1,17 @@
 """SVGF on the device: spatiotemporal variance-guided filtering (Schied et al. 2017, as Falcor's
 SVGFPass), with NRD RELAX's fast history clipping the long one.
 
-One frame is seven passes, one kernel each in ``cl/denoise/`` and one method here of the same name:
+One frame is ten passes, one kernel each in ``cl/denoise/`` and one method here of the same name:
 :meth:`Svgf.demodulate` (sanitize, divide by the albedo, this frame's geometry),
 :meth:`Svgf.reproject` (firefly clamp, reproject and accumulate the fast history, moments and
 history length), :meth:`Svgf.clip_history` (clip the long history into the fast one's neighbourhood
-and blend; the anti-lag statistic), :meth:`Svgf.antilag` (cut the histories where the statistic says
-the lighting changed, in the same frame), :meth:`Svgf.variance` (temporal or, on a short history, spatial
-variance), :meth:`Svgf.atrous` (``iterations`` a-trous iterations) and :meth:`Svgf.modulate` (times
-the albedo, plus the emission's own temporal history: the emitted part of the colour is kept out of
-the filter). :meth:`Svgf.count_dropped` adds up the NaN/inf inputs (``cl/film/count_dropped.cl``).
+and blend; the anti-lag statistic; the clamp's deficit history), :meth:`Svgf.antilag` (cut the
+histories where the statistic says the lighting changed, in the same frame), :meth:`Svgf.deficit` and
+:meth:`Svgf.deficit_gain` (per tile, the share of the light that the firefly clamp took, which
+modulate gives back), :meth:`Svgf.variance` (temporal or, on a short history, spatial variance),
+:meth:`Svgf.atrous` (``iterations`` a-trous iterations) and :meth:`Svgf.modulate` (times the albedo,
+plus the emission's own temporal history: the emitted part of the colour is kept out of the filter).
+:meth:`Svgf.count_dropped` adds up the NaN/inf inputs (``cl/film/count_dropped.cl``).
 
 All state stays on the device. The history is double-buffered: each frame writes the buffers the
 previous frame read from, and the two swap roles (nothing is copied); the a-trous iteration
@@ -34,7 +36,14 @@ from pyclpt.device.program import build_program
 log = logging.getLogger("pyclpt.denoise")
 
 #: The passes of a frame, in launch order (each a kernel, a .cl file and a method of Svgf).
-PASSES = ("demodulate", "count_dropped", "reproject", "clip_history", "antilag", "variance", "atrous", "modulate")
+PASSES = ("demodulate", "count_dropped", "reproject", "clip_history", "antilag", "deficit", "deficit_gain",
+          "variance", "atrous", "modulate")
+#: Side of the tiles over which the firefly clamp's deficit is measured (cl/denoise/svgf.h, DEFICIT_TILE).
+DEFICIT_TILE = 16
+#: Where the anti-lag statistic stays at or under this fraction of ``antilag``, what the history clipping
+#: takes is the noise of a skewed 1-sample distribution, not a change of the lighting: it joins the
+#: clamp's deficit (cl/denoise/clip_history.cl).
+CLIP_NOISE = 0.5
 #: Channels of a geometry record (cl/denoise/svgf.h, GEO_COUNT).
 GEO_COUNT = 6
 #: Floats of padding before and after each internal buffer (cl/denoise/svgf.h, PAD).
@@ -96,7 +105,7 @@ class Svgf:
         self.global_size = (-(-self.width // lx) * lx, -(-self.height // ly) * ly)
         n, f = self.pixels, 4
         size = f"{self.width}x{self.height}"
-        needs = {"denoiser history": 2 * f * n * (GEO_COUNT + 4 + 3 + 2 + 1 + 3),
+        needs = {"denoiser history": 2 * f * n * (GEO_COUNT + 4 + 3 + 2 + 1 + 3 + 3),
                  "denoiser work buffers": f * n * (6 + 4 + 4 + 3 + 3 + 3) + n}
         check_memory(self.device, needs, hint="denoise a smaller image")
         self._padded: list[tuple[cl.Buffer, int]] = []
@@ -106,6 +115,11 @@ class Svgf:
         self._moments = [self._alloc(2, f"denoiser moments {size}") for _ in range(2)]
         self._len = [self._alloc(1, f"denoiser history length {size}") for _ in range(2)]
         self._emis = [self._alloc(3, f"denoiser emission history {size}") for _ in range(2)]
+        self._deficit = [self._alloc(3, f"denoiser clamp deficit history {size}") for _ in range(2)]
+        self._tiles_x = -(-self.width // DEFICIT_TILE)
+        self._tiles_y = -(-self.height // DEFICIT_TILE)
+        self._tiles = [alloc(self.device, f * 6 * self._tiles_x * self._tiles_y, f"denoiser deficit tiles {size}")
+                       for _ in range(2)]
         self._emission = self._alloc(3, f"denoiser frame emission {size}")
         self._lag = self._alloc(3, f"denoiser anti-lag statistic {size}")
         self._temporal = self._alloc(6, f"denoiser temporal {size}")
@@ -158,7 +172,7 @@ class Svgf:
         phi = self._settings.phi_normal
         power_of_two = phi >= 1 and phi == 2.0 ** int(math.log2(phi))
         squarings = {"NORMAL_SQUARINGS": int(math.log2(phi))} if power_of_two else {}
-        for name in ("demodulate", "reproject", "antilag", "variance", "atrous", "modulate"):
+        for name in ("demodulate", "reproject", "antilag", "deficit", "deficit_gain", "variance", "atrous", "modulate"):
             defines = squarings if name in ("variance", "atrous") else {}
             kernels[name] = cl.Kernel(build_program(d, [f"denoise/{name}.cl"], defines=defines,
                                                     options=BUILD_OPTIONS), name)
@@ -176,7 +190,7 @@ class Svgf:
         q = self.device.queue
         n = self.pixels
         for bufs, channels in ((self._geo, GEO_COUNT), (self._hist, 4), (self._fast, 3), (self._moments, 2),
-                               (self._len, 1), (self._emis, 3), ([self._lag], 3)):
+                               (self._len, 1), (self._emis, 3), (self._deficit, 3), ([self._lag], 3)):
             for buf in bufs:
                 fill_buffer(q, buf, np.float32(0), 4 * PAD, 4 * n * channels)
         self.frames = 0
@@ -242,8 +256,9 @@ class Svgf:
         s, c, p = self._settings, self._cur, self._prev
         ev = self._kernels["reproject"](
             self.device.queue, self.global_size, self.local, self._ping[0], self._emission, self._geo[c], aovs,
-            self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p], self._temporal,
-            self._fast[c], self._moments[c], self._len[c], self._emis[c], *self._args2d(),
+            self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p],
+            self._deficit[p], self._temporal, self._deficit[c], self._fast[c], self._moments[c], self._len[c],
+            self._emis[c], *self._args2d(),
             np.float32(s.depth_threshold), np.float32(s.normal_threshold), np.float32(s.firefly_ratio),
             np.float32(s.firefly_sigma), np.float32(s.max_history), np.float32(s.alpha_min),
             np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
@@ -268,8 +283,10 @@ class Svgf:
         s = self._settings
         ev = self._kernels["clip_history"](
             self.device.queue, (*self.global_size, 3), (*self.local, 1), self._temporal, self._fast[self._cur],
-            self._len[self._cur], self._moments[self._cur], self._accum, self._lag, *self._args2d(),
-            np.float32(s.alpha_min), np.float32(s.clip_gamma), np.float32(s.fast_alpha / (2.0 - s.fast_alpha)))
+            self._len[self._cur], self._moments[self._cur], self._ping[0], self._deficit[self._cur], self._accum,
+            self._lag, *self._args2d(),
+            np.float32(s.alpha_min), np.float32(s.clip_gamma), np.float32(s.fast_alpha / (2.0 - s.fast_alpha)),
+            np.float32(CLIP_NOISE * s.antilag if s.give_back else 0.0))
         return self._record("clip_history", ev)
 
     def antilag(self) -> cl.Event:
@@ -277,11 +294,28 @@ class Svgf:
         history length, moments and fast and long histories of this frame cut, in place."""
         s, c = self._settings, self._cur
         ev = self._kernels["antilag"](
-            self.device.queue, self.global_size, self.local, self._temporal, self._emission, self._lag, self._accum,
-            self._fast[c], self._moments[c], self._len[c], self._emis[c], *self._args2d(),
+            self.device.queue, self.global_size, self.local, self._temporal, self._emission, self._lag, self._ping[0],
+            self._deficit[c], self._accum, self._fast[c], self._moments[c], self._len[c], self._emis[c],
+            *self._args2d(),
             np.float32(s.antilag if s.clip_gamma >= 0 else 0.0), np.float32(s.alpha_min),
             np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
         return self._record("antilag", ev)
+
+    def deficit(self, aovs: cl.Buffer) -> cl.Event:
+        """Pass 3c (cl/denoise/deficit.cl): per tile of DEFICIT_TILE pixels, the share of its light that the
+        firefly clamp took (the clamp's deficit history over the long one), which modulate gives back."""
+        ev = self._kernels["deficit"](
+            self.device.queue, (self._tiles_x, self._tiles_y), None, self._accum, self._deficit[self._cur],
+            aovs, self._tiles[0], *self._args2d())
+        return self._record("deficit", ev)
+
+    def deficit_gain(self) -> cl.Event:
+        """Pass 3d (cl/denoise/deficit_gain.cl): per tile, the share modulate gives back: the mean of the
+        3x3 tiles' shares around it, the largest left out (a lone firefly's tile gives nothing back)."""
+        ev = self._kernels["deficit_gain"](
+            self.device.queue, (self._tiles_x, self._tiles_y), None, self._tiles[0], self._tiles[1],
+            *self._args2d())
+        return self._record("deficit_gain", ev)
 
     def variance(self) -> cl.Event:
         """Pass 4 (cl/denoise/variance.cl): illumination and variance, the a-trous input."""
@@ -314,7 +348,8 @@ class Svgf:
         """Pass 6 (cl/denoise/modulate.cl): the filtered illumination times the albedo, into ``output``."""
         src = self._src if self._src is not None else self._ping[0]
         ev = self._kernels["modulate"](self.device.queue, self.global_size, self.local, src, aovs,
-                                       self._emis[self._cur], self.output, *self._args2d(), np.int32(1))
+                                       self._emis[self._cur], self._tiles[1], self.output, *self._args2d(), np.int32(1),
+                                       np.int32(1 if self._settings.give_back else 0))
         return self._record("modulate", ev)
 
     def run(self, color: cl.Buffer, aovs: cl.Buffer) -> cl.Buffer:
@@ -331,6 +366,9 @@ class Svgf:
         self.reproject(aovs)
         self.clip_history()
         self.antilag()
+        if self._settings.give_back:
+            self.deficit(aovs)
+            self.deficit_gain()
         self.variance()
         for i in range(self._settings.iterations):
             self.atrous(i)
