@@ -46,3 +46,20 @@ def filling_sphere(albedo: float, radiance: float) -> pyclpt.Scene:
 def material_under_sky(bsdf: dict) -> pyclpt.Scene:
     """``bsdf`` (give it the id ``m``) on a cube under a constant sky (``sky``)."""
     return object_under_sky(dict(bsdf, id="m"))
+
+
+def update_differences(scene: pyclpt.Scene, params, name: str, tangent: np.ndarray, h: float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """(central differences, forward mode) of the image along ``tangent`` in parameter ``name``, the differences
+    through params.update() (what update() writes: recomputed normals, a spot light's record), 16 spp, the same
+    seed on both sides."""
+    base = np.asarray(params[name], np.float64)
+
+    def render(s: float) -> np.ndarray:
+        params.update({name: (base + s * tangent).astype(np.float32)})
+        return pyclpt.render(scene, spp=16, seed=3, max_depth=2).astype(np.float64)
+
+    fd = (render(h) - render(-h)) / (2 * h)
+    params.update({name: base.astype(np.float32)})
+    fwd = pyclpt.render_forward(scene, name, tangent, spp=16, seed=3, max_depth=2, boundary=False)
+    return fd, fwd.astype(np.float64)

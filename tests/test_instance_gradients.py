@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from gradient_scenes import update_differences
 
 import pyclpt
 from pyclpt.gradients.placement import vertex_normals
@@ -44,21 +45,6 @@ def _instanced_floor(smooth: bool, pose: np.ndarray) -> pyclpt.Scene:
     return scene
 
 
-def _update_differences(scene: pyclpt.Scene, params, name: str, tangent: np.ndarray, h: float
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """(central differences through params.update(), forward mode) along ``tangent``, 16 spp, the same seed."""
-    base = np.asarray(params[name], np.float64)
-
-    def render(s: float) -> np.ndarray:
-        params.update({name: (base + s * tangent).astype(np.float32)})
-        return pyclpt.render(scene, spp=16, seed=3, max_depth=2).astype(np.float64)
-
-    fd = (render(h) - render(-h)) / (2 * h)
-    params.update({name: base.astype(np.float32)})
-    fwd = pyclpt.render_forward(scene, name, tangent, spp=16, seed=3, max_depth=2, boundary=False)
-    return fd, fwd.astype(np.float64)
-
-
 #: A turn about y, a translation and a non-uniform scale (the normals turn by the inverse transpose).
 TANGENT = np.array([[0.2, 0.0, 0.3, 0.5], [0.0, -0.3, 0.0, 0.4], [-0.3, 0.0, 0.1, 0.3], [0, 0, 0, 0]])
 
@@ -74,7 +60,7 @@ def test_instance_to_world_interior(smooth):
     params = pyclpt.traverse(scene)
     name = "floor_i.to_world"
     assert name in params.differentiable and "other.to_world" in params.differentiable
-    fd, fwd = _update_differences(scene, params, name, TANGENT, 1e-3)
+    fd, fwd = update_differences(scene, params, name, TANGENT, 1e-3)
     assert np.abs(fd).max() > 0.03
     err = np.abs(fwd - fd).max(-1)
     assert np.quantile(err, 0.95) < 1e-2 * np.abs(fd).max(), (np.quantile(err, 0.95), np.abs(fd).max())
@@ -95,7 +81,7 @@ def test_instance_to_world_mirrored(smooth):
     forward mode equals the central differences, reverse mode forward mode."""
     scene = _instanced_floor(smooth, tf.rotate([0, 0, 1], 20) @ np.diag([-1.0, 1.3, 0.8, 1.0]))
     params = pyclpt.traverse(scene)
-    fd, fwd = _update_differences(scene, params, "floor_i.to_world", TANGENT, 1e-3)
+    fd, fwd = update_differences(scene, params, "floor_i.to_world", TANGENT, 1e-3)
     err = np.abs(fwd - fd).max(-1)
     assert np.quantile(err, 0.95) < 1e-2 * np.abs(fd).max(), (np.quantile(err, 0.95), np.abs(fd).max())
     grad = np.random.default_rng(2).random((H, W, 3)).astype(np.float32)

@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from gradient_scenes import update_differences
 
 import pyclpt
 from pyclpt.scene import transform as tf
@@ -185,23 +186,6 @@ def _bumpy_floor(n: int = 24, size: float = 6.0) -> pyclpt.Scene:
                         lights=[pyclpt.PointLight((-2.0, 0.5, 2.0), (10.0, 10.0, 10.0))])
 
 
-def _update_differences(scene: pyclpt.Scene, params, name: str, tangent: np.ndarray, h: float
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """(central differences, forward mode) of the image along ``tangent`` in parameter ``name``, the differences
-    through params.update() (what update() writes: recomputed normals, a spot light's record), 16 spp, the same
-    seed on both sides."""
-    base = np.asarray(params[name], np.float64)
-
-    def render(s: float) -> np.ndarray:
-        params.update({name: (base + s * tangent).astype(np.float32)})
-        return pyclpt.render(scene, spp=16, seed=3, max_depth=2).astype(np.float64)
-
-    fd = (render(h) - render(-h)) / (2 * h)
-    params.update({name: base.astype(np.float32)})
-    fwd = pyclpt.render_forward(scene, name, tangent, spp=16, seed=3, max_depth=2, boundary=False)
-    return fd, fwd.astype(np.float64)
-
-
 @pytest.mark.parametrize("name", ["floor.to_world", "floor.vertex_positions"])
 def test_smooth_shaded_floor(name):
     """A smooth-shaded floor sliding under the camera (to_world: a translation and a turn; its shading normals
@@ -220,7 +204,7 @@ def test_smooth_shaded_floor(name):
         tangent = np.zeros_like(p)
         tangent[:, 2] = np.cos(0.9 * p[:, 0] + 0.4 * p[:, 1])
         tangent = tangent.reshape(-1)
-    fd, fwd = _update_differences(scene, params, name, tangent, 1e-3)
+    fd, fwd = update_differences(scene, params, name, tangent, 1e-3)
     err = np.abs(fwd - fd).max(-1)
     assert np.quantile(err, 0.95) < 1e-2 * np.abs(fd).max(), (np.quantile(err, 0.95), np.abs(fd).max())
     grad = np.random.default_rng(1).random((H, W, 3)).astype(np.float32)
@@ -257,7 +241,7 @@ def test_spot_light_moving(motion):
         tangent[:3, 3] = [0.4, -0.3, 0.2]
     else:
         tangent[:3, :3] = np.array([[0, 0, 1], [0, 0, 0], [-1, 0, 0]], np.float64) @ base[:3, :3]
-    fd, fwd = _update_differences(scene, params, name, tangent, 3e-4)
+    fd, fwd = update_differences(scene, params, name, tangent, 3e-4)
     angle = _spot_angles(scene)
     smooth = (np.abs(angle - 10.0) > 1.5) & (np.abs(angle - 25.0) > 1.5)
     assert np.abs(fd[smooth]).max() > 1.0 and (angle[smooth] > 10).sum() > 100
