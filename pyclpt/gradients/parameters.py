@@ -30,6 +30,7 @@ import numpy as np
 
 from pyclpt.common.image_io import srgb_to_linear
 from pyclpt.gradients import placement
+from pyclpt.gradients.flatten import instance_names
 from pyclpt.scene.model import (
     Bitmap,
     BumpMap,
@@ -340,9 +341,7 @@ class _Walker:
                 reason = ""
                 self.add(f"{name}.position", "" if reason else "geometry", placement.point_accessors(light), light,
                          reason, "geometry")
-        names = [i.name for i in sc.instances]
-        for k, inst in enumerate(sc.instances):
-            name = inst.name if names.count(inst.name) == 1 else f"{inst.name}_{k}"
+        for name, inst in zip(instance_names(sc), sc.instances):
             reason = moving_instance_reason(sc, inst)
             self.add(f"{name}.to_world", "" if reason else "geometry", placement.instance_accessors(inst), inst,
                      reason, "geometry")
