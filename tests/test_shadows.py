@@ -4,6 +4,7 @@ derivative is an integral over the shadow of the floor's radiance gradient; movi
 the camera move that shadow at known rates. A mutant (the receiver's distance ratio dropped) must fail."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -189,3 +190,40 @@ def test_forward_mode_agrees_with_reverse_mode():
                                                      max_depth=2)
         want = float((back[name] * tangent).sum())
         assert float((image * grad).sum()) == pytest.approx(want, rel=1e-4, abs=1e-3), name
+
+
+def _cube_scene(welded: bool) -> pyclpt.Scene:
+    """A cube on view between the floor and two lights, a point light (hard shadows) and a rectangle light (soft
+    ones); with ``welded``, the cube's 24 vertices (split at its edges, as a cube's normals and uvs are) merged
+    into its 8 corners."""
+    scene = _scene(area={"type": "rectangle",
+                         "to_world": tf.translate([2.0, 1.0, 3.0]) @ tf.rotate([0, 1, 0], 180 + 34) @ tf.scale(0.3),
+                         "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [30.0] * 3}}},
+                   cube={"type": "cube", "to_world": tf.translate([0.2, 0.1, 0.5]) @ tf.rotate([1, 1, 0], 30)
+                         @ tf.scale(0.25),
+                         "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.6, 0.3, 0.2]}}})
+    if welded:
+        i = [m.name for m in scene.meshes].index("cube")
+        cube = scene.meshes[i]
+        corners, weld = np.unique(cube.positions, axis=0, return_inverse=True)
+        scene.meshes[i] = dataclasses.replace(cube, positions=corners, indices=weld.reshape(-1)[cube.indices].astype(
+            np.int32), normals=None, uvs=None)
+    return scene
+
+
+def test_a_mesh_split_at_its_edges_has_the_outlines_of_the_welded_one():
+    """A cube's vertices come four times over at its edges (one copy per face, for its normals and uvs). Its edges
+    are found by position: the boundary terms of its pose (camera silhouettes and creases, hard and soft shadows)
+    are those of the same cube with its 8 corners shared, for the same seed. Found by index, each face's edges were
+    boundary edges and every outline counted twice: the soft shadows' term of the Cornell box's small box was 2.3
+    times its value in y."""
+    split, welded = _cube_scene(False), _cube_scene(True)
+    assert len(split.meshes[[m.name for m in split.meshes].index("cube")].positions) == 24
+    grad = np.random.default_rng(5).random((H, W, 3)).astype(np.float32)
+    name = ["cube.to_world"]
+    for term, kw in ((edges.primary_boundary, dict(samples=4096)), (shadows.shadow_boundary, dict(samples=4096)),
+                     (shadows.soft_shadow_boundary, dict(spp=2))):
+        a = term(split, grad, name, seed=4, max_depth=3, **kw)[name[0]]
+        b = term(welded, grad, name, seed=4, max_depth=3, **kw)[name[0]]
+        assert np.any(b != 0), term.__name__
+        np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-3 * np.abs(b).max(), err_msg=term.__name__)

@@ -6,7 +6,8 @@
  *           mean of spp samples).
  * Produces: the adjoints of the scene's parameters added to the gradient buffers (params.h: GRAD_PARAMS,
  *           float atomics); drop_marks[f] = 1 for a path whose radiance was NaN or inf (dropped, its
- *           gradient too; counted by the host).
+ *           gradient too; counted by the host). Nothing else: the closest hits of a path's first
+ *           REPLAY_HITS bounces, cached by the primal pass for its replay, stay in private memory.
  *
  * One work-item per path; dL = image_grad[pixel] / spp (-DFILM_SPLAT, a splatting film: the filter-weighted
  * sum of image_grad over the pixels the sample reaches, splat_adjoint). The path's contributions and what they
@@ -23,8 +24,12 @@
  * again from its camera ray with the same random numbers (rng keys: seed, pixel, sample, bounce,
  * dimension): the replay, which scatters the third term of its later vertices (DEFERRED_VERTICES = 0:
  * every vertex, Mitsuba's prb as published). Shadow-ray visibility of the first 32 bounces is kept as
- * bits for the replay. A path's adjoints are summed privately per slot and added to the buffers when it
- * ends (params.h: grad_put3, grad_flush). Memory: nothing per path, sample or bounce in device memory. */
+ * bits for the replay, and the closest hits of its first REPLAY_HITS bounces (t, u, v, prim) too, so that the
+ * replay (with -DGRAD_GEOMETRY every path's) traverses the BVH only past them. A path's adjoints are summed
+ * privately per slot and added to the buffers when it ends (params.h: grad_put3, grad_flush). Memory: nothing
+ * per path, sample or bounce in device memory; per work-item, private memory grows by REPLAY_HITS x 16 bytes
+ * (128 by default) where a replay can happen (-DGRAD_BSDF or -DGRAD_GEOMETRY), which a GPU keeps in slow local
+ * memory: keep REPLAY_HITS small. */
 #include "gradients/bsdf_derivative.h"
 #ifdef GRAD_GEOMETRY
 #include "gradients/geometry.h"
@@ -64,6 +69,41 @@ static inline vec3 splat_adjoint(const Scene* sc, __global const float* image_gr
 #define DEFERRED_VERTICES 8
 #endif
 #define DEFERRED_SLOTS (DEFERRED_VERTICES > 0 ? DEFERRED_VERTICES : 1)
+
+/* Bounces whose closest hit the primal pass keeps for the replay (REPLAY_HITS x 16 bytes of private memory,
+ * local memory on a GPU, so few; 0: the replay traces every bounce again). The replay traces the same rays
+ * (same random numbers, same arithmetic) and scene_closest is a pure function of them: its traversal is
+ * deterministic, an alpha mask's random number is keyed by (seed, pixel, sample, bounce, query, triangle)
+ * (scene/mask.h, with the instance's record in instanced scenes) and consumes no state, an instanced hit's
+ * transform is found again from its packed prim (instances.h, surface_at), and nothing but t, u, v and prim is
+ * written (-DPATH_TRACE's traversal counters, scene.h, are the megakernel's only). So a kept hit is the one the
+ * replay would find, to the bit, a miss (prim -1) included. Compiled in only where a replay can happen. */
+#ifndef REPLAY_HITS
+#define REPLAY_HITS 8
+#endif
+#if REPLAY_HITS > 0 && (defined(GRAD_BSDF) || defined(GRAD_GEOMETRY))
+#define REPLAY_CACHE
+#define REPLAY_SLOTS REPLAY_HITS
+#else
+#define REPLAY_SLOTS 1
+#endif
+
+/* The closest hit of the path's ray at its bounce ps->depth: the primal pass (replay false) traces it and keeps it
+ * in hits[depth] for a bounce before REPLAY_HITS, the replay takes the kept one there (and traces the later ones). */
+static inline bool walk_closest(const Scene* sc, RngKey key, const PathState* ps, bool replay, Hit* hits, Hit* hit) {
+#ifdef REPLAY_CACHE
+    if (ps->depth < REPLAY_HITS) {
+        if (replay) {
+            *hit = hits[ps->depth];
+            return hit->prim >= 0;
+        }
+        bool found = scene_closest(sc, key, ps->depth, ps->org, ps->dir, hit);
+        hits[ps->depth] = *hit;
+        return found;
+    }
+#endif
+    return scene_closest(sc, key, ps->depth, ps->org, ps->dir, hit);
+}
 
 /* A vertex's BSDF-sample term, waiting for the path's radiance. */
 typedef struct {
@@ -113,11 +153,12 @@ static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, co
 /* One walk along the path (path_continue's loop). The primal pass (replay false) scatters the emission
  * and next-event terms, defers the BSDF-sample terms of vertices before DEFERRED_VERTICES (at most
  * that many, in deferred) and says in *more whether later vertices need a replay; it records
- * shadow-ray visibility in *visible. The replay (replay true, L_total known) scatters the BSDF-sample
+ * shadow-ray visibility in *visible and the closest hits of bounces before REPLAY_HITS in hits. The
+ * replay (replay true, L_total known) takes those hits (walk_closest) and scatters the BSDF-sample
  * terms of the vertices from DEFERRED_VERTICES on. Returns the path's radiance. */
 static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pixel, int max_depth, vec3 dL,
-                                 bool replay, vec3 L_total, uint* visible, Deferred* deferred, int* n_deferred,
-                                 bool* more) {
+                                 bool replay, vec3 L_total, uint* visible, Hit* hits, Deferred* deferred,
+                                 int* n_deferred, bool* more) {
     PathState ps;
     camera_path(sc, key, pixel, &ps);
     if (max_depth == 0) return ps.L;
@@ -132,7 +173,7 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
 #endif
     for (;;) {
         Hit hit;
-        if (!scene_closest(sc, key, ps.depth, ps.org, ps.dir, &hit)) {
+        if (!walk_closest(sc, key, &ps, replay, hits, &hit)) {
 #ifdef GRAD_GEOMETRY
             if (replay) { /* a direction to the environment: nothing moves it */
                 geo_scatter(sc, gr, &ga);
@@ -279,10 +320,11 @@ __kernel SCALAR_KERNEL void backward(SCENE_PARAMS, __global const float* image_g
 #endif
     if (v3_is_zero(dL)) return;
     uint visible = 0;
+    Hit hits[REPLAY_SLOTS];
     Deferred deferred[DEFERRED_SLOTS];
     int n_deferred = 0;
     bool more = false;
-    vec3 L = backward_walk(&sc, &gr, key, pixel, max_depth, dL, false, v3_splat(0.0f), &visible, deferred,
+    vec3 L = backward_walk(&sc, &gr, key, pixel, max_depth, dL, false, v3_splat(0.0f), &visible, hits, deferred,
                            &n_deferred, &more);
     if (!all_finite3(L)) { /* dropped, with its gradient */
         drop_marks[f] = (uchar)1;
@@ -298,7 +340,8 @@ __kernel SCALAR_KERNEL void backward(SCENE_PARAMS, __global const float* image_g
     more = true; /* the interior term of moving geometry is the replay's (it needs the path's radiance) */
 #endif
 #if defined(GRAD_BSDF) || defined(GRAD_GEOMETRY)
-    if (more) backward_walk(&sc, &gr, key, pixel, max_depth, dL, true, L, &visible, deferred, &n_deferred, &more);
+    if (more)
+        backward_walk(&sc, &gr, key, pixel, max_depth, dL, true, L, &visible, hits, deferred, &n_deferred, &more);
 #endif
     grad_flush(&gr);
 }

@@ -44,10 +44,10 @@
     __global float *grad_mats, __global float *grad_lights, __global float *grad_tex8, __global float *grad_tex32, \
         __global float *grad_verts, __global float *grad_lightpos, __global float *grad_camera,                 \
         __global float *grad_vnormals, __global float *grad_inst, __global const float *alpha_up,            \
-        __global const float *alpha_down
+        __global const float *alpha_down, int grad_moving_lo, int grad_moving_hi
 #define GRAD_INIT                                                                                             \
     {grad_mats,     grad_lights, grad_tex8, grad_tex32, grad_verts, grad_lightpos, grad_camera, grad_vnormals,     \
-     grad_inst,     alpha_up,    alpha_down, {0},       {{0.0f}},   0}
+     grad_inst,     alpha_up,    alpha_down, grad_moving_lo, grad_moving_hi, {0}, {{0.0f}}, 0}
 
 /* Adjoints a path adds to the same slots (its materials' colours, the light triangles it samples) are
  * summed in private memory first, in up to GRAD_CACHE slots, and added to the buffers once, when the
@@ -71,6 +71,9 @@ typedef struct {
     __global float* inst;
     __global const float* alpha_up;
     __global const float* alpha_down;
+    /* reverse mode: the packed vertices [moving_lo, moving_hi) whose adjoints the host reads (the moving meshes';
+       geometry.h, geo_scatter: a triangle outside scatters nothing); forward mode: unused */
+    int moving_lo, moving_hi;
     __global float* pending_at[GRAD_CACHE]; /* three floats each */
     vec3 pending[GRAD_CACHE];
     int n_pending;

@@ -62,6 +62,7 @@ def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wav
         replay.kernel(name, kinds)
     replay.kernel("edge_radiance")  # the boundary term of primary visibility (pyclpt.gradients.edges)
     replay.kernel("incident_radiance")  # ... of soft shadows (pyclpt.gradients.shadows)
+    replay.kernel("soft_edge_pick")  # ... and their silhouette search
 
 
 def collect_programs(scenes: Iterable[Scene | str], *, device_class: str | None = "gpu",

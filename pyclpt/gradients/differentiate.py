@@ -121,7 +121,7 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     shift = int(np.ceil(np.log2(peak))) if peak > 1.0 else 0
     if shift:
         grad = np.ldexp(grad, -shift).astype(np.float32)
-    buffers = replay.backward(grad, spp, seed, _kinds(chosen))
+    buffers = replay.backward(grad, spp, seed, _kinds(chosen), _moving_vertices(scene, chosen))
     if replay.dropped:
         log.warning("%s: render_backward dropped %d paths with NaN/inf radiance", scene.name, replay.dropped)
     out = {}
@@ -154,6 +154,15 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
                                          device=device, samples=edge_samples, spp=edge_spp).items():
             out[name] = (out[name] + g.reshape(out[name].shape)).astype(np.float32)
     return out
+
+
+def _moving_vertices(scene: Scene, chosen: Sequence) -> tuple[int, int]:
+    """The packed vertices [lo, hi) that hold every moved mesh's (the backward kernel scatters no others)."""
+    spans = [(vertex_offset(scene, p.target), p.target.positions.shape[0]) for p in chosen
+             if p.kind == "geometry" and isinstance(p.target, Mesh)]
+    if not spans:
+        return 0, 0
+    return min(lo for lo, _ in spans), max(lo + n for lo, n in spans)
 
 
 def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str], parameters: SceneParameters, *,

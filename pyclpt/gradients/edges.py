@@ -130,6 +130,25 @@ def _clip(a: np.ndarray, b: np.ndarray, width: int, height: int) -> tuple[np.nda
     return s0, s1
 
 
+def edge_copies(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every triangle's three edges, ordered so that the copies of one edge (one per triangle it bounds) are
+    adjacent, and which copy is its edge's first: ``pairs`` (3F, 2) the copy's vertex indices in its triangle's
+    winding order, ``face`` (3F,) its triangle, ``new`` (3F,) True on an edge's first copy. The copies are found
+    by position (the vertices welded), so that a mesh whose vertices are split where its normals or uvs jump (a
+    box of 24 vertices) has its faces' common edges all the same: found by index, each face's edges were
+    boundary edges, and a box's outlines and creases were each counted twice (once per face)."""
+    f = mesh.indices.astype(np.int64)
+    _, weld = np.unique(np.asarray(mesh.positions), axis=0, return_inverse=True)
+    pairs = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    face = np.tile(np.arange(len(f)), 3)
+    key = np.sort(weld.reshape(-1)[pairs], axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key, face, pairs = key[order], face[order], pairs[order]
+    new = np.ones(len(key), bool)
+    new[1:] = np.any(key[1:] != key[:-1], axis=1)
+    return pairs, face, new
+
+
 def mesh_edges(mesh: Mesh, camera_origin: np.ndarray, creases: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The vertex pairs (K, 2) of ``mesh``'s edges that can bound what a camera at ``camera_origin``
     sees: boundary edges, silhouettes (their two triangles facing the camera on different sides) and
@@ -139,13 +158,7 @@ def mesh_edges(mesh: Mesh, camera_origin: np.ndarray, creases: bool = False) -> 
     f = mesh.indices.astype(np.int64)
     n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
     facing = np.sign(np.einsum("ij,ij->i", n, camera_origin - p[f[:, 0]]))
-    pairs = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    face = np.tile(np.arange(len(f)), 3)
-    key = np.sort(pairs, axis=1)
-    order = np.lexsort((key[:, 1], key[:, 0]))
-    key, face, pairs = key[order], face[order], pairs[order]
-    new = np.ones(len(key), bool)
-    new[1:] = np.any(key[1:] != key[:-1], axis=1)
+    pairs, face, new = edge_copies(mesh)
     group = np.cumsum(new) - 1
     count = np.bincount(group)
     lo = np.full(len(count), np.inf)

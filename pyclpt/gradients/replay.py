@@ -85,7 +85,8 @@ class PathReplay:
         self.compile_seconds = 0.0
 
     def kernel(self, name: str, kinds: Iterable[str] = ()) -> cl.Kernel:
-        """Kernel ``backward`` (specialised for the parameter kinds differentiated) or ``forward``."""
+        """Kernel ``backward`` or ``forward`` (specialised for the parameter kinds differentiated), or one of the
+        boundary terms' (``edge_radiance``, ``incident_radiance``, ``soft_edge_pick``)."""
         kinds = tuple(sorted(set(kinds)))
         key = (name, *kinds)
         if key not in self._programs:
@@ -161,9 +162,12 @@ class PathReplay:
         self.dropped = self.film.dropped_samples()
         return self.film.image()
 
-    def backward(self, image_grad: np.ndarray, spp: int, seed: int, kinds: Iterable[str]) -> dict[str, np.ndarray]:
+    def backward(self, image_grad: np.ndarray, spp: int, seed: int, kinds: Iterable[str],
+                 moving: tuple[int, int] = (0, 2**31 - 1)) -> dict[str, np.ndarray]:
         """Reverse mode: the adjoints of every parameter of ``kinds`` (params.h) for dLoss/dImage
-        ``image_grad`` (H, W, 3), as host copies of the gradient buffers by name (layout.py)."""
+        ``image_grad`` (H, W, 3), as host copies of the gradient buffers by name (layout.py). ``moving``: the
+        packed vertices [lo, hi) whose adjoints (``verts``, ``vnormals``) are wanted (the moving meshes'; the
+        kernel skips the triangles of the others, cl/gradients/geometry.h, geo_scatter); default: all."""
         kinds = [k for k in kinds if k in KINDS or k in ("rigid", "instance")]
         kernel = self.kernel("backward", kinds)
         grads = self._buffers()
@@ -180,7 +184,8 @@ class PathReplay:
             cl.enqueue_copy(self.device.queue, self._image_grad, arr)
         self.film.clear()
         self._launch(kernel, "backward", spp, seed, (self._image_grad, self.film.drop_marks),
-                     (np.float32(1.0 / spp), *(grads[b] for b in BUFFERS), *self._alpha_records()))
+                     (np.float32(1.0 / spp), *(grads[b] for b in BUFFERS), *self._alpha_records(),
+                      *(np.int32(min(max(v, 0), 2**31 - 1)) for v in moving)))
         self.dropped = self.film.dropped_samples()
         out = {}
         for name in BUFFERS:
@@ -251,6 +256,38 @@ class PathReplay:
             self.dropped += int(marks.astype(np.int64).sum())
         return out, prims, hits
 
+    def soft_edge_pick(self, points: np.ndarray, u: np.ndarray, edges: np.ndarray, ranges: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """For each shading point (N, 3), one silhouette edge seen from it among the edges ``ranges[i]`` = (first,
+        count) of ``edges`` (E, 20) float32 records (the soft_edge_pick kernel's: end points, each face's point
+        and normal, the one-face flag), in proportion to the angle it subtends, with uniform numbers ``u`` (N,).
+        Returns the chosen edge (N,) relative to its range's first (-1: none) and the inverse of its
+        probability (N,)."""
+        kernel = self.kernel("soft_edge_pick")
+        pts = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
+        n = len(pts)
+        pick = np.full(n, -1, np.int32)
+        inv_pdf = np.zeros(n, np.float32)
+        if not n or not len(edges):
+            return pick, inv_pdf
+        e_buf = upload(self.device, np.ascontiguousarray(edges, np.float32).reshape(-1), "silhouette edges")
+        uu = np.ascontiguousarray(u, np.float32)
+        rr = np.ascontiguousarray(ranges, np.int32).reshape(-1, 2)
+        for start in range(0, n, LAUNCH):
+            count = min(LAUNCH, n - start)
+            p_buf = upload(self.device, pts[start:start + count], "shading points")
+            u_buf = upload(self.device, uu[start:start + count], "edge choices")
+            r_buf = upload(self.device, rr[start:start + count], "edge ranges")
+            k_buf = alloc(self.device, 4 * count, "chosen edges")
+            w_buf = alloc(self.device, 4 * count, "chosen edges' inverse probabilities")
+            g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
+            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), p_buf, u_buf, e_buf, r_buf, k_buf, w_buf,
+                        np.int32(count))
+            self.profile.record("soft_edge_pick", ev)
+            cl.enqueue_copy(self.device.queue, pick[start:start + count], k_buf)
+            cl.enqueue_copy(self.device.queue, inv_pdf[start:start + count], w_buf)
+        return pick, inv_pdf
+
     def forward(self, tangent: dict[str, np.ndarray], spp: int, seed: int, kinds: Iterable[str] = ()) -> np.ndarray:
         """Forward mode: the derivative of the image (H, W, 3) along ``tangent`` (host arrays by buffer
         name, layout.py); ``kinds``: ``geometry`` when the tangent moves vertices or lights, ``camera`` when it moves
@@ -263,6 +300,6 @@ class PathReplay:
                 cl.enqueue_copy(self.device.queue, bufs[name], data)
         self.film.clear()
         self._launch(kernel, "forward", spp, seed, (self.film.frame, self.film.drop_marks),
-                     (*(bufs[b] for b in BUFFERS), *self._alpha_records()))
+                     (*(bufs[b] for b in BUFFERS), *self._alpha_records(), np.int32(0), np.int32(0)))
         self.dropped = self.film.dropped_samples()
         return self.film.image()

@@ -43,6 +43,7 @@ from pyclpt.gradients.edges import (
     add_on_edges,
     add_on_triangles,
     along,
+    edge_copies,
     edge_point_motion,
     mesh_edges,
     sample_weights,
@@ -301,8 +302,6 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
 
 #: Angular offset (radians) of the two directions either side of a soft-shadow edge point.
 SOFT_SIDE_EPS = 1e-4
-#: Shading points a time whose silhouettes are found together (points x edges booleans).
-POINT_CHUNK = 4096
 
 
 @dataclass
@@ -316,18 +315,27 @@ class MeshEdges:
 
     @classmethod
     def of(cls, mesh) -> MeshEdges:
-        f = mesh.indices.astype(np.int64)
-        pairs = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-        face = np.tile(np.arange(len(f)), 3)
-        key = np.sort(pairs, axis=1)
-        order = np.lexsort((key[:, 1], key[:, 0]))
-        key, face = key[order], face[order]
-        new = np.ones(len(key), bool)
-        new[1:] = np.any(key[1:] != key[:-1], axis=1)
+        """``mesh``'s edges, welded by position (:func:`pyclpt.gradients.edges.edge_copies`); ``v0``, ``v1``: the
+        vertex indices of ``face_a``'s copy."""
+        pairs, face, new = edge_copies(mesh)
         first = np.flatnonzero(new)
-        count = np.diff(np.append(first, len(key)))
-        face_b = np.where(count == 2, face[np.minimum(first + 1, len(key) - 1)], -1)
-        return cls(key[first, 0], key[first, 1], face[first], face_b)
+        count = np.diff(np.append(first, len(pairs)))
+        face_b = np.where(count == 2, face[np.minimum(first + 1, len(pairs) - 1)], -1)
+        return cls(pairs[first, 0], pairs[first, 1], face[first], face_b)
+
+    def records(self, positions: np.ndarray, indices: np.ndarray, face_normals: np.ndarray) -> np.ndarray:
+        """(E, 20) float32: the edges as the soft_edge_pick kernel reads them (cl/gradients/soft_edge_pick.cl): end
+        points, a vertex and the unit normal of each face (a boundary edge's second face repeats its first), and
+        1 for a boundary edge."""
+        length = np.linalg.norm(face_normals, axis=1, keepdims=True)
+        unit = np.divide(face_normals, length, out=np.zeros_like(face_normals), where=length > 0)
+        fb = np.where(self.face_b >= 0, self.face_b, self.face_a)
+        rec = np.zeros((len(self.v0), 20), np.float32)
+        rec[:, 0:3], rec[:, 3:6] = positions[self.v0], positions[self.v1]
+        rec[:, 6:9], rec[:, 9:12] = positions[indices[self.face_a, 0]], unit[self.face_a]
+        rec[:, 12:15], rec[:, 15:18] = positions[indices[fb, 0]], unit[fb]
+        rec[:, 18] = self.face_b < 0
+        return rec
 
 
 def _camera_rays(scene: Scene, film: np.ndarray, width: int, height: int, camera: Camera | None = None
@@ -422,46 +430,50 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
     parts: dict[str, list[np.ndarray]] = {k: [] for k in keys}
     moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | camera  # shading points that move
     occluders = set(meshes)
+    # the silhouette search on the device, every mesh's in one launch: each shading point that can see mesh i's
+    # outline (not on i; i moves or the point does) against i's edges
+    found, entries, records, first_edge = [], [], [], 0
     for i in sorted(occluders | (set(range(len(scene.meshes))) if len(receivers) or camera else set())):
         mesh = scene.meshes[i]
         p = mesh.positions.astype(np.float64)
         tri = mesh.indices.astype(np.int64)
-        face_n = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
         edges = MeshEdges.of(mesh)
-        a, b = p[edges.v0], p[edges.v1]
         live = np.flatnonzero(np.isfinite(t_hit) & (mesh_hit != i) & ((i in occluders) | moving))
-        chosen_e = np.full(len(x), -1)
-        chosen_w = np.zeros(len(x))  # 1 / the edge's probability
-        for c0 in range(0, len(live), POINT_CHUNK):
-            idx = live[c0:c0 + POINT_CHUNK]
-            xs = x[idx]
-            side_a = np.einsum("ec,nec->ne", face_n[edges.face_a], xs[:, None] - p[tri[edges.face_a, 0]][None]) > 0
-            fb = np.maximum(edges.face_b, 0)
-            side_b = np.einsum("ec,nec->ne", face_n[fb], xs[:, None] - p[tri[fb, 0]][None]) > 0
-            silhouette = (edges.face_b[None] < 0) | (side_a != side_b)
-            wa, _ = _unit(a[None] - xs[:, None])
-            wb, _ = _unit(b[None] - xs[:, None])
-            angle = np.arccos(np.clip(np.einsum("nec,nec->ne", wa, wb), -1.0, 1.0)) * silhouette
-            total = angle.sum(1)
-            ok = total > 0
-            cdf = np.cumsum(angle, axis=1)
-            u = rng.random(len(idx)) * total
-            k = np.minimum((cdf < u[:, None]).sum(1), len(edges.v0) - 1)
-            chosen_e[idx[ok]] = k[ok]
-            chosen_w[idx[ok]] = total[ok] / np.maximum(angle[np.arange(len(idx)), k][ok], 1e-300)
-        sel = np.flatnonzero(chosen_e >= 0)
-        if not len(sel):
+        if not len(live) or not len(edges.v0):
             continue
-        k = chosen_e[sel]
+        records.append(edges.records(p, tri, np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])))
+        found.append((i, p, edges, live))
+        entries.append(np.broadcast_to(np.array([first_edge, len(edges.v0)], np.int32), (len(live), 2)))
+        first_edge += len(edges.v0)
+    if found:
+        lives = np.concatenate([f[3] for f in found])
+        picks, inv_pdfs = replay.soft_edge_pick(x[lives], rng.random(len(lives)), np.concatenate(records),
+                                                np.concatenate(entries))
+    # the edge points and the samples of the incident_radiance kernel, every mesh's in one launch
+    chosen, samples, at = [], [], 0
+    for i, p, edges, live in found:
+        k, inv_pdf = picks[at:at + len(live)], inv_pdfs[at:at + len(live)]
+        at += len(live)
+        ok = k >= 0
+        sel, k, w_pick = live[ok], k[ok].astype(np.int64), inv_pdf[ok].astype(np.float64)  # 1 / p(edge)
+        a, b = p[edges.v0[k]], p[edges.v1[k]]
         t = rng.random(len(sel))
-        e = a[k] + t[:, None] * (b[k] - a[k])
+        e = a + t[:, None] * (b - a)
         w, dist = _unit(e - x[sel])
-        dw_dt = ((b[k] - a[k]) - w * np.einsum("nc,nc->n", w, b[k] - a[k])[:, None]) / dist[:, None]
+        dw_dt = ((b - a) - w * np.einsum("nc,nc->n", w, b - a)[:, None]) / dist[:, None]
         n, speed = _unit(np.cross(w, dw_dt))
         keep = speed > 1e-12
-        sel, k, t, w, dist, n, speed = (v[keep] for v in (sel, k, t, w, dist, n, speed))
-        samples = np.concatenate([film[sel], w, n], axis=1)
-        radiance, prims, hits = replay.incident_radiance(samples, seed, SOFT_SIDE_EPS)
+        sel, k, w_pick, t, w, dist, n, speed = (v[keep] for v in (sel, k, w_pick, t, w, dist, n, speed))
+        chosen.append((i, edges, sel, k, w_pick, t, dist, n, speed))
+        samples.append(np.concatenate([film[sel], w, n], axis=1))
+    if samples:
+        radiances, all_prims, all_hits = replay.incident_radiance(np.concatenate(samples), seed, SOFT_SIDE_EPS)
+    at = 0
+    for i, edges, sel, k, w_pick, t, dist, n, speed in chosen:
+        radiance, prims, hits = (v[at:at + len(sel)] for v in (radiances, all_prims, all_hits))
+        at += len(sel)
+        if not len(sel):
+            continue
         # The material form (the interior term's: points on the surfaces move with them): the occluder's own
         # radiance has no jump at its outline (its points stay in its area integral), what it hides behind does:
         # the side whose ray meets mesh i first counts 0, and the outline moves relative to that background.
@@ -477,7 +489,7 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         parts["back_dist"].append(np.where(back >= 0, hits[rows, side, 0].astype(np.float64), np.inf))
         parts["edge_dist"].append(dist)
         # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel
-        parts["jump"].append((radiance[:, 0] - radiance[:, 1]) * (speed * chosen_w[sel] / spp)[:, None])
+        parts["jump"].append((radiance[:, 0] - radiance[:, 1]) * (speed * w_pick / spp)[:, None])
         parts["film"].append(film[sel])
         parts["mesh"].append(np.full(len(sel), i))
         parts["v0"].append(edges.v0[k])
