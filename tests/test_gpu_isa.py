@@ -30,7 +30,7 @@ KERNELS = {"megakernel", "path_init", "intersect", "miss", "process_hit", "shado
            "sample_bsdf", "compact_count", "compact_scatter", "finish_paths", "accumulate_frame", "accumulate_batch",
            "resolve", "aov_accumulate", "count_dropped", "demodulate", "reproject", "clip_history", "antilag",
            "variance", "atrous", "modulate", "deficit", "deficit_gain", "blend", "backward", "forward", "edge_radiance",
-           "incident_radiance", "soft_edge_pick", "splat_axes", "splat_gather"}
+           "incident_radiance", "soft_edge_pick", "path_vertices", "vertex_radiance", "splat_axes", "splat_gather"}
 
 
 @pytest.fixture(scope="module")

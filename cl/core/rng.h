@@ -23,6 +23,7 @@
 #define DIM_MASK_SHADOW 10 /* opacity tests of the shadow ray */
 #define DIM_LENS_U 11 /* the thin lens's aperture sample (bounce 0) */
 #define DIM_LENS_V 12
+#define DIM_VERTEX_CHOICE 13 /* gradients/path_vertices.cl: which later vertex of a path its boundary term takes */
 
 /* The high word of a 32 x 32-bit product: exact on every device, and inlined on PoCL, which calls
  * OpenCL's mul_hi out of line. */

@@ -11,7 +11,7 @@
  *           one gives 0 and adds 1 to drop_marks[2 i (+ 1)]; first_prim[2 i (+ 1)] the leaf-order triangle that
  *           side's ray meets first (-1: none) and first_hit[3 (2 i (+ 1))] its distance and barycentrics there, so
  *           that the host can tell the occluder's side from the one that passes it, and what lies behind. */
-#include "integrators/path.h"
+#include "gradients/incident.h"
 
 __kernel SCALAR_KERNEL void incident_radiance(SCENE_PARAMS, __global const float* samples, __global float* radiance,
                                               __global int* first_prim, __global float* first_hit,
@@ -26,7 +26,6 @@ __kernel SCALAR_KERNEL void incident_radiance(SCENE_PARAMS, __global const float
     camera_ray(&sc, key, q[0], q[1], &cam);
     Hit hit;
     bool found = depth_allows(1, max_depth) && scene_closest(&sc, key, 0, cam.org, cam.dir, &hit);
-    vec3 w = v3(q[2], q[3], q[4]), n = v3(q[5], q[6], q[7]);
     Surface s;
     Bsdf b;
     vec3 wi = v3_splat(0.0f);
@@ -35,36 +34,6 @@ __kernel SCALAR_KERNEL void incident_radiance(SCENE_PARAMS, __global const float
         b = bsdf_at(&sc, &s);
         wi = to_local(s.sh, v3_neg(cam.dir));
     }
-    for (int side = 0; side < 2; side++) {
-        vec3 out = v3_splat(0.0f);
-        int prim = -1;
-        vec3 where = v3_splat(0.0f);
-        if (found) {
-            vec3 dir = m_normalize(v3_add(w, v3_scale(n, side == 0 ? -eps : eps)));
-            vec3 wo = to_local(s.sh, dir);
-            float pdf;
-            vec3 f = bsdf_eval(&b, wi, wo, &pdf); /* value x |cos| */
-            if (m_dot(dir, s.ng) * wo.z > 0.0f && !v3_is_zero(f)) {
-                PathState ps;
-                ps.org = spawn_origin(&s, dir);
-                ps.dir = dir;
-                ps.beta = v3_splat(1.0f);
-                ps.L = v3_splat(0.0f);
-                ps.prev_pdf = 0.0f;
-                ps.eta_scale = 1.0f;
-                ps.depth = 1;
-                ps.flags = PATH_PREV_DELTA;
-                Hit next;
-                if (scene_closest(&sc, key, 1, ps.org, ps.dir, &next)) {
-                    prim = next.prim;
-                    where = v3(next.t, next.u, next.v);
-                }
-                path_continue(&sc, key, &ps, max_depth, aov_out(0, 0, 0));
-                out = v3_mul(f, ps.L);
-            }
-        }
-        film_commit(radiance, drop_marks, 2 * i + side, out);
-        first_prim[2 * i + side] = prim;
-        store3(first_hit, 2 * i + side, where);
-    }
+    incident_sides(&sc, key, found, &s, &b, wi, v3(q[2], q[3], q[4]), v3(q[5], q[6], q[7]), eps, 1, max_depth, i,
+                   radiance, first_prim, first_hit, drop_marks);
 }

@@ -86,7 +86,8 @@ class PathReplay:
 
     def kernel(self, name: str, kinds: Iterable[str] = ()) -> cl.Kernel:
         """Kernel ``backward`` or ``forward`` (specialised for the parameter kinds differentiated), or one of the
-        boundary terms' (``edge_radiance``, ``incident_radiance``, ``soft_edge_pick``)."""
+        boundary terms' (``edge_radiance``, ``incident_radiance``, ``soft_edge_pick``, ``path_vertices``,
+        ``vertex_radiance``)."""
         kinds = tuple(sorted(set(kinds)))
         key = (name, *kinds)
         if key not in self._programs:
@@ -228,16 +229,33 @@ class PathReplay:
         kernel; N, 8 float32), both with the random numbers of (seed, sample), the leaf-order triangle (N, 2)
         each side's ray meets first (-1: none) and its distance and barycentrics there (N, 2, 3). NaN or inf ones
         give 0 and are counted in :attr:`dropped`."""
-        kernel = self.kernel("incident_radiance")
         pts = np.ascontiguousarray(samples, np.float32).reshape(-1, 8)
-        out = np.zeros((len(pts), 2, 3), np.float32)
-        prims = np.full((len(pts), 2), -1, np.int32)
-        hits = np.zeros((len(pts), 2, 3), np.float32)
+        return self._sides("incident_radiance", len(pts), [(pts, "incident-radiance samples")], seed, eps)
+
+    def vertex_radiance(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, seed: int, eps: float
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`incident_radiance`, at later vertices of camera paths (:meth:`path_vertices`): the leaf-order
+        triangles ``prims`` (N,), ``samples`` (N, 11) = barycentrics, the direction back along the path, the
+        direction w and its side n, and the vertices' bounces ``depths`` (N,) (the vertex_radiance kernel)."""
+        pr = np.ascontiguousarray(prims, np.int32).reshape(-1)
+        pts = np.ascontiguousarray(samples, np.float32).reshape(-1, 11)
+        dp = np.ascontiguousarray(depths, np.int32).reshape(-1)
+        return self._sides("vertex_radiance", len(pr), [(pr, "vertex triangles"), (pts, "vertex samples"),
+                                                        (dp, "vertex bounces")], seed, eps)
+
+    def _sides(self, name: str, n: int, inputs: list[tuple[np.ndarray, str]], seed: int, eps: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Launch incident_radiance or vertex_radiance over n samples of the arrays ``inputs`` (first axis: the
+        sample); their common outputs (cl/gradients/incident.h)."""
+        kernel = self.kernel(name)
+        out = np.zeros((n, 2, 3), np.float32)
+        prims = np.full((n, 2), -1, np.int32)
+        hits = np.zeros((n, 2, 3), np.float32)
         args = self.scene.args(self.width, self.height)
         self.dropped = 0
-        for start in range(0, len(pts), LAUNCH):
-            count = min(LAUNCH, len(pts) - start)
-            p_buf = upload(self.device, pts[start:start + count], "incident-radiance samples")
+        for start in range(0, n, LAUNCH):
+            count = min(LAUNCH, n - start)
+            bufs = [upload(self.device, a[start:start + count], what) for a, what in inputs]
             r_buf = alloc(self.device, 4 * 6 * count, "incident radiance")
             f_buf = alloc(self.device, 4 * 2 * count, "incident radiance first triangles")
             h_buf = alloc(self.device, 4 * 6 * count, "incident radiance first hits")
@@ -245,16 +263,41 @@ class PathReplay:
             m_buf = alloc(self.device, marks.nbytes, "incident radiance drop marks")
             fill_buffer(self.device.queue, m_buf, np.uint8(0), 0, marks.nbytes)
             g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
-            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, p_buf, r_buf, f_buf, h_buf, m_buf,
-                        np.uint32(seed),
-                        np.int32(count), np.int32(self.max_depth), np.float32(eps))
-            self.profile.record("incident_radiance", ev)
+            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, *bufs, r_buf, f_buf, h_buf, m_buf,
+                        np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps))
+            self.profile.record(name, ev)
             cl.enqueue_copy(self.device.queue, out[start:start + count], r_buf)
             cl.enqueue_copy(self.device.queue, prims[start:start + count], f_buf)
             cl.enqueue_copy(self.device.queue, hits[start:start + count], h_buf)
             cl.enqueue_copy(self.device.queue, marks, m_buf)
             self.dropped += int(marks.astype(np.int64).sum())
         return out, prims, hits
+
+    def path_vertices(self, film: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One later vertex of the camera path through each film position (N, 2) (the path_vertices kernel, random
+        numbers of (seed, i)): its leaf-order triangle (N,) (-1: none), (N, 8) its barycentrics, the direction
+        back along the path and its throughput over the probability of the choice, and its bounce (N,)."""
+        kernel = self.kernel("path_vertices")
+        f = np.ascontiguousarray(film, np.float32).reshape(-1, 2)
+        n = len(f)
+        prims = np.full(n, -1, np.int32)
+        vertex = np.zeros((n, 8), np.float32)
+        depths = np.zeros(n, np.int32)
+        args = self.scene.args(self.width, self.height)
+        for start in range(0, n, LAUNCH):
+            count = min(LAUNCH, n - start)
+            f_buf = upload(self.device, f[start:start + count], "path film positions")
+            p_buf = alloc(self.device, 4 * count, "path vertex triangles")
+            v_buf = alloc(self.device, 4 * 8 * count, "path vertices")
+            d_buf = alloc(self.device, 4 * count, "path vertex bounces")
+            g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
+            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, f_buf, p_buf, v_buf, d_buf, np.uint32(seed),
+                        np.int32(count), np.int32(self.max_depth))
+            self.profile.record("path_vertices", ev)
+            cl.enqueue_copy(self.device.queue, prims[start:start + count], p_buf)
+            cl.enqueue_copy(self.device.queue, vertex[start:start + count], v_buf)
+            cl.enqueue_copy(self.device.queue, depths[start:start + count], d_buf)
+        return prims, vertex, depths
 
     def soft_edge_pick(self, points: np.ndarray, u: np.ndarray, edges: np.ndarray, ranges: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:

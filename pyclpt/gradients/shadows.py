@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pyclpt.buffers.rfilter import sample_offsets
 from pyclpt.device.context import Device
 from pyclpt.gradients.edges import (
     CAMERA_STEP,
@@ -354,8 +355,8 @@ def _camera_rays(scene: Scene, film: np.ndarray, width: int, height: int, camera
 class SoftSamples:
     """Points on the occluders' silhouettes seen from the shading points, and what each contributes."""
 
-    pixels: np.ndarray  # (N, K) flat pixel indices the shading point's filter reaches (-1: none)
-    weights: np.ndarray  # (N, K) the filter's normalised weights there
+    pixels: np.ndarray  # (N, 1) the flat index of the pixel the shading point stands for
+    weights: np.ndarray  # (N, 1) 1 (its film position was drawn from the pixel's filter)
     jump: np.ndarray  # (N, 3) f |cos| (L_i- - L_i+) x the curve's measure per sample
     mesh: np.ndarray  # (N,) index in scene.meshes of the occluder
     v0: np.ndarray  # (N,) the edge's vertices
@@ -371,6 +372,9 @@ class SoftSamples:
     ray: np.ndarray
     receiver_normal: np.ndarray
     point: np.ndarray  # (N, 3) the shading point
+    # (N,): False for a camera hit (it slides on its camera ray), True for a later vertex of a camera path (attached
+    # to its surface: path_vertices)
+    attached: np.ndarray
     # what the occluder hides there (the first hit of the side that passes it): its mesh (-1: none, the
     # environment), triangle (index in its mesh), barycentrics (N, 2), distance (inf: none); the edge point's
     background: np.ndarray
@@ -392,7 +396,9 @@ class SoftSamples:
         (velocity = n / |e - x|)."""
         nd = np.einsum("nc,nc->n", self.receiver_normal, self.ray)
         k = -np.einsum("nc,nc->n", self.velocity, self.ray) / np.where(nd != 0, nd, np.inf) * self.relative
-        return k[:, None] * self.receiver_normal
+        # a later vertex is attached to its surface, x = p: -n . dp (1 / |e - x| - 1 / |b - x|)
+        return np.where(self.attached[:, None], -self.velocity * self.relative[:, None],
+                        k[:, None] * self.receiver_normal)
 
     def background_velocity(self) -> np.ndarray:
         """(N, 3): n . d(outline's direction relative to the background)/d(the background's material point):
@@ -402,16 +408,25 @@ class SoftSamples:
 
 def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
                       max_depth: int | None = None, device: Device | str | None = None,
-                      receivers: Sequence[int] = (), camera: bool = False) -> SoftSamples:
-    """``spp`` shading points a pixel (stratified), each with one point on an edge of ``scene.meshes[i]`` (i in
+                      receivers: Sequence[int] = (), camera: bool = False, later: bool = True) -> SoftSamples:
+    """``spp`` shading points a pixel, each with one point on an edge of ``scene.meshes[i]`` (i in
     ``meshes``) that is a silhouette from it, chosen in proportion to the angle the edges subtend, and the
     radiance either side from the ``incident_radiance`` kernel (see :func:`soft_shadow_boundary`). With
     ``receivers`` (mesh indices) the shading points on those meshes also take a point on an edge of every other
-    mesh (their own motion moves the outlines they see); with ``camera``, every shading point does."""
+    mesh (their own motion moves the outlines they see); with ``camera``, every shading point does. With ``later``,
+    also one later vertex of a camera path through each of the same film positions (the path_vertices kernel: a
+    vertex after the first bounce, weighted by the throughput that reached it), whose incident light's outlines
+    move as its surface (attached), the occluders and what they hide move, not with the camera.
+    A shading point stands for its own pixel alone (``pixels`` (N, 1), ``weights`` 1): its film position is drawn
+    from the pixel's filter (filter importance sampling, :func:`pyclpt.buffers.rfilter.sample_offsets`; the box:
+    uniform in the pixel), rather than spread over the 16 pixels Mitsuba's gaussian reaches (its (N, 16) tables
+    took a third of the term's time)."""
     Projection.of(scene, width, height)  # perspective cameras only (the others are refused by name)
     rng = np.random.default_rng([seed, 0x736F6674])  # "soft"
     pix = np.repeat(np.arange(width * height), spp)
-    film = np.stack([pix % width, pix // width], axis=1) + rng.random((len(pix), 2))
+    cell, u = np.stack([pix % width, pix // width], axis=1), rng.random((len(pix), 2))
+    rfilter = scene.film.rfilter
+    film = cell + u if rfilter.kind == "box" else cell + 0.5 + sample_offsets(rfilter, u)
     org, dirs = _camera_rays(scene, film, width, height)
     tracer = _HostTracer(scene)
     t_hit, ng_hit, mesh_hit, tri_hit, bary_hit = tracer.hit_triangle(org, dirs)
@@ -425,10 +440,44 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         """The mesh (index in scene.meshes) of leaf-order triangles (-1: none)."""
         return np.where(prims >= 0, np.searchsorted(first, order[np.maximum(prims, 0)], side="right") - 1, -1)
 
-    keys = ("film", "jump", "mesh", "v0", "v1", "t", "velocity", "receiver", "tri", "bary", "ray", "receiver_normal",
-            "point", "background", "back_tri", "back_bary", "back_dist", "edge_dist")
+    # The later vertices of camera paths through the same film positions (path_vertices: one a path, attached to
+    # its surface, weighted by the throughput that reached it): the light they receive has outlines too.
+    n_first = len(film)
+    valid = np.isfinite(t_hit)
+    beta = np.ones((n_first, 3))
+    attached = np.zeros(n_first, bool)
+    prim = np.full(n_first, -1, np.int64)
+    depth = np.zeros(n_first, np.int64)
+    back_dir = -dirs
+    if later and (replay.max_depth < 0 or replay.max_depth > 2):  # a bounce after the camera's hit's
+        vprim, vert, vdepth = replay.path_vertices(film, int(rng.integers(2**32)))
+        keep = np.flatnonzero(vprim >= 0)
+        vmesh = prim_mesh(vprim[keep])
+        vtri = order[vprim[keep]] - first[vmesh]
+        vbary = vert[keep, :2].astype(np.float64)
+        vx, vn = np.zeros((len(keep), 3)), np.zeros((len(keep), 3))
+        for i in np.unique(vmesh):
+            r = vmesh == i
+            p = scene.meshes[i].positions.astype(np.float64)
+            vx[r] = _point_motion(scene, i, vtri[r], vbary[r], p)  # the barycentric point
+            corners = p[scene.meshes[i].indices.astype(np.int64)[vtri[r]]]  # (n, 3, 3)
+            vn[r] = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        vn, _ = _unit(vn)
+        film, x, mesh_hit, tri_hit = (np.concatenate(v) for v in ((film, film[keep]), (x, vx), (mesh_hit, vmesh),
+                                                                   (tri_hit, vtri)))
+        pix = np.concatenate([pix, pix[keep]])
+        bary_hit, ng_hit, dirs = (np.concatenate(v) for v in ((bary_hit, vbary), (ng_hit, vn),
+                                                               (dirs, -vert[keep, 2:5])))
+        valid, beta = np.concatenate([valid, np.ones(len(keep), bool)]), np.concatenate([beta, vert[keep, 5:8]])
+        attached = np.concatenate([attached, np.ones(len(keep), bool)])
+        prim, depth = np.concatenate([prim, vprim[keep]]), np.concatenate([depth, vdepth[keep]])
+        back_dir = np.concatenate([back_dir, vert[keep, 2:5].astype(np.float64)])
+
+    keys = ("pixel", "film", "jump", "mesh", "v0", "v1", "t", "velocity", "receiver", "tri", "bary", "ray",
+            "receiver_normal", "point", "attached", "background", "back_tri", "back_bary", "back_dist", "edge_dist")
     parts: dict[str, list[np.ndarray]] = {k: [] for k in keys}
-    moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | camera  # shading points that move
+    # shading points that move: on a moving mesh, or (the camera's hits, sliding on its rays) with the camera
+    moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | (camera & ~attached)
     occluders = set(meshes)
     # the silhouette search on the device, every mesh's in one launch: each shading point that can see mesh i's
     # outline (not on i; i moves or the point does) against i's edges
@@ -438,7 +487,7 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         p = mesh.positions.astype(np.float64)
         tri = mesh.indices.astype(np.int64)
         edges = MeshEdges.of(mesh)
-        live = np.flatnonzero(np.isfinite(t_hit) & (mesh_hit != i) & ((i in occluders) | moving))
+        live = np.flatnonzero(valid & (mesh_hit != i) & ((i in occluders) | moving))
         if not len(live) or not len(edges.v0):
             continue
         records.append(edges.records(p, tri, np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])))
@@ -465,9 +514,22 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         keep = speed > 1e-12
         sel, k, w_pick, t, w, dist, n, speed = (v[keep] for v in (sel, k, w_pick, t, w, dist, n, speed))
         chosen.append((i, edges, sel, k, w_pick, t, dist, n, speed))
-        samples.append(np.concatenate([film[sel], w, n], axis=1))
-    if samples:
-        radiances, all_prims, all_hits = replay.incident_radiance(np.concatenate(samples), seed, SOFT_SIDE_EPS)
+        samples.append((sel, w, n))
+    if samples:  # the camera's hits through incident_radiance, the later vertices through vertex_radiance
+        sel, w, n = (np.concatenate(v) for v in zip(*samples))
+        radiances = np.zeros((len(sel), 2, 3), np.float32)
+        all_prims = np.full((len(sel), 2), -1, np.int32)
+        all_hits = np.zeros((len(sel), 2, 3), np.float32)
+        at_camera, later_ones = np.flatnonzero(~attached[sel]), np.flatnonzero(attached[sel])
+        if len(at_camera):
+            q = at_camera
+            radiances[q], all_prims[q], all_hits[q] = replay.incident_radiance(
+                np.concatenate([film[sel[q]], w[q], n[q]], axis=1), seed, SOFT_SIDE_EPS)
+        if len(later_ones):
+            q, v = later_ones, sel[later_ones]
+            radiances[q], all_prims[q], all_hits[q] = replay.vertex_radiance(
+                prim[v], np.concatenate([bary_hit[v], back_dir[v], w[q], n[q]], axis=1), depth[v], seed,
+                SOFT_SIDE_EPS)
     at = 0
     for i, edges, sel, k, w_pick, t, dist, n, speed in chosen:
         radiance, prims, hits = (v[at:at + len(sel)] for v in (radiances, all_prims, all_hits))
@@ -479,6 +541,12 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         # the side whose ray meets mesh i first counts 0, and the outline moves relative to that background.
         pm = prim_mesh(prims)
         radiance = np.where((pm == i)[..., None], 0.0, radiance.astype(np.float64))
+        # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel
+        jump = (radiance[:, 0] - radiance[:, 1]) * (speed * w_pick / spp)[:, None] * beta[sel]
+        # a sample with no jump contributes nothing (a third of them: both sides meet the occluder, or the same
+        # light): kept out of the tables
+        nz = np.flatnonzero(np.any(jump != 0.0, axis=1))
+        pm, prims, hits, jump, sel, k, t, dist, n = (v[nz] for v in (pm, prims, hits, jump, sel, k, t, dist, n))
         rows = np.arange(len(pm))
         side = np.where(pm[:, 0] != i, 0, 1)  # the side that passes the occluder (0 when both do)
         back = np.where(pm[rows, side] != i, pm[rows, side], -1)
@@ -488,8 +556,7 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         parts["back_bary"].append(hits[rows, side, 1:].astype(np.float64))
         parts["back_dist"].append(np.where(back >= 0, hits[rows, side, 0].astype(np.float64), np.inf))
         parts["edge_dist"].append(dist)
-        # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel
-        parts["jump"].append((radiance[:, 0] - radiance[:, 1]) * (speed * w_pick / spp)[:, None])
+        parts["jump"].append(jump)
         parts["film"].append(film[sel])
         parts["mesh"].append(np.full(len(sel), i))
         parts["v0"].append(edges.v0[k])
@@ -497,15 +564,16 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         parts["t"].append(t)
         parts["velocity"].append(n / dist[:, None])  # n is normal to w: n . (I - w w^T) / |e - x| = n / |e - x|
         for key, v in (("receiver", mesh_hit), ("tri", tri_hit), ("bary", bary_hit), ("ray", dirs),
-                       ("receiver_normal", ng_hit), ("point", x)):
+                       ("receiver_normal", ng_hit), ("point", x), ("attached", attached), ("pixel", pix)):
             parts[key].append(v[sel])
     if not parts["film"]:
         z, z3, zi = np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64)
         return SoftSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), z3, zi, zi, zi, z, z3, zi, zi,
-                           np.zeros((0, 2)), np.zeros((0, 2)), z3, z3, z3, zi, zi, np.zeros((0, 2)), z, z)
+                           np.zeros((0, 2)), np.zeros((0, 2)), z3, z3, z3, np.zeros(0, bool), zi, zi,
+                           np.zeros((0, 2)), z, z)
     cat = {k: np.concatenate(v) for k, v in parts.items()}
-    pixels, weights, _ = _filter_weights(scene.film.rfilter, cat["film"], width, height)
-    return SoftSamples(pixels, weights, **cat)
+    pixel = cat.pop("pixel")
+    return SoftSamples(pixel[:, None], np.ones((len(pixel), 1)), **cat)
 
 
 def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
@@ -588,6 +656,7 @@ def _shading_camera_velocity(scene: Scene, width: int, height: int, ss: SoftSamp
                                                                                    dirs)
             ends.append(o + t[:, None] * dirs)
         out[:, k] = -np.einsum("nc,nc->n", ss.velocity, (ends[0] - ends[1]) / (2 * step)) * ss.relative
+        out[ss.attached, k] = 0.0  # a later vertex stays on its surface when the camera moves
     return out.reshape(len(ss.point), *((4, 4) if name.endswith(".to_world") else (1,)))
 
 
