@@ -585,3 +585,26 @@ def test_the_light_after_the_first_bounce_has_outlines_too():
     with_later, without = rest + soft(True), rest + soft(False)
     assert abs(with_later - fd) < 0.35 * abs(fd), (with_later, without, fd)
     assert abs(without - fd) > 0.7 * abs(fd), (with_later, without, fd)
+
+
+def test_the_later_outlines_forward_equal_backward():
+    """The later vertices' soft-shadow samples (depth 4, the lifted box of the test above) give the same derivative
+    in forward and reverse mode, for the box's pose and for the camera's (which leaves the later vertices where they
+    are: their receiver terms are the box's alone), and they are there: samples attached to their surfaces, with
+    jumps."""
+    from pyclpt.gradients import shadows
+
+    scene = _lifted_box()
+    size = 16
+    grad = np.random.default_rng(3).random((size, size, 3)).astype(np.float32)
+    kw = dict(spp=16, seed=2, max_depth=4)
+    ss = shadows.sample_soft_edges(scene, [6], size, size, receivers=[6], **kw)
+    assert ss.attached.sum() > 100 and np.all(np.any(ss.jump[ss.attached] != 0, axis=1))
+    rng = np.random.default_rng(4)
+    for name in ("small-box.to_world", "sensor.to_world"):
+        back = shadows.soft_shadow_boundary(scene, grad, [name], **kw)[name]
+        tangent = rng.normal(size=back.shape)
+        tangent[3] = 0
+        image = shadows.soft_shadow_boundary_forward(scene, name, tangent, width=size, height=size, **kw)
+        want = float((back * tangent).sum())
+        assert float((image * grad).sum()) == pytest.approx(want, rel=1e-4, abs=1e-4), name
