@@ -62,3 +62,19 @@ def test_table_statistics():
     rows = [r for r in text.splitlines() if r.startswith("| s |")]
     assert len(rows) == 3
     assert rows[0].endswith("| +0.00 |") and rows[1].endswith("| - |")
+
+
+def test_the_cube_is_pyclpts_cube(tmp_path):
+    """The cube-shadow scene's PLY cube: the 24 corners (four to a face, split at its edges) of pyclpt's ``cube`` of
+    the same to_world, and its triangles wound outwards; both renderers load the same file."""
+    m = mg.translate([-0.1, 0.1, 0.55]) @ mg.rotate([1, 1, 0], 30) @ mg.scale(0.25)
+    corners, faces = mg.cube(m)
+    assert corners.shape == (24, 3) and faces.shape == (12, 3)
+    scene = pyclpt.load_dict({"type": "scene", "box": {"type": "cube", "to_world": m.tolist()}})
+    ours = np.asarray(scene.meshes[0].positions, np.float64)
+    assert sorted(map(tuple, np.round(corners, 5))) == sorted(map(tuple, np.round(ours, 5)))
+    n = np.cross(corners[faces[:, 1]] - corners[faces[:, 0]], corners[faces[:, 2]] - corners[faces[:, 0]])
+    assert np.all(np.einsum("ij,ij->i", n, corners[faces].mean(1) - corners.mean(0)) > 0)
+    ply = pyclpt.load_dict(mg.scene_dict("cube-shadow", tmp_path))
+    cube = next(s for s in ply.meshes if s.name == "cube")
+    assert np.asarray(cube.positions) == pytest.approx(corners, abs=1e-6)
