@@ -608,3 +608,28 @@ def test_the_later_outlines_forward_equal_backward():
         image = shadows.soft_shadow_boundary_forward(scene, name, tangent, width=size, height=size, **kw)
         want = float((back * tangent).sum())
         assert float((image * grad).sum()) == pytest.approx(want, rel=1e-4, abs=1e-4), name
+
+
+@pytest.mark.parametrize("name", ["small-box.to_world", "light.to_world"])
+def test_only_the_paths_that_meet_a_moving_mesh_are_replayed(name, monkeypatch):
+    """With the vertices of the moving meshes named (differentiate._moving_vertices), the backward kernel replays only
+    the paths with a vertex or a light sample on one of their triangles and scatters no other mesh's vertex adjoints
+    (geometry.h, geo_moving_prim): the Cornell box's small box, and its light (an emitter that moves: paths that only
+    sample it count), get the gradients of a pass that replays every path, up to float-atomic summation order; a
+    range that leaves the mesh out gives it none."""
+    import pyclpt.gradients.differentiate as differentiate
+
+    scene = _lifted_box()
+    grad = np.random.default_rng(6).random((16, 16, 3)).astype(np.float32)
+
+    def backward() -> np.ndarray:
+        return pyclpt.render_backward(scene, grad, spp=8, seed=1, max_depth=5, params=[name], boundary=False,
+                                      width=16, height=16)[name].astype(np.float64)
+
+    some = backward()
+    monkeypatch.setattr(differentiate, "_moving_vertices", lambda scene, chosen: (0, 2**31 - 1))
+    every = backward()
+    assert np.abs(some).max() > 0
+    np.testing.assert_allclose(some, every, rtol=1e-4, atol=1e-4 * np.abs(every).max())
+    monkeypatch.setattr(differentiate, "_moving_vertices", lambda scene, chosen: (0, 0))
+    assert np.all(backward() == 0)

@@ -158,7 +158,7 @@ static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, co
  * terms of the vertices from DEFERRED_VERTICES on. Returns the path's radiance. */
 static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pixel, int max_depth, vec3 dL,
                                  bool replay, vec3 L_total, uint* visible, Hit* hits, Deferred* deferred,
-                                 int* n_deferred, bool* more) {
+                                 int* n_deferred, bool* more, bool* touched) {
     PathState ps;
     camera_path(sc, key, pixel, &ps);
     if (max_depth == 0) return ps.L;
@@ -196,6 +196,7 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
         }
         Surface s = surface_hit(sc, hit.prim, hit.u, hit.v, ps.dir);
 #ifdef GRAD_GEOMETRY
+        if (!replay && geo_moving_prim(sc, gr, hit.prim)) *touched = true;
         Bsdf b = bsdf_at(sc, &s); /* here already: a delta-only vertex is held still */
         if (replay) {
             int kind = bsdf_is_delta(&b) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
@@ -238,6 +239,11 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
                 ps.L = v3_add(ps.L, n.sr.contrib);
                 if (!replay) {
                     if (ps.depth < VIS_BITS) *visible |= 1u << ps.depth;
+#ifdef GRAD_GEOMETRY
+                    __global const float* lr = sc->lights + LIGHT_STRIDE * n.ls.light; /* a moving emitter's point */
+                    if ((int)lr[LIGHT_TYPE] == LIGHT_TRIANGLE && geo_moving_prim(sc, gr, as_int(lr[LIGHT_PRIM])))
+                        *touched = true;
+#endif
                     grad_emitter(sc, gr, n.ls.light, n.ls.wi, v3_scale(v3_mul(v3_mul(dL, ps.beta), n.f), n.weight));
 #ifdef GRAD_BSDF
                     if (bsdf_differentiated(&b)) {
@@ -323,9 +329,9 @@ __kernel SCALAR_KERNEL void backward(SCENE_PARAMS, __global const float* image_g
     Hit hits[REPLAY_SLOTS];
     Deferred deferred[DEFERRED_SLOTS];
     int n_deferred = 0;
-    bool more = false;
+    bool more = false, touched = false;
     vec3 L = backward_walk(&sc, &gr, key, pixel, max_depth, dL, false, v3_splat(0.0f), &visible, hits, deferred,
-                           &n_deferred, &more);
+                           &n_deferred, &more, &touched);
     if (!all_finite3(L)) { /* dropped, with its gradient */
         drop_marks[f] = (uchar)1;
         return;
@@ -337,11 +343,14 @@ __kernel SCALAR_KERNEL void backward(SCENE_PARAMS, __global const float* image_g
     }
 #endif
 #ifdef GRAD_GEOMETRY
-    more = true; /* the interior term of moving geometry is the replay's (it needs the path's radiance) */
+    /* the interior term of moving geometry is the replay's (it needs the path's radiance), for a path with a
+       vertex or a light sample on a moving mesh (geo_moving_prim): on none, no factor of it moves */
+    more = more || touched;
 #endif
 #if defined(GRAD_BSDF) || defined(GRAD_GEOMETRY)
     if (more)
-        backward_walk(&sc, &gr, key, pixel, max_depth, dL, true, L, &visible, hits, deferred, &n_deferred, &more);
+        backward_walk(&sc, &gr, key, pixel, max_depth, dL, true, L, &visible, hits, deferred, &n_deferred, &more,
+                      &touched);
 #endif
     grad_flush(&gr);
 }

@@ -90,6 +90,18 @@ static inline GeoVertex geo_fixed(vec3 p) {
 }
 
 
+/* Whether leaf-order triangle prim is a moving mesh's: its vertices in the packed range [moving_lo, moving_hi) whose
+ * adjoints the host reads (params.h; a camera's, a light's or an instance's motion: the host passes every vertex).
+ * Always true in an instanced scene (a triangle's vertices there are its shapegroup's, whichever instance moves). */
+static inline bool geo_moving_prim(const Scene* sc, const Grads* gr, int prim) {
+#ifdef SCENE_HAS_INSTANCES
+    return true;
+#else
+    int k = sc->tri_vidx[3 * prim];
+    return k >= gr->moving_lo && k < gr->moving_hi;
+#endif
+}
+
 /* ---- triangles in world space (instanced scenes: through the vertex's instance record) ------------------ */
 
 /* The instance record of v's triangle (0: none, the identity). */
@@ -389,15 +401,10 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
         return;
     }
     if (v->kind == GEO_FIXED) return;
-#ifndef SCENE_HAS_INSTANCES
     /* a triangle of a mesh that does not move: nothing reads its vertices' adjoints (the host reads the packed
        vertices [moving_lo, moving_hi), the moving meshes'); a camera hit's adjoints still go to the camera. In
        the Cornell box with one box moving, most vertices are the walls': this saved 30 % of the backward pass. */
-    if (!v->camera) {
-        int k = sc->tri_vidx[3 * v->id];
-        if (k < gr->moving_lo || k >= gr->moving_hi) return;
-    }
-#endif
+    if (!v->camera && !geo_moving_prim(sc, gr, v->id)) return;
     vec3 e1, e2;
     geo_edges(sc, v, &e1, &e2);
     vec3 c = m_cross(e1, e2);

@@ -157,9 +157,13 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
 
 
 def _moving_vertices(scene: Scene, chosen: Sequence) -> tuple[int, int]:
-    """The packed vertices [lo, hi) that hold every moved mesh's (the backward kernel scatters no others)."""
-    spans = [(vertex_offset(scene, p.target), p.target.positions.shape[0]) for p in chosen
-             if p.kind == "geometry" and isinstance(p.target, Mesh)]
+    """The packed vertices [lo, hi) that hold every moved mesh's: the backward kernel scatters no others, and
+    replays only the paths that meet one of their triangles (cl/gradients/geometry.h, geo_moving_prim). Every vertex
+    when the camera, a light or an instance moves (every path can move then)."""
+    moving = [p for p in chosen if p.kind in ("geometry", "camera")]
+    if any(p.kind == "camera" or not isinstance(p.target, Mesh) for p in moving):
+        return 0, 2**31 - 1
+    spans = [(vertex_offset(scene, p.target), p.target.positions.shape[0]) for p in moving]
     if not spans:
         return 0, 0
     return min(lo for lo, _ in spans), max(lo + n for lo, n in spans)
