@@ -25,7 +25,7 @@
  * dimension): the replay, which scatters the third term of its later vertices (DEFERRED_VERTICES = 0:
  * every vertex, Mitsuba's prb as published). Shadow-ray visibility of the first 32 bounces is kept as
  * bits for the replay, and the closest hits of its first REPLAY_HITS bounces (t, u, v, prim) too, so that the
- * replay (with -DGRAD_GEOMETRY every path's) traverses the BVH only past them. A path's adjoints are summed
+ * replay (with -DGRAD_GEOMETRY that of every path meeting a moving mesh) traverses the BVH only past them. A path's adjoints are summed
  * privately per slot and added to the buffers when it ends (params.h: grad_put3, grad_flush). Memory: nothing
  * per path, sample or bounce in device memory; per work-item, private memory grows by REPLAY_HITS x 16 bytes
  * (128 by default) where a replay can happen (-DGRAD_BSDF or -DGRAD_GEOMETRY), which a GPU keeps in slow local
