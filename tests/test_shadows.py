@@ -227,3 +227,13 @@ def test_a_mesh_split_at_its_edges_has_the_outlines_of_the_welded_one():
         b = term(welded, grad, name, seed=4, max_depth=3, **kw)[name[0]]
         assert np.any(b != 0), term.__name__
         np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-3 * np.abs(b).max(), err_msg=term.__name__)
+
+
+def test_edge_stride_matches_the_kernel():
+    """MeshEdges.records writes the edge records cl/gradients/soft_edge_pick.cl reads, EDGE_STRIDE floats each."""
+    import re
+
+    from pyclpt.device.program import cl_dir
+
+    text = (cl_dir() / "gradients" / "soft_edge_pick.cl").read_text()
+    assert int(re.search(r"#define EDGE_STRIDE (\d+)", text).group(1)) == shadows.EDGE_STRIDE

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 import pyopencl as cl
@@ -167,8 +167,9 @@ class PathReplay:
                  moving: tuple[int, int] = (0, 2**31 - 1)) -> dict[str, np.ndarray]:
         """Reverse mode: the adjoints of every parameter of ``kinds`` (params.h) for dLoss/dImage
         ``image_grad`` (H, W, 3), as host copies of the gradient buffers by name (layout.py). ``moving``: the
-        packed vertices [lo, hi) whose adjoints (``verts``, ``vnormals``) are wanted (the moving meshes'; the
-        kernel skips the triangles of the others, cl/gradients/geometry.h, geo_scatter); default: all."""
+        packed vertices [lo, hi) whose adjoints (``verts``, ``vnormals``) are wanted (the moving meshes': the
+        kernel replays only the paths that meet their triangles and scatters no others', cl/gradients/geometry.h,
+        geo_moving_prim); default: all."""
         kinds = [k for k in kinds if k in KINDS or k in ("rigid", "instance")]
         kernel = self.kernel("backward", kinds)
         grads = self._buffers()
@@ -200,26 +201,12 @@ class PathReplay:
         ``eps`` times the unit film directions ``points[:, 2:]`` (the edge_radiance kernel; N, 4 float32),
         both with the random numbers of (seed, point). NaN or inf paths give 0 and are counted in
         :attr:`dropped`."""
-        kernel = self.kernel("edge_radiance")
         pts = np.ascontiguousarray(points, np.float32).reshape(-1, 4)
-        n = len(pts)
-        out = np.zeros((n, 2, 3), np.float32)
-        args = self.scene.args(self.width, self.height)
-        self.dropped = 0
-        for start in range(0, n, LAUNCH):
-            count = min(LAUNCH, n - start)
-            p_buf = upload(self.device, pts[start:start + count], "edge points")
-            r_buf = alloc(self.device, 4 * 6 * count, "edge radiance")
-            marks = np.zeros(2 * count, np.uint8)
-            m_buf = alloc(self.device, marks.nbytes, "edge drop marks")
-            fill_buffer(self.device.queue, m_buf, np.uint8(0), 0, marks.nbytes)
-            g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
-            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, p_buf, r_buf, m_buf, np.uint32(seed),
-                        np.int32(count), np.int32(self.max_depth), np.float32(eps))
-            self.profile.record("edge_radiance", ev)
-            cl.enqueue_copy(self.device.queue, out[start:start + count], r_buf)
-            cl.enqueue_copy(self.device.queue, marks, m_buf)
-            self.dropped += int(marks.astype(np.int64).sum())
+        out = np.zeros((len(pts), 2, 3), np.float32)
+        marks = np.zeros((len(pts), 2), np.uint8)
+        self._batched("edge_radiance", len(pts), self.scene.args(self.width, self.height), [pts], [out, marks],
+                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)))
+        self.dropped = int(marks.astype(np.int64).sum())
         return out
 
     def incident_radiance(self, samples: np.ndarray, seed: int, eps: float
@@ -229,74 +216,41 @@ class PathReplay:
         kernel; N, 8 float32), both with the random numbers of (seed, sample), the leaf-order triangle (N, 2)
         each side's ray meets first (-1: none) and its distance and barycentrics there (N, 2, 3). NaN or inf ones
         give 0 and are counted in :attr:`dropped`."""
-        pts = np.ascontiguousarray(samples, np.float32).reshape(-1, 8)
-        return self._sides("incident_radiance", len(pts), [(pts, "incident-radiance samples")], seed, eps)
+        return self._sides("incident_radiance", [np.ascontiguousarray(samples, np.float32).reshape(-1, 8)], seed, eps)
 
     def vertex_radiance(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, seed: int, eps: float
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """As :meth:`incident_radiance`, at later vertices of camera paths (:meth:`path_vertices`): the leaf-order
         triangles ``prims`` (N,), ``samples`` (N, 11) = barycentrics, the direction back along the path, the
         direction w and its side n, and the vertices' bounces ``depths`` (N,) (the vertex_radiance kernel)."""
-        pr = np.ascontiguousarray(prims, np.int32).reshape(-1)
-        pts = np.ascontiguousarray(samples, np.float32).reshape(-1, 11)
-        dp = np.ascontiguousarray(depths, np.int32).reshape(-1)
-        return self._sides("vertex_radiance", len(pr), [(pr, "vertex triangles"), (pts, "vertex samples"),
-                                                        (dp, "vertex bounces")], seed, eps)
+        return self._sides("vertex_radiance", [np.ascontiguousarray(prims, np.int32).reshape(-1),
+                                               np.ascontiguousarray(samples, np.float32).reshape(-1, 11),
+                                               np.ascontiguousarray(depths, np.int32).reshape(-1)], seed, eps)
 
-    def _sides(self, name: str, n: int, inputs: list[tuple[np.ndarray, str]], seed: int, eps: float
+    def _sides(self, name: str, inputs: list[np.ndarray], seed: int, eps: float
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Launch incident_radiance or vertex_radiance over n samples of the arrays ``inputs`` (first axis: the
-        sample); their common outputs (cl/gradients/incident.h)."""
-        kernel = self.kernel(name)
+        """incident_radiance or vertex_radiance over the samples of ``inputs`` (first axis: the sample): their
+        common outputs (cl/gradients/incident.h)."""
+        n = len(inputs[0])
         out = np.zeros((n, 2, 3), np.float32)
         prims = np.full((n, 2), -1, np.int32)
         hits = np.zeros((n, 2, 3), np.float32)
-        args = self.scene.args(self.width, self.height)
-        self.dropped = 0
-        for start in range(0, n, LAUNCH):
-            count = min(LAUNCH, n - start)
-            bufs = [upload(self.device, a[start:start + count], what) for a, what in inputs]
-            r_buf = alloc(self.device, 4 * 6 * count, "incident radiance")
-            f_buf = alloc(self.device, 4 * 2 * count, "incident radiance first triangles")
-            h_buf = alloc(self.device, 4 * 6 * count, "incident radiance first hits")
-            marks = np.zeros(2 * count, np.uint8)
-            m_buf = alloc(self.device, marks.nbytes, "incident radiance drop marks")
-            fill_buffer(self.device.queue, m_buf, np.uint8(0), 0, marks.nbytes)
-            g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
-            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, *bufs, r_buf, f_buf, h_buf, m_buf,
-                        np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps))
-            self.profile.record(name, ev)
-            cl.enqueue_copy(self.device.queue, out[start:start + count], r_buf)
-            cl.enqueue_copy(self.device.queue, prims[start:start + count], f_buf)
-            cl.enqueue_copy(self.device.queue, hits[start:start + count], h_buf)
-            cl.enqueue_copy(self.device.queue, marks, m_buf)
-            self.dropped += int(marks.astype(np.int64).sum())
+        marks = np.zeros((n, 2), np.uint8)
+        self._batched(name, n, self.scene.args(self.width, self.height), inputs, [out, prims, hits, marks],
+                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)))
+        self.dropped = int(marks.astype(np.int64).sum())
         return out, prims, hits
 
     def path_vertices(self, film: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One later vertex of the camera path through each film position (N, 2) (the path_vertices kernel, random
         numbers of (seed, i)): its leaf-order triangle (N,) (-1: none), (N, 8) its barycentrics, the direction
         back along the path and its throughput over the probability of the choice, and its bounce (N,)."""
-        kernel = self.kernel("path_vertices")
         f = np.ascontiguousarray(film, np.float32).reshape(-1, 2)
-        n = len(f)
-        prims = np.full(n, -1, np.int32)
-        vertex = np.zeros((n, 8), np.float32)
-        depths = np.zeros(n, np.int32)
-        args = self.scene.args(self.width, self.height)
-        for start in range(0, n, LAUNCH):
-            count = min(LAUNCH, n - start)
-            f_buf = upload(self.device, f[start:start + count], "path film positions")
-            p_buf = alloc(self.device, 4 * count, "path vertex triangles")
-            v_buf = alloc(self.device, 4 * 8 * count, "path vertices")
-            d_buf = alloc(self.device, 4 * count, "path vertex bounces")
-            g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
-            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), *args, f_buf, p_buf, v_buf, d_buf, np.uint32(seed),
-                        np.int32(count), np.int32(self.max_depth))
-            self.profile.record("path_vertices", ev)
-            cl.enqueue_copy(self.device.queue, prims[start:start + count], p_buf)
-            cl.enqueue_copy(self.device.queue, vertex[start:start + count], v_buf)
-            cl.enqueue_copy(self.device.queue, depths[start:start + count], d_buf)
+        prims = np.full(len(f), -1, np.int32)
+        vertex = np.zeros((len(f), 8), np.float32)
+        depths = np.zeros(len(f), np.int32)
+        self._batched("path_vertices", len(f), self.scene.args(self.width, self.height), [f], [prims, vertex, depths],
+                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth)))
         return prims, vertex, depths
 
     def soft_edge_pick(self, points: np.ndarray, u: np.ndarray, edges: np.ndarray, ranges: np.ndarray
@@ -306,30 +260,38 @@ class PathReplay:
         and normal, the one-face flag), in proportion to the angle it subtends, with uniform numbers ``u`` (N,).
         Returns the chosen edge (N,) relative to its range's first (-1: none) and the inverse of its
         probability (N,)."""
-        kernel = self.kernel("soft_edge_pick")
         pts = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
-        n = len(pts)
-        pick = np.full(n, -1, np.int32)
-        inv_pdf = np.zeros(n, np.float32)
-        if not n or not len(edges):
+        pick = np.full(len(pts), -1, np.int32)
+        inv_pdf = np.zeros(len(pts), np.float32)
+        if not len(pts) or not len(edges):
             return pick, inv_pdf
         e_buf = upload(self.device, np.ascontiguousarray(edges, np.float32).reshape(-1), "silhouette edges")
-        uu = np.ascontiguousarray(u, np.float32)
-        rr = np.ascontiguousarray(ranges, np.int32).reshape(-1, 2)
+        self._batched("soft_edge_pick", len(pts), (),
+                      [pts, np.ascontiguousarray(u, np.float32), e_buf, np.ascontiguousarray(ranges, np.int32)],
+                      [pick, inv_pdf], lambda count: (np.int32(count),))
+        return pick, inv_pdf
+
+    def _batched(self, name: str, n: int, head: tuple, inputs: list, outputs: list[np.ndarray],
+                 tail: Callable[[int], tuple]) -> None:
+        """Launch kernel ``name`` over n items, LAUNCH a time, one work-item an item, with the arguments ``head``,
+        then ``inputs`` (host arrays, first axis the item: that launch's items uploaded; a cl.Buffer: whole), then
+        ``outputs`` (host arrays, first axis the item, zeroed on the device and filled from it), then
+        ``tail(count)``."""
+        kernel = self.kernel(name)
+        q = self.device.queue
         for start in range(0, n, LAUNCH):
             count = min(LAUNCH, n - start)
-            p_buf = upload(self.device, pts[start:start + count], "shading points")
-            u_buf = upload(self.device, uu[start:start + count], "edge choices")
-            r_buf = upload(self.device, rr[start:start + count], "edge ranges")
-            k_buf = alloc(self.device, 4 * count, "chosen edges")
-            w_buf = alloc(self.device, 4 * count, "chosen edges' inverse probabilities")
+            ins = [a if isinstance(a, cl.Buffer) else upload(self.device, a[start:start + count], f"{name} input")
+                   for a in inputs]
+            outs = []
+            for a in outputs:
+                nbytes = a[start:start + count].nbytes
+                outs.append(alloc(self.device, max(nbytes, 1), f"{name} output"))
+                fill_buffer(q, outs[-1], np.uint8(0), 0, nbytes)
             g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
-            ev = kernel(self.device.queue, (g,), (LOCAL_SIZE,), p_buf, u_buf, e_buf, r_buf, k_buf, w_buf,
-                        np.int32(count))
-            self.profile.record("soft_edge_pick", ev)
-            cl.enqueue_copy(self.device.queue, pick[start:start + count], k_buf)
-            cl.enqueue_copy(self.device.queue, inv_pdf[start:start + count], w_buf)
-        return pick, inv_pdf
+            self.profile.record(name, kernel(q, (g,), (LOCAL_SIZE,), *head, *ins, *outs, *tail(count)))
+            for a, b in zip(outputs, outs):
+                cl.enqueue_copy(q, a[start:start + count], b)
 
     def forward(self, tangent: dict[str, np.ndarray], spp: int, seed: int, kinds: Iterable[str] = ()) -> np.ndarray:
         """Forward mode: the derivative of the image (H, W, 3) along ``tangent`` (host arrays by buffer

@@ -303,6 +303,8 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
 
 #: Angular offset (radians) of the two directions either side of a soft-shadow edge point.
 SOFT_SIDE_EPS = 1e-4
+#: Floats of an edge record of the soft_edge_pick kernel (EDGE_STRIDE of cl/gradients/soft_edge_pick.cl).
+EDGE_STRIDE = 20
 
 
 @dataclass
@@ -325,13 +327,13 @@ class MeshEdges:
         return cls(pairs[first, 0], pairs[first, 1], face[first], face_b)
 
     def records(self, positions: np.ndarray, indices: np.ndarray, face_normals: np.ndarray) -> np.ndarray:
-        """(E, 20) float32: the edges as the soft_edge_pick kernel reads them (cl/gradients/soft_edge_pick.cl): end
-        points, a vertex and the unit normal of each face (a boundary edge's second face repeats its first), and
+        """(E, EDGE_STRIDE) float32: the edges as the soft_edge_pick kernel reads them (cl/gradients/soft_edge_pick.cl):
+        end points, a vertex and the unit normal of each face (a boundary edge's second face repeats its first), and
         1 for a boundary edge."""
         length = np.linalg.norm(face_normals, axis=1, keepdims=True)
         unit = np.divide(face_normals, length, out=np.zeros_like(face_normals), where=length > 0)
         fb = np.where(self.face_b >= 0, self.face_b, self.face_a)
-        rec = np.zeros((len(self.v0), 20), np.float32)
+        rec = np.zeros((len(self.v0), EDGE_STRIDE), np.float32)
         rec[:, 0:3], rec[:, 3:6] = positions[self.v0], positions[self.v1]
         rec[:, 6:9], rec[:, 9:12] = positions[indices[self.face_a, 0]], unit[self.face_a]
         rec[:, 12:15], rec[:, 15:18] = positions[indices[fb, 0]], unit[fb]
