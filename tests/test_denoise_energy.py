@@ -17,26 +17,31 @@ SIZE = 64
 FRAMES = 32
 
 
-@pytest.fixture(scope="module")
-def frames(device) -> tuple[np.ndarray, np.ndarray]:
-    """FRAMES frames of the built-in cornell-box at SIZE x SIZE, 1 sample per pixel each, and their
+def render_frames(device, scene: str, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """FRAMES frames of the built-in ``scene`` at size x size, 1 sample per pixel each, and their
     G-buffers, (FRAMES, H, W, 3) and (FRAMES, AOV_COUNT, H, W)."""
-    pr = pyclpt.ProgressiveRenderer(pyclpt.load("cornell-box"), width=SIZE, height=SIZE, device=device,
-                                    denoiser="svgf")
+    pr = pyclpt.ProgressiveRenderer(pyclpt.load(scene), width=size, height=size, device=device, denoiser="svgf")
     colors, gbuffers = [], []
     for _ in range(FRAMES):
         pr.step()
         colors.append(pr.frame_image())
-        g = np.empty(AOV_COUNT * SIZE * SIZE, np.float32)
+        g = np.empty(AOV_COUNT * size * size, np.float32)
         cl.enqueue_copy(pr.device.queue, g, pr.renderer.film.aov.mean)
-        gbuffers.append(g.reshape(AOV_COUNT, SIZE, SIZE))
+        gbuffers.append(g.reshape(AOV_COUNT, size, size))
     return np.array(colors), np.array(gbuffers)
+
+
+@pytest.fixture(scope="module")
+def frames(device) -> tuple[np.ndarray, np.ndarray]:
+    """The cornell-box's FRAMES frames at SIZE x SIZE and their G-buffers (render_frames)."""
+    return render_frames(device, "cornell-box", SIZE)
 
 
 def denoised_mean(device, frames, settings: DenoiserSettings) -> np.ndarray:
     """The channel means of the last denoised frame."""
     colors, gbuffers = frames
-    d = Denoiser(device, SIZE, SIZE, settings=settings)
+    size = colors.shape[1]
+    d = Denoiser(device, size, size, settings=settings)
     for color, gbuffer in zip(colors, gbuffers):
         out = d.denoise_gbuffer(color, gbuffer)
     return out.reshape(-1, 3).mean(axis=0).astype(np.float64)
@@ -58,6 +63,20 @@ def test_the_denoised_mean_converges_to_the_plain_average(device, frames):
     0.994 / 0.999 / 0.999 (the red channel just outside); now about 0.999 / 1.001 / 1.001."""
     plain = frames[0].reshape(-1, 3).mean(axis=0).astype(np.float64)
     ratio = denoised_mean(device, frames, DenoiserSettings()) / plain
+    assert np.all(np.abs(ratio - 1) < 0.005), ratio
+
+
+def test_the_bunny_converges_to_the_plain_average(device):
+    """The same goal on the cornell-bunny at 80x80: a small bright light, whose light reaches the ceiling
+    and the floor as a sparse 1-sample tail that the firefly clamp and the clipping take, and an object
+    whose edges the a-trous filter works along. The code before gave 0.989 / 0.990 / 0.990 of the plain
+    average's here: the filter gave away more of the bright pixels' light than their quiet neighbours
+    took in, the clamp's deficit came back only up to the robust mean of the 3x3 tiles around, and the
+    clip's noise only where the anti-lag statistic stayed under half of ``antilag``. Now about 1.001 /
+    1.000 / 1.000 (DenoiserSettings.conserve, cl/denoise/conserve.cl, deficit_gain.cl; docs/denoising.md,
+    "Energy at 32 frames", where other sizes are measured too: not all of them meet 0.5 %)."""
+    colors, gbuffers = render_frames(device, "cornell-bunny", 80)
+    ratio = denoised_mean(device, (colors, gbuffers), DenoiserSettings()) / colors.reshape(-1, 3).mean(axis=0)
     assert np.all(np.abs(ratio - 1) < 0.005), ratio
 
 

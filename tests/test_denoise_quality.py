@@ -23,7 +23,7 @@ if str(REPO) not in sys.path:  # the evaluation's metrics: bench/evaluations/ be
 SIZE = 64
 #: The defaults before issue 29's FLIP work (iterations, clip_gamma, firefly_ratio, firefly_sigma,
 #: antilag), for the comparisons below.
-BEFORE = dict(iterations=5, clip_gamma=2.5, firefly_ratio=4.0, firefly_sigma=3.0, antilag=4.0)
+BEFORE = dict(iterations=5, clip_gamma=2.5, firefly_ratio=4.0, firefly_sigma=3.0, antilag=4.0, conserve=False)
 
 
 def relmse(x: np.ndarray, ref: np.ndarray, mask: np.ndarray | None = None) -> float:

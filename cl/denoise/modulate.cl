@@ -1,6 +1,11 @@
 /* modulate: the denoised colour, the filtered illumination times the albedo. One work-item per
  * pixel, 2D range.
  *
+ * With conserve, the filtered illumination of a surface pixel is first scaled by the filter's
+ * energy balance (conserve.cl, conserve_gain.cl: per 8x8 tile, bilinear between the tiles' centres),
+ * ramped in with the pixel's history length N (svgf.h, conserve_ramp: none up to 2 frames, all from
+ * 8 on).
+ *
  * The albedo divides as in demodulate (svgf.h, albedo_divisors: floored at ALBEDO_REL x the largest
  * channel; 1 where no channel is above ALBEDO_MIN, or the channel is not finite), so a pixel
  * whose illumination came through unfiltered gets its colour back exactly.
@@ -17,40 +22,45 @@
  * Consumes: src[c * pixels + p] (padded, svgf.h; c < 3: the filtered illumination, the last
  *           a-trous iteration);
  *           aovs (cl/film/aovs.h: the albedo); emis[c * pixels + p] (padded: reproject's emission
- *           history); gains (deficit_gain: shares and levels per tile).
+ *           history); gains (deficit_gain: shares and levels per tile); conserve (conserve_gain: the
+ *           gain per 8x8 tile, c < 3); geo (GEO_DEPTH, padded), len (N, padded).
  * Produces: out[3 p + c] (interleaved RGB, written through the opaque stride unit = 1). */
 #include "denoise/svgf.h"
 
 __kernel void modulate(__global const float* src, __global const float* aovs, __global const float* emis,
-                       __global const float* gains, __global float* out, int width, int height, int unit,
-                       int give_back) {
+                       __global const float* gains, __global const float* conserve, __global const float* geo,
+                       __global const float* len, __global float* out, int width, int height, int unit,
+                       int give_back, int conserve_on) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;
     src += PAD;
     emis += PAD;
+    geo += PAD;
+    len += PAD;
+    vec3 il = planar3(src, n, p);
+    /* the filter's energy balance (conserve.cl), bilinear between the tiles' centres, ramped in with
+     * the history as the a-trous weight's symmetry is (conserve_ramp) */
+    float ramp = conserve_on && geo[GEO_DEPTH * n + p] > 0.0f ? conserve_ramp(len[p]) : 0.0f;
+    if (ramp > 0.0f) {
+        int ntx = conserve_tiles(width), nty = conserve_tiles(height), count = ntx * nty;
+        float k[3];
+        for (int c = 0; c < 3; ++c)
+            k[c] = lerpf(1.0f, tile_bilinear(conserve + c * count, ntx, nty, CONSERVE_TILE, x, y), ramp);
+        il = v3_mul(il, v3(k[0], k[1], k[2]));
+    }
     vec3 g = v3_splat(0.0f), lev = v3_splat(0.0f);
     if (give_back) {
         /* the robust shares of the 2x2 tiles around p, bilinear between the tiles' centres */
-        int ntx = deficit_tiles(width), nty = deficit_tiles(height);
-        float u = ((float)x + 0.5f) / (float)DEFICIT_TILE - 0.5f, v = ((float)y + 0.5f) / (float)DEFICIT_TILE - 0.5f;
-        float fu = m_floor(u), fv = m_floor(v);
-        int u0 = (int)fu, v0 = (int)fv;
-        float wu = u - fu, wv = v - fv;
-        int x0 = clampi(u0, 0, ntx - 1), x1 = clampi(u0 + 1, 0, ntx - 1);
-        int y0 = clampi(v0, 0, nty - 1) * ntx, y1 = clampi(v0 + 1, 0, nty - 1) * ntx;
+        int ntx = deficit_tiles(width), nty = deficit_tiles(height), count = ntx * nty;
         float gc[3], lc[3];
-        for (int c = 0; c < 6; ++c) {
-            __global const float* plane = gains + c * ntx * nty;
-            float v = (plane[y0 + x0] * (1.0f - wu) + plane[y0 + x1] * wu) * (1.0f - wv)
-                      + (plane[y1 + x0] * (1.0f - wu) + plane[y1 + x1] * wu) * wv;
-            if (c < 3) gc[c] = m_min(v, DEFICIT_MAX);
-            else lc[c - 3] = v;
+        for (int c = 0; c < 3; ++c) {
+            gc[c] = m_min(tile_bilinear(gains + c * count, ntx, nty, DEFICIT_TILE, x, y), DEFICIT_MAX);
+            lc[c] = tile_bilinear(gains + (3 + c) * count, ntx, nty, DEFICIT_TILE, x, y);
         }
         g = v3(gc[0], gc[1], gc[2]);
         lev = v3(lc[0], lc[1], lc[2]);
     }
-    vec3 il = planar3(src, n, p);
     il = v3_add(il, v3_mul(lev, g)); /* g = 0: il exactly */
     vec3 c = v3_add(v3_mul(il, aov_divisor(aovs, n, p)), planar3(emis, n, p));
     c = all_finite3(c) ? c : v3_splat(0.0f);

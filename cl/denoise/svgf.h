@@ -171,15 +171,67 @@ static inline float normal_agreement(vec3 a, vec3 b) {
 
 /* The clamp's deficit (cl/denoise/deficit.cl, deficit_gain.cl, modulate.cl): the image is cut into
  * DEFICIT_TILE x DEFICIT_TILE tiles (pyclpt/denoise/svgf.py, DEFICIT_TILE), each with the share of
- * its light that the firefly clamp took, per channel; a tile's own share is at most DEFICIT_MAX
- * (0.25 raised the living room's relMSE at frame 8 from 0.344 to 0.353 x the plain average's, 0.1
- * lowered it to 0.332 and gave back a third less; docs/denoising.md), and what modulate gives back at
- * most DEFICIT_MAX too. A share under DEFICIT_EPS is rounding (a noise-free history and its deficit-
- * free twin differ by an ulp) and counts as 0, so that g is exactly 0 where nothing was clamped. */
+ * its light that the firefly clamp took, per channel; a tile's own share is at most DEFICIT_MAX, and
+ * what modulate gives back at most DEFICIT_MAX too. 0.2 when the share given back was the robust
+ * mean of the 3x3 tiles' (0.25 raised the living room's relMSE at frame 8 from 0.344 to 0.353 x the
+ * plain average's, 0.1 lowered it to 0.332 and gave back a third less); 0.25 since it is the tile's
+ * own share up to DEFICIT_OUTLIER x that mean (deficit_gain.cl): the room's relMSE 0.338 (0.331 at
+ * 0.2, 0.350 at 0.3), the cornell-bunny's 32-frame means 0.9958 / 0.9942 / 0.9933 of the plain
+ * average's (0.9949 / 0.9932 / 0.9926 at 0.2; its ceiling beside the light has tiles whose share is
+ * 0.4 to 0.9); docs/denoising.md, "Energy at 32 frames". A share under DEFICIT_EPS is rounding (a
+ * noise-free history and its deficit-free twin differ by an ulp) and counts as 0, so that g is
+ * exactly 0 where nothing was clamped. */
 #define DEFICIT_TILE 16
-#define DEFICIT_MAX 0.2f
+#define DEFICIT_MAX 0.25f
+#define DEFICIT_OUTLIER 5.0f /* deficit_gain.cl */
 #define DEFICIT_EPS 1e-4f
 
 static inline int deficit_tiles(int size) { return (size + DEFICIT_TILE - 1) / DEFICIT_TILE; }
+
+/* Tile p's value of a per-tile plane (tiles of `tile` pixels, ntx x nty of them), bilinear between
+ * the tiles' centres (clamped at the image's border): the deficit's shares and levels, the conserve
+ * gains, as modulate reads them. */
+static inline float tile_bilinear(__global const float* plane, int ntx, int nty, int tile, int x, int y) {
+    float u = ((float)x + 0.5f) / (float)tile - 0.5f, v = ((float)y + 0.5f) / (float)tile - 0.5f;
+    float fu = m_floor(u), fv = m_floor(v);
+    int u0 = (int)fu, v0 = (int)fv;
+    float wu = u - fu, wv = v - fv;
+    int x0 = clampi(u0, 0, ntx - 1), x1 = clampi(u0 + 1, 0, ntx - 1);
+    int y0 = clampi(v0, 0, nty - 1) * ntx, y1 = clampi(v0 + 1, 0, nty - 1) * ntx;
+    return (plane[y0 + x0] * (1.0f - wu) + plane[y0 + x1] * wu) * (1.0f - wv)
+           + (plane[y1 + x0] * (1.0f - wu) + plane[y1 + x1] * wu) * wv;
+}
+
+/* The a-trous filter's energy balance (cl/denoise/conserve.cl): tiles of CONSERVE_TILE x
+ * CONSERVE_TILE pixels (pyclpt/denoise/svgf.py, CONSERVE_TILE), each with the gain that gives its
+ * filtered light the sum of its unfiltered light, within [1 / CONSERVE_MAX, CONSERVE_MAX] (a bound
+ * for a tile whose filtered light is nearly 0; in the frame of the evaluation's light change the
+ * cornell-box's tiles are at 0.77 to 1.27). */
+#define CONSERVE_TILE 8
+#define CONSERVE_MAX 2.0f
+/* conserve_gain: a tile's gain - 1 at most CONSERVE_OUTLIER x the robust mean of its 3x3 tiles'
+ * (a lone firefly's tile gets nothing), and 0 under CONSERVE_EPS (rounding). */
+#define CONSERVE_OUTLIER 10.0f
+#define CONSERVE_EPS 1e-4f
+
+static inline int conserve_tiles(int size) { return (size + CONSERVE_TILE - 1) / CONSERVE_TILE; }
+
+/* How much of the conserve gain a pixel with a history of N frames takes: 0 up to CONSERVE_FROM,
+ * 1 from CONSERVE_FULL on, linear between, as the a-trous luminance weight is made symmetric
+ * (atrous.cl, SYMMETRIC_FROM, SYMMETRIC_FULL). On the first frames of a history the filter dims a
+ * light's edge on purpose (p's own variance, a spatial estimate there, keeps a bright neighbour's
+ * noise out); a tile's gain would give that light to the whole tile, the dark band beside the light
+ * included (tests/test_denoise.py::test_a_light_does_not_bleed_into_its_dark_surroundings: its band
+ * at 0.136 relMSE in the first frame with the gain at once, under 0.071 asked). */
+#define CONSERVE_FROM 2.0f
+#define CONSERVE_FULL 8.0f
+
+static inline float conserve_ramp(float n) {
+    return m_clamp((n - CONSERVE_FROM) / (CONSERVE_FULL - CONSERVE_FROM), 0.0f, 1.0f);
+}
+
+static inline float conserve_ratio(float unfiltered, float filtered) {
+    return filtered > 0.0f ? m_clamp(unfiltered / filtered, 1.0f / CONSERVE_MAX, CONSERVE_MAX) : 1.0f;
+}
 
 #endif

@@ -1,7 +1,7 @@
 """SVGF on the device: spatiotemporal variance-guided filtering (Schied et al. 2017, as Falcor's
 SVGFPass), with NRD RELAX's fast history clipping the long one.
 
-One frame is ten passes, one kernel each in ``cl/denoise/`` and one method here of the same name:
+One frame is twelve passes, one kernel each in ``cl/denoise/`` and one method here of the same name:
 :meth:`Svgf.demodulate` (sanitize, divide by the albedo, this frame's geometry),
 :meth:`Svgf.reproject` (firefly clamp, reproject and accumulate the fast history, moments and
 history length), :meth:`Svgf.clip_history` (clip the long history into the fast one's neighbourhood
@@ -9,7 +9,9 @@ and blend; the anti-lag statistic; the clamp's deficit history), :meth:`Svgf.ant
 histories where the statistic says the lighting changed, in the same frame), :meth:`Svgf.deficit` and
 :meth:`Svgf.deficit_gain` (per tile, the share of the light that the firefly clamp took, which
 modulate gives back), :meth:`Svgf.variance` (temporal or, on a short history, spatial variance),
-:meth:`Svgf.atrous` (``iterations`` a-trous iterations) and :meth:`Svgf.modulate` (times the albedo,
+:meth:`Svgf.atrous` (``iterations`` a-trous iterations), :meth:`Svgf.conserve` and
+:meth:`Svgf.conserve_gain` (per tile, the gain that gives the filtered light the sum of the unfiltered
+light, robust to a lone firefly) and :meth:`Svgf.modulate` (times the albedo,
 plus the emission's own temporal history: the emitted part of the colour is kept out of the filter).
 :meth:`Svgf.count_dropped` adds up the NaN/inf inputs (``cl/film/count_dropped.cl``).
 
@@ -37,13 +39,19 @@ log = logging.getLogger("pyclpt.denoise")
 
 #: The passes of a frame, in launch order (each a kernel, a .cl file and a method of Svgf).
 PASSES = ("demodulate", "count_dropped", "reproject", "clip_history", "antilag", "deficit", "deficit_gain",
-          "variance", "atrous", "modulate")
+          "variance", "atrous", "conserve", "conserve_gain", "modulate")
 #: Side of the tiles over which the firefly clamp's deficit is measured (cl/denoise/svgf.h, DEFICIT_TILE).
 DEFICIT_TILE = 16
+#: Side of the tiles over which the a-trous filter's energy balance is kept (cl/denoise/svgf.h, CONSERVE_TILE).
+CONSERVE_TILE = 8
 #: Where the anti-lag statistic stays at or under this fraction of ``antilag``, what the history clipping
 #: takes is the noise of a skewed 1-sample distribution, not a change of the lighting: it joins the
-#: clamp's deficit (cl/denoise/clip_history.cl).
-CLIP_NOISE = 0.5
+#: clamp's deficit (cl/denoise/clip_history.cl). 0.5 before; 1, up to where the anti-lag starts to cut,
+#: brought the cornell-bunny's 32-frame means from 0.9958 / 0.9942 / 0.9933 to 0.9974 / 0.9960 / 0.9951
+#: of the plain average's and the living room's from 0.9863 / 0.9907 / 0.9950 to 0.9866 / 0.9910 /
+#: 0.9958, relMSE at frame 8 0.338 and 0.340 x the plain average's (docs/denoising.md, "Energy at 32
+#: frames"; its light-change lag there).
+CLIP_NOISE = 1.0
 #: Channels of a geometry record (cl/denoise/svgf.h, GEO_COUNT).
 GEO_COUNT = 6
 #: Floats of padding before and after each internal buffer (cl/denoise/svgf.h, PAD).
@@ -120,6 +128,10 @@ class Svgf:
         self._tiles_y = -(-self.height // DEFICIT_TILE)
         self._tiles = [alloc(self.device, f * 6 * self._tiles_x * self._tiles_y, f"denoiser deficit tiles {size}")
                        for _ in range(2)]
+        self._ctiles_x = -(-self.width // CONSERVE_TILE)
+        self._ctiles_y = -(-self.height // CONSERVE_TILE)
+        self._conserve = [alloc(self.device, f * 3 * self._ctiles_x * self._ctiles_y, f"denoiser conserve tiles {size}")
+                          for _ in range(2)]
         self._emission = self._alloc(3, f"denoiser frame emission {size}")
         self._lag = self._alloc(3, f"denoiser anti-lag statistic {size}")
         self._temporal = self._alloc(6, f"denoiser temporal {size}")
@@ -172,7 +184,8 @@ class Svgf:
         phi = self._settings.phi_normal
         power_of_two = phi >= 1 and phi == 2.0 ** int(math.log2(phi))
         squarings = {"NORMAL_SQUARINGS": int(math.log2(phi))} if power_of_two else {}
-        for name in ("demodulate", "reproject", "antilag", "deficit", "deficit_gain", "variance", "atrous", "modulate"):
+        for name in ("demodulate", "reproject", "antilag", "deficit", "deficit_gain", "variance", "atrous", "conserve",
+                     "conserve_gain", "modulate"):
             defines = squarings if name in ("variance", "atrous") else {}
             kernels[name] = cl.Kernel(build_program(d, [f"denoise/{name}.cl"], defines=defines,
                                                     options=BUILD_OPTIONS), name)
@@ -344,12 +357,37 @@ class Svgf:
         self._src = dst
         return self._record("atrous", ev)
 
+    def _conserving(self) -> bool:
+        """Whether this frame keeps the filter's energy balance: ``conserve`` on and a filter to balance."""
+        return self._settings.conserve and self._settings.iterations > 0
+
+    def conserve(self, aovs: cl.Buffer) -> cl.Event:
+        """Pass 5b (cl/denoise/conserve.cl): per tile of CONSERVE_TILE pixels, the gain that gives the
+        filtered illumination the light of the unfiltered one (modulate applies it)."""
+        src = self._src if self._src is not None else self._ping[0]
+        ev = self._kernels["conserve"](
+            self.device.queue, (self._ctiles_x, self._ctiles_y), None, self._accum, src, self._geo[self._cur],
+            self._len[self._cur], aovs, self._conserve[0], *self._args2d())
+        return self._record("conserve", ev)
+
+    def conserve_gain(self) -> cl.Event:
+        """Pass 5c (cl/denoise/conserve_gain.cl): per tile, the gain modulate applies: the tile's own, its
+        excess over 1 limited to a few times the robust mean of the 3x3 tiles' (a lone firefly's tile
+        gets none)."""
+        ev = self._kernels["conserve_gain"](
+            self.device.queue, (self._ctiles_x, self._ctiles_y), None, self._conserve[0], self._conserve[1],
+            *self._args2d())
+        return self._record("conserve_gain", ev)
+
     def modulate(self, aovs: cl.Buffer) -> cl.Event:
-        """Pass 6 (cl/denoise/modulate.cl): the filtered illumination times the albedo, into ``output``."""
+        """Pass 6 (cl/denoise/modulate.cl): the filtered illumination (times the conserve gains) times the
+        albedo, plus the clamp's deficit and the emission history, into ``output``."""
         src = self._src if self._src is not None else self._ping[0]
         ev = self._kernels["modulate"](self.device.queue, self.global_size, self.local, src, aovs,
-                                       self._emis[self._cur], self._tiles[1], self.output, *self._args2d(), np.int32(1),
-                                       np.int32(1 if self._settings.give_back else 0))
+                                       self._emis[self._cur], self._tiles[1], self._conserve[1], self._geo[self._cur],
+                                       self._len[self._cur], self.output, *self._args2d(), np.int32(1),
+                                       np.int32(1 if self._settings.give_back else 0),
+                                       np.int32(1 if self._conserving() else 0))
         return self._record("modulate", ev)
 
     def run(self, color: cl.Buffer, aovs: cl.Buffer) -> cl.Buffer:
@@ -372,6 +410,9 @@ class Svgf:
         self.variance()
         for i in range(self._settings.iterations):
             self.atrous(i)
+        if self._conserving():
+            self.conserve(aovs)
+            self.conserve_gain()
         self.modulate(aovs)
         self.frames += 1
         return self.output
