@@ -29,8 +29,8 @@ EXTRA_SCENES = ("delta-emitters", "emitter-textures", "instances", "orthographic
 KERNELS = {"megakernel", "path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution",
            "sample_bsdf", "compact_count", "compact_scatter", "finish_paths", "accumulate_frame", "accumulate_batch",
            "resolve", "aov_accumulate", "count_dropped", "demodulate", "reproject", "clip_history", "antilag",
-           "variance", "atrous", "modulate", "deficit", "deficit_gain", "blend", "backward", "forward", "edge_radiance",
-           "incident_radiance", "soft_edge_pick", "path_vertices", "vertex_radiance", "splat_axes", "splat_gather"}
+           "variance", "atrous", "conserve", "conserve_gain", "modulate", "deficit", "deficit_gain", "blend",
+           "backward", "forward", "edge_radiance", "path_vertices", "vertex_radiance", "splat_axes", "splat_gather"}
 
 
 @pytest.fixture(scope="module")

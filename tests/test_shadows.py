@@ -230,10 +230,71 @@ def test_a_mesh_split_at_its_edges_has_the_outlines_of_the_welded_one():
 
 
 def test_edge_stride_matches_the_kernel():
-    """MeshEdges.records writes the edge records cl/gradients/soft_edge_pick.cl reads, EDGE_STRIDE floats each."""
+    """MeshEdges.records writes the edge records cl/gradients/edge_pick.h reads, EDGE_STRIDE floats each."""
     import re
 
     from pyclpt.device.program import cl_dir
 
-    text = (cl_dir() / "gradients" / "soft_edge_pick.cl").read_text()
+    text = (cl_dir() / "gradients" / "edge_pick.h").read_text()
     assert int(re.search(r"#define EDGE_STRIDE (\d+)", text).group(1)) == shadows.EDGE_STRIDE
+
+
+def test_the_edge_pick_follows_the_angles_and_skips_the_occluders_side():
+    """The vertex_radiance kernel at one point of the soft scene's floor, 20,000 samples: the edge it picks among
+    every mesh's (the floor's own left out) follows the angles the silhouette edges subtend there (computed here in
+    float64), the outline's measure it reports is the edge point's speed over that probability, and the side whose
+    ray meets the picked edge's mesh first is 0 (the material form: not traced), the other one the light's when it
+    meets the light."""
+    from pyclpt.gradients.session import replay_for
+
+    scene = _soft_scene()
+    names = [m.name for m in scene.meshes]
+    floor = names.index("floor")
+    replay = replay_for(scene, width=24, height=24, max_depth=2)
+    _, _, _, prim, hit = replay.path_vertices(np.array([[6.5, 12.5]]), 3)  # left of centre: under the shadow
+    assert prim[0] >= 0
+    records, offsets = [], np.cumsum([0] + [m.positions.shape[0] for m in scene.meshes]).astype(np.int32)
+    for i, mesh in enumerate(scene.meshes):
+        p, tri = mesh.positions.astype(np.float64), mesh.indices.astype(np.int64)
+        records.append(shadows.MeshEdges.of(mesh).records(p, tri, np.cross(p[tri[:, 1]] - p[tri[:, 0]],
+                                                                           p[tri[:, 2]] - p[tri[:, 0]]), i))
+    rec = np.concatenate(records).astype(np.float64)
+    n = 20000
+    u = np.random.default_rng(2).random((n, 2)).astype(np.float32)
+    samples = np.concatenate([np.tile(np.r_[hit[0, 1:], 6.5, 12.5, 0.0], (n, 1)), u], axis=1)  # depth 0: film
+    ranges = np.tile([0, len(rec), floor], (n, 1))
+    out = replay.vertex_radiance(np.full(n, prim[0]), samples, np.zeros(n), rec, ranges, offsets, 5,
+                                 shadows.SOFT_SIDE_EPS)
+    # the point, and each edge's angle if it is a silhouette from it (the floor's own: none)
+    corners = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)[
+        replay.scene.arrays.tri_vidx[prim[0]]]
+    b = hit[0, 1:].astype(np.float64)
+    x = (1 - b[0] - b[1]) * corners[0] + b[0] * corners[1] + b[1] * corners[2]
+    da, db = rec[:, 0:3] - x, rec[:, 3:6] - x
+    front_a, front_b = (rec[:, k:k + 3] @ x > rec[:, k + 3] for k in (6, 10))
+    silhouette = (rec[:, 14] > 0.5) | (front_a != front_b)
+    angle = np.where(silhouette & (rec[:, 15] != floor), np.arctan2(np.linalg.norm(np.cross(da, db), axis=1),
+                                                                  np.einsum("ec,ec->e", da, db)), 0.0)
+    p_edge = angle / angle.sum()
+    assert np.all(out.pick >= 0)
+    counts = np.bincount(out.pick, minlength=len(rec)) / n
+    assert counts[rec[:, 15] == floor].sum() == 0
+    assert np.all(np.abs(counts - p_edge) <= 4 * np.sqrt(p_edge * (1 - p_edge) / n) + 1e-9), (counts, p_edge)
+    # the measure: |w x dw/dt| / p(edge) at the edge point of parameter t
+    e = out.pick
+    a, ab, t = rec[e, 0:3], rec[e, 3:6] - rec[e, 0:3], u[:, 1].astype(np.float64)
+    w, dist = shadows._unit(a + t[:, None] * ab - x)
+    dw_dt = (ab - w * np.einsum("nc,nc->n", w, ab)[:, None]) / dist[:, None]
+    speed = np.linalg.norm(np.cross(w, dw_dt), axis=1)
+    np.testing.assert_allclose(out.outline[:, 0], speed / p_edge[e], rtol=2e-3)
+    np.testing.assert_allclose(out.outline[:, 1], dist, rtol=1e-4)
+    # the side meeting the picked edge's mesh first gives 0; with the other side on the light, that side the light's
+    first_mesh = np.where(out.first_prim >= 0, np.searchsorted(
+        offsets, replay.scene.arrays.tri_vidx[np.maximum(out.first_prim, 0), 0], side="right") - 1, -1)
+    on_mesh = first_mesh == rec[e, 15][:, None].astype(int)
+    assert np.all(out.radiance[on_mesh] == 0)
+    one = on_mesh[:, 0] != on_mesh[:, 1]
+    passing = np.where(on_mesh[:, 0], 1, 0)  # the other side
+    lit = one & (first_mesh[np.arange(n), passing] == names.index("light"))
+    assert lit.sum() > 100 and np.all(out.radiance[lit, passing[lit]].sum(axis=1) > 0)
+    assert np.all(out.radiance[~one] == 0)

@@ -1,54 +1,112 @@
 /* incident.h: the radiance a surface point receives from two directions either side of an occluder's outline,
- * times its BSDF, for the soft-shadow boundary terms (incident_radiance.cl at the surfaces the camera sees,
- * vertex_radiance.cl at the later vertices of camera paths; pyclpt/gradients/shadows.py). */
+ * times its BSDF, for the soft-shadow boundary terms (vertex_radiance.cl at the vertices of camera paths;
+ * pyclpt/gradients/shadows.py). */
 #ifndef PYCLPT_GRADIENT_INCIDENT_H
 #define PYCLPT_GRADIENT_INCIDENT_H
 
+#include "gradients/edge_pick.h"
 #include "integrators/path.h"
 
-/* Sample i's two sides at surface s (found: a surface at all; bsdf b, wi the local direction towards where the path
- * came from): radiance[3 (2 i + side)] = f(wi, w -+ eps n) |cos| L_i(w -+ eps n), L_i the estimator of path.h from
- * there, its first ray at bounce `depth` (the emission it meets counted whole, as after a delta sample); 0 where
- * the direction is below the surface or `depth` allows no bounce; a NaN or inf one 0 and 1 in drop_marks; the
- * leaf-order triangle each side's ray meets first in first_prim (-1: none) and its distance and barycentrics in
- * first_hit. */
+/* One side's direction from surface s, f(wi, wo) |cos| there (0: below the surface) and its ray's first hit. */
+typedef struct {
+    vec3 dir, f;
+    Hit hit;
+    bool found;
+} SideStart;
+
+static inline SideStart side_start(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, vec3 wi, vec3 w,
+                                   vec3 n, float eps, int depth) {
+    SideStart st;
+    st.dir = m_normalize(v3_add(w, v3_scale(n, eps)));
+    vec3 wo = to_local(s->sh, st.dir);
+    float pdf;
+    st.f = bsdf_eval(b, wi, wo, &pdf); /* value x |cos| */
+    st.found = false;
+    st.hit.prim = -1;
+    if (m_dot(st.dir, s->ng) * wo.z > 0.0f && !v3_is_zero(st.f))
+        st.found = scene_closest(sc, key, depth, spawn_origin(s, st.dir), st.dir, &st.hit);
+    else
+        st.f = v3_splat(0.0f);
+    return st;
+}
+
+/* Whether a side's ray met the occluder first: its triangle's vertices in the occluder's packed range [lo, hi). */
+static inline bool side_on_occluder(const Scene* sc, const SideStart* st, int lo, int hi) {
+    if (!st->found) return false;
+    int k = sc->tri_vidx[3 * st->hit.prim];
+    return k >= lo && k < hi;
+}
+
+/* f |cos| L_i along a side's direction: L_i the estimator of path.h from s, its first ray at bounce `depth`. */
+static inline vec3 side_radiance(const Scene* sc, RngKey key, const Surface* s, const SideStart* st, int depth,
+                                 int max_depth) {
+    if (v3_is_zero(st->f)) return v3_splat(0.0f);
+    PathState ps;
+    ps.org = spawn_origin(s, st->dir);
+    ps.dir = st->dir;
+    ps.beta = v3_splat(1.0f);
+    ps.L = v3_splat(0.0f);
+    ps.prev_pdf = 0.0f;
+    ps.eta_scale = 1.0f;
+    ps.depth = depth;
+    ps.flags = PATH_PREV_DELTA;
+    path_continue_from(sc, key, &ps, max_depth, aov_out(0, 0, 0), st->found ? &st->hit : 0);
+    return v3_mul(st->f, ps.L);
+}
+
+static inline void side_store(__global float* radiance, __global int* first_prim, __global float* first_hit,
+                              __global uchar* drop_marks, int f, const SideStart* st, vec3 out) {
+    film_commit(radiance, drop_marks, f, out);
+    first_prim[f] = st->found ? st->hit.prim : -1;
+    store3(first_hit, f, st->found ? v3(st->hit.t, st->hit.u, st->hit.v) : v3_splat(0.0f));
+}
+
+/* Sample i at surface s (found: a surface at all; bsdf b, wi the local direction towards where the path came from,
+ * on mesh `own`): an edge among edges[0 .. edge_count) (edge_pick.h; not mesh own's), picked with uniform u, and
+ * its point at t; its mesh, the occluder, has packed vertices [mesh_vertices[j], mesh_vertices[j + 1]); two
+ * directions w -+ eps n either side of the outline there; radiance[3 (2 i + side)] = f(wi, w -+ eps n) |cos|
+ * L_i(w -+ eps n), L_i the estimator of path.h from there, its first ray at bounce `depth` (the emission it meets
+ * counted whole, as after a delta sample); 0 where the direction is below the surface or `depth` allows no
+ * bounce; a NaN or inf one 0 and 1 in drop_marks; the leaf-order triangle each side's ray meets first in
+ * first_prim (-1: none) and its distance and barycentrics in first_hit; pick[i] the edge (-1: none, the sides 0)
+ * and outline[5 i ..] the outline's measure per sample (its speed over the pick's probability), the distance to
+ * the edge point and the outline's unit normal n (3).
+ * The boundary term takes the material form, in which the side
+ * whose ray meets the occluder first has no jump (the occluder's points stay in its area integral), so its path
+ * is not traced and its radiance is 0; and unless exactly one side meets the occluder, the edge is no outline of
+ * it from s (something nearer hides it, or both sides pass it): as eps -> 0 both sides' light is the same, so
+ * neither path is traced and both are 0 (the host drops samples without a jump). */
 static inline void incident_sides(const Scene* sc, RngKey key, bool found, const Surface* s, const Bsdf* b, vec3 wi,
-                                  vec3 w, vec3 n, float eps, int depth, int max_depth, int i,
-                                  __global float* radiance, __global int* first_prim, __global float* first_hit,
-                                  __global uchar* drop_marks) {
+                                  __global const float* edges, int edge_count, int own,
+                                  __global const int* mesh_vertices, float u, float t, float eps, int depth,
+                                  int max_depth, int i, __global float* radiance,
+                                  __global int* first_prim, __global float* first_hit, __global uchar* drop_marks,
+                                  __global int* pick, __global float* outline) {
     found = found && depth_allows(depth, max_depth);
-    for (int side = 0; side < 2; side++) {
-        vec3 out = v3_splat(0.0f);
-        int prim = -1;
-        vec3 where = v3_splat(0.0f);
-        if (found) {
-            vec3 dir = m_normalize(v3_add(w, v3_scale(n, side == 0 ? -eps : eps)));
-            vec3 wo = to_local(s->sh, dir);
-            float pdf;
-            vec3 f = bsdf_eval(b, wi, wo, &pdf); /* value x |cos| */
-            if (m_dot(dir, s->ng) * wo.z > 0.0f && !v3_is_zero(f)) {
-                PathState ps;
-                ps.org = spawn_origin(s, dir);
-                ps.dir = dir;
-                ps.beta = v3_splat(1.0f);
-                ps.L = v3_splat(0.0f);
-                ps.prev_pdf = 0.0f;
-                ps.eta_scale = 1.0f;
-                ps.depth = depth;
-                ps.flags = PATH_PREV_DELTA;
-                Hit next;
-                if (scene_closest(sc, key, depth, ps.org, ps.dir, &next)) {
-                    prim = next.prim;
-                    where = v3(next.t, next.u, next.v);
-                }
-                path_continue(sc, key, &ps, max_depth, aov_out(0, 0, 0));
-                out = v3_mul(f, ps.L);
-            }
+    SideStart minus, plus;
+    minus.found = plus.found = false;
+    vec3 out_minus = v3_splat(0.0f), out_plus = v3_splat(0.0f), w, n = v3_splat(0.0f);
+    float inv_pdf = 0.0f, dist = 0.0f, speed = 0.0f;
+    int e = found ? edge_pick(edges, edge_count, s->p, own, u, &inv_pdf) : -1;
+    if (e >= 0) speed = edge_point(edges, e, s->p, t, &w, &dist, &n);
+    if (!(speed > 0.0f)) e = -1;
+    if (e >= 0) {
+        minus = side_start(sc, key, s, b, wi, w, n, -eps, depth);
+        plus = side_start(sc, key, s, b, wi, w, n, eps, depth);
+        int j = edge_mesh(edges, e), lo = mesh_vertices[j], hi = mesh_vertices[j + 1];
+        bool on_minus = side_on_occluder(sc, &minus, lo, hi);
+        bool on_plus = side_on_occluder(sc, &plus, lo, hi);
+        if (on_minus != on_plus) {
+            if (on_plus) out_minus = side_radiance(sc, key, s, &minus, depth, max_depth);
+            else out_plus = side_radiance(sc, key, s, &plus, depth, max_depth);
         }
-        film_commit(radiance, drop_marks, 2 * i + side, out);
-        first_prim[2 * i + side] = prim;
-        store3(first_hit, 2 * i + side, where);
     }
+    side_store(radiance, first_prim, first_hit, drop_marks, 2 * i, &minus, out_minus);
+    side_store(radiance, first_prim, first_hit, drop_marks, 2 * i + 1, &plus, out_plus);
+    pick[i] = e;
+    outline[5 * i] = e >= 0 ? speed * inv_pdf : 0.0f;
+    outline[5 * i + 1] = dist;
+    store3(outline + 5 * i + 2, 0, n);
 }
 
 #endif

@@ -9,7 +9,8 @@
  *           vertex[8 i ..] its barycentrics u, v, the world direction back along the path (3), the throughput that
  *           reached it (3: the estimator's beta, f |cos| / pdf of the bounces before and 1 / q of the roulette) times
  *           the number of such vertices (1 / the probability of the choice); vertex_depth[i] its bounce (the
- *           camera's hit: 0).
+ *           camera's hit: 0); first_prim[i] the leaf-order triangle the camera ray meets (-1: none) and first_hit[3
+ *           i ..] its distance and barycentrics there (the shading points of the first bounce).
  *
  * The chosen vertex is attached to its surface (the interior term's material form, cl/gradients/geometry.h): the
  * outlines of occluders in the light it receives, as its surface, the occluders and the surfaces behind them move,
@@ -19,7 +20,8 @@
 /* DIM_VERTEX_CHOICE (core/rng.h): the reservoir's numbers, a dimension of each bounce that path.h never draws */
 
 __kernel SCALAR_KERNEL void path_vertices(SCENE_PARAMS, __global const float* film, __global int* vertex_prim,
-                                          __global float* vertex, __global int* vertex_depth, uint seed, int count,
+                                          __global float* vertex, __global int* vertex_depth,
+                                          __global int* first_prim, __global float* first_hit, uint seed, int count,
                                           int max_depth) {
     int i = get_global_id(0);
     if (i >= count) return;
@@ -29,10 +31,16 @@ __kernel SCALAR_KERNEL void path_vertices(SCENE_PARAMS, __global const float* fi
     camera_ray(&sc, key, film[2 * i], film[2 * i + 1], &ps);
     int chosen = -1, depth = 0, seen = 0;
     float cu = 0.0f, cv = 0.0f;
+    first_prim[i] = -1;
+    store3(first_hit, i, v3_splat(0.0f));
     vec3 cdir = v3_splat(0.0f), cbeta = v3_splat(0.0f);
     while (depth_allows(ps.depth, max_depth)) {
         Hit hit;
         if (!scene_closest(&sc, key, ps.depth, ps.org, ps.dir, &hit)) break;
+        if (ps.depth == 0) {
+            first_prim[i] = hit.prim;
+            store3(first_hit, i, v3(hit.t, hit.u, hit.v));
+        }
         Surface s = surface_hit(&sc, hit.prim, hit.u, hit.v, ps.dir);
         Bsdf b = bsdf_at(&sc, &s);
         if (ps.depth > 0 && !(ps.flags & PATH_PREV_DELTA) && !bsdf_is_delta(&b) && depth_allows(ps.depth + 1, max_depth)) {

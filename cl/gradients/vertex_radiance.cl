@@ -1,28 +1,52 @@
-/* vertex_radiance: the radiance reaching a later vertex of a camera path from two directions either side of an
- * occluder's outline, times the BSDF there (path_vertices.cl chose the vertex), for the soft-shadow boundary term
- * after the first bounce (pyclpt/gradients/shadows.py, sample_soft_edges; docs/differentiable.md).
+/* vertex_radiance: at a vertex of a camera path (the camera ray's first hit, or a later vertex path_vertices.cl
+ * chose), one edge of an occluder that is a silhouette from it, picked in proportion to the angle it subtends, and
+ * the radiance reaching the vertex from two directions either side of the outline there, times the BSDF: the
+ * boundary term of soft shadows and of every occluder's outline in the incident light (pyclpt/gradients/shadows.py,
+ * sample_soft_edges; docs/differentiable.md).
  *
- * Consumes: count samples, prims[i] the vertex's leaf-order triangle, samples[11 i ..] = its barycentrics u, v, the
- *           world direction back along the path (3), a unit direction w (3, world) and a unit n perpendicular to it
- *           (3, the edge's side), depths[i] the vertex's bounce (the camera's hit: 0).
- * Produces: as incident_radiance, with the random numbers of key (seed, i, 0) and the sides' first rays at bounce
- *           depths[i] + 1 (cl/gradients/incident.h, incident_sides): radiance[3 (2 i (+ 1))], first_prim[2 i (+
- *           1)], first_hit[3 (2 i (+ 1))], drop_marks[2 i (+ 1)]. */
+ * Consumes: count samples, prims[i] the vertex's leaf-order triangle, samples[7 i ..] = its barycentrics u, v, the
+ *           world direction back along the path (3; at the camera's hit, depth 0: the film position x, y of the
+ *           camera ray, whose direction is found again here, and 0), a uniform for the edge's pick and t in [0, 1)
+ *           for its point;
+ *           depths[i] the vertex's bounce (the camera's hit: 0); ranges[3 i ..] = the first of the sample's edges
+ *           in `edges` (every mesh's records, cl/gradients/edge_pick.h), their number, and the index of the mesh the
+ *           vertex lies on (its edges are left out); mesh_vertices[j], [j + 1]: the packed vertex range of mesh j.
+ * Produces: pick[i] the edge, counted from the sample's first, picked in proportion to the angle it subtends among
+ *           those that are silhouettes from the vertex (-1: none), the occluder its mesh; outline[5 i ..] the
+ *           outline's measure per sample, the distance to the edge point and the outline's unit normal n (3);
+ *           radiance[3 (2 i)] = f(wi, w - eps n) |cos| L_i(w - eps n),
+ *           w the direction to the edge's point at t, radiance[3 (2 i + 1)] the same for w + eps n: L_i the
+ *           estimator of path.h from there, its first ray at bounce depths[i] + 1 (both sides with the random numbers
+ *           of key (seed, i, 0); the emission it meets counted whole, as after a delta sample); 0 for the side that
+ *           meets the occluder first (untraced), for both unless exactly one side meets it, where the direction is
+ *           below the surface or the depth allows no bounce; a NaN or inf one gives 0 and adds 1 to drop_marks[2 i
+ *           (+ 1)]; first_prim[2 i (+ 1)] the leaf-order triangle that side's ray meets first (-1: none) and
+ *           first_hit[3 (2 i (+ 1))] its distance and barycentrics there, so that the host can tell the occluder's
+ *           side from the one that passes it, and what lies behind (cl/gradients/incident.h, incident_sides). */
 #include "gradients/incident.h"
 
 __kernel SCALAR_KERNEL void vertex_radiance(SCENE_PARAMS, __global const int* prims, __global const float* samples,
-                                            __global const int* depths, __global float* radiance,
-                                            __global int* first_prim, __global float* first_hit,
-                                            __global uchar* drop_marks, uint seed, int count, int max_depth, float eps) {
+                                            __global const int* depths, __global const float* edges,
+                                            __global const int* ranges, __global const int* mesh_vertices,
+                                            __global float* radiance, __global int* first_prim,
+                                            __global float* first_hit,
+                                            __global uchar* drop_marks, __global int* pick,
+                                            __global float* outline, uint seed, int count, int max_depth, float eps) {
     int i = get_global_id(0);
     if (i >= count) return;
     Scene sc = SCENE_INIT;
     RngKey key = rng_key(seed, (uint)i, 0u);
-    __global const float* q = samples + 11 * i;
+    __global const float* q = samples + 7 * i;
+    __global const int* r = ranges + 3 * i;
     vec3 back = v3(q[2], q[3], q[4]);
+    if (depths[i] == 0) { /* the camera ray through film position (q[2], q[3]) (perspective: no random numbers) */
+        PathState cam;
+        camera_ray(&sc, key, q[2], q[3], &cam);
+        back = v3_neg(cam.dir);
+    }
     Surface s = surface_hit(&sc, prims[i], q[0], q[1], v3_neg(back));
     Bsdf b = bsdf_at(&sc, &s);
     vec3 wi = to_local(s.sh, back);
-    incident_sides(&sc, key, true, &s, &b, wi, v3(q[5], q[6], q[7]), v3(q[8], q[9], q[10]), eps, depths[i] + 1,
-                   max_depth, i, radiance, first_prim, first_hit, drop_marks);
+    incident_sides(&sc, key, true, &s, &b, wi, edges + EDGE_STRIDE * r[0], r[1], r[2], mesh_vertices, q[5], q[6],
+                   eps, depths[i] + 1, max_depth, i, radiance, first_prim, first_hit, drop_marks, pick, outline);
 }

@@ -247,21 +247,34 @@ static inline void path_trace_steps(const Scene* sc, int bounce, int word) {
 }
 #endif
 
+/* The closest hit of the path's current ray: *first where it is given (its first ray's hit, already found; then
+ * *first is cleared), else a traversal. */
+static inline bool path_next_hit(const Scene* sc, RngKey key, const PathState* ps, const Hit** first, Hit* hit) {
+    if (*first != 0) {
+        *hit = **first;
+        *first = 0;
+        return true;
+    }
+    return scene_closest(sc, key, ps->depth, ps->org, ps->dir, hit);
+}
+
 /* The rest of a path from its current ray, bounce after bounce, until it leaves the scene, reaches the
  * depth limit or ends by roulette: the megakernel's loop, which the wavefront's finish_paths stage also
- * runs for the last paths of a wave. With -DAOVS it records the G-buffer in aov (gbuffer.h). */
-static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int max_depth, AovOut aov) {
+ * runs for the last paths of a wave. With -DAOVS it records the G-buffer in aov (gbuffer.h). `first`: the
+ * current ray's hit where the caller has found it (0: none found yet; a miss is not passed). */
+static inline void path_continue_from(const Scene* sc, RngKey key, PathState* ps, int max_depth, AovOut aov,
+                                      const Hit* first) {
     for (;;) {
         Hit hit;
 #ifdef PATH_TRACE
         int bounce = ps->depth;
-        bool found = scene_closest(sc, key, ps->depth, ps->org, ps->dir, &hit);
+        bool found = path_next_hit(sc, key, ps, &first, &hit);
         int tr = PATH_TRACE_ALIVE | (found ? PATH_TRACE_HIT : 0);
         path_trace_steps(sc, bounce, 1);
         path_trace_put(sc, bounce, 0, tr);
         if (!found) {
 #else
-        if (!scene_closest(sc, key, ps->depth, ps->org, ps->dir, &hit)) {
+        if (!path_next_hit(sc, key, ps, &first, &hit)) {
 #endif
 #ifdef AOVS
             gbuffer_miss(sc, aov, ps->depth, ps->dir);
@@ -296,6 +309,10 @@ static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int
         if (!path_sample_bsdf(key, &s, &b, ps, max_depth)) return;
 #endif
     }
+}
+
+static inline void path_continue(const Scene* sc, RngKey key, PathState* ps, int max_depth, AovOut aov) {
+    path_continue_from(sc, key, ps, max_depth, aov, 0);
 }
 
 /* The end of a path: its radiance goes to its film slot f (see film_pixel); a NaN or inf sample is

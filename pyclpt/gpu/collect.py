@@ -61,10 +61,8 @@ def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wav
     for name in ("backward", "forward"):
         replay.kernel(name, kinds)
     replay.kernel("edge_radiance")  # the boundary term of primary visibility (pyclpt.gradients.edges)
-    replay.kernel("incident_radiance")  # ... of soft shadows (pyclpt.gradients.shadows)
-    replay.kernel("soft_edge_pick")  # ... and their silhouette search
-    replay.kernel("path_vertices")  # ... of the light after the first bounce
-    replay.kernel("vertex_radiance")
+    replay.kernel("path_vertices")  # ... of soft shadows (pyclpt.gradients.shadows): the shading points
+    replay.kernel("vertex_radiance")  # ... their silhouette search and the radiance either side
 
 
 def collect_programs(scenes: Iterable[Scene | str], *, device_class: str | None = "gpu",

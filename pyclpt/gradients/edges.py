@@ -367,10 +367,17 @@ def scatter_to_vertices(params: SceneParameters, scene: Scene, i: int, names: Se
     vertex_gradients(params, scene, i, names, gv, out)
 
 
+def add_at(out: np.ndarray, rows: np.ndarray, q: np.ndarray) -> None:
+    """out (V, C) += q (N, C) at rows (N,), as np.add.at, in the same order, a column at a time with np.bincount
+    (about ten times faster than np.add.at on rows of vectors)."""
+    for c in range(out.shape[1]):
+        out[:, c] += np.bincount(rows, weights=q[:, c], minlength=out.shape[0])
+
+
 def add_on_edges(gv: np.ndarray, v0: np.ndarray, v1: np.ndarray, t: np.ndarray, q: np.ndarray) -> None:
     """gv (V, 3) += per-point vectors q (N, 3) at the points (1 - t) v0 + t v1, to the two vertices linearly."""
-    np.add.at(gv, v0, (1 - t)[:, None] * q)
-    np.add.at(gv, v1, t[:, None] * q)
+    add_at(gv, v0, (1 - t)[:, None] * q)
+    add_at(gv, v1, t[:, None] * q)
 
 
 def add_on_triangles(gv: np.ndarray, indices: np.ndarray, tri: np.ndarray, bary: np.ndarray, q: np.ndarray) -> None:
@@ -378,7 +385,7 @@ def add_on_triangles(gv: np.ndarray, indices: np.ndarray, tri: np.ndarray, bary:
     with ``indices``, to the three vertices by their barycentrics."""
     corners = np.asarray(indices, np.int64)[tri]
     for k, bk in enumerate((1 - bary[:, 0] - bary[:, 1], bary[:, 0], bary[:, 1])):
-        np.add.at(gv, corners[:, k], bk[:, None] * q)
+        add_at(gv, corners[:, k], bk[:, None] * q)
 
 
 def along(velocity: np.ndarray, tangent: np.ndarray) -> np.ndarray:

@@ -61,6 +61,20 @@ def moved_alpha_records(scene: Scene, step: float = BSDF_DIFF_STEP) -> tuple[np.
     return up, down
 
 
+@dataclasses.dataclass
+class SideSamples:
+    """The outputs of the vertex_radiance kernel (cl/gradients/incident.h), per sample."""
+
+    radiance: np.ndarray  # (N, 2, 3) f |cos| L_i either side of the outline (minus, plus)
+    first_prim: np.ndarray  # (N, 2) the leaf-order triangle each side's ray meets first (-1: none)
+    first_hit: np.ndarray  # (N, 2, 3) its distance and barycentrics there
+    pick: np.ndarray  # (N,) the edge picked, counted from the sample's first (-1: none)
+    outline: np.ndarray  # (N, 5) the outline's measure per sample, the distance to the edge point, its normal n (3)
+
+    def __iter__(self):
+        return iter((self.radiance, self.first_prim, self.first_hit, self.pick, self.outline))
+
+
 class PathReplay:
     """The gradient kernels of one scene on one device, at one resolution and depth limit."""
 
@@ -86,8 +100,7 @@ class PathReplay:
 
     def kernel(self, name: str, kinds: Iterable[str] = ()) -> cl.Kernel:
         """Kernel ``backward`` or ``forward`` (specialised for the parameter kinds differentiated), or one of the
-        boundary terms' (``edge_radiance``, ``incident_radiance``, ``soft_edge_pick``, ``path_vertices``,
-        ``vertex_radiance``)."""
+        boundary terms' (``edge_radiance``, ``path_vertices``, ``vertex_radiance``)."""
         kinds = tuple(sorted(set(kinds)))
         key = (name, *kinds)
         if key not in self._programs:
@@ -205,78 +218,65 @@ class PathReplay:
         out = np.zeros((len(pts), 2, 3), np.float32)
         marks = np.zeros((len(pts), 2), np.uint8)
         self._batched("edge_radiance", len(pts), self.scene.args(self.width, self.height), [pts], [out, marks],
-                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)))
+                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)),
+                      written=1)
         self.dropped = int(marks.astype(np.int64).sum())
         return out
 
-    def incident_radiance(self, samples: np.ndarray, seed: int, eps: float
-                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """f |cos| L_i (N, 2, 3) at the first hits of the camera rays through film points ``samples[:, :2]``, from
-        directions ``samples[:, 2:5]`` minus and plus ``eps`` times ``samples[:, 5:8]`` (the incident_radiance
-        kernel; N, 8 float32), both with the random numbers of (seed, sample), the leaf-order triangle (N, 2)
-        each side's ray meets first (-1: none) and its distance and barycentrics there (N, 2, 3). NaN or inf ones
-        give 0 and are counted in :attr:`dropped`."""
-        return self._sides("incident_radiance", [np.ascontiguousarray(samples, np.float32).reshape(-1, 8)], seed, eps)
-
-    def vertex_radiance(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, seed: int, eps: float
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """As :meth:`incident_radiance`, at later vertices of camera paths (:meth:`path_vertices`): the leaf-order
-        triangles ``prims`` (N,), ``samples`` (N, 11) = barycentrics, the direction back along the path, the
-        direction w and its side n, and the vertices' bounces ``depths`` (N,) (the vertex_radiance kernel)."""
-        return self._sides("vertex_radiance", [np.ascontiguousarray(prims, np.int32).reshape(-1),
-                                               np.ascontiguousarray(samples, np.float32).reshape(-1, 11),
-                                               np.ascontiguousarray(depths, np.int32).reshape(-1)], seed, eps)
-
-    def _sides(self, name: str, inputs: list[np.ndarray], seed: int, eps: float
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """incident_radiance or vertex_radiance over the samples of ``inputs`` (first axis: the sample): their
-        common outputs (cl/gradients/incident.h)."""
-        n = len(inputs[0])
-        out = np.zeros((n, 2, 3), np.float32)
-        prims = np.full((n, 2), -1, np.int32)
-        hits = np.zeros((n, 2, 3), np.float32)
+    def vertex_radiance(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, edges: np.ndarray,
+                        ranges: np.ndarray, mesh_vertices: np.ndarray, seed: int, eps: float) -> SideSamples:
+        """At vertices of camera paths (:meth:`path_vertices`: the camera rays' first hits, depth 0, and later
+        vertices), the leaf-order triangles ``prims`` (N,), ``samples`` (N, 7) = barycentrics, the direction back
+        along the path (at depth 0: the camera ray's film position x, y and 0) and the uniforms of the edge's pick
+        and of its point t, and the vertices' bounces ``depths`` (N,): one edge that is a silhouette from the
+        vertex x among the ``ranges[:, 1]`` records of ``edges`` (E, EDGE_STRIDE:
+        :meth:`pyclpt.gradients.shadows.MeshEdges.records`, the mesh's index last) from ``ranges[:, 0]``, those
+        of mesh ``ranges[:, 2]`` (x's) left out, picked in proportion to the angle it subtends, and f |cos| L_i
+        either side of its point at t, both sides with the random numbers of (seed, sample) (the vertex_radiance
+        kernel). ``mesh_vertices`` (M + 1,): the meshes' packed vertex ranges: the side that meets the edge's mesh
+        first gives 0 untraced, and both do unless exactly one side meets it (cl/gradients/incident.h). NaN or
+        inf ones give 0 and are counted in :attr:`dropped`."""
+        n = len(prims)
+        out = SideSamples(np.zeros((n, 2, 3), np.float32), np.full((n, 2), -1, np.int32),
+                          np.zeros((n, 2, 3), np.float32), np.full(n, -1, np.int32), np.zeros((n, 5), np.float32))
         marks = np.zeros((n, 2), np.uint8)
-        self._batched(name, n, self.scene.args(self.width, self.height), inputs, [out, prims, hits, marks],
-                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)))
+        if n and len(edges):
+            e_buf = upload(self.device, np.ascontiguousarray(edges, np.float32).reshape(-1), "silhouette edges")
+            m_buf = upload(self.device, np.ascontiguousarray(mesh_vertices, np.int32), "mesh vertex ranges")
+            self._batched("vertex_radiance", n, self.scene.args(self.width, self.height),
+                          [np.ascontiguousarray(prims, np.int32).reshape(-1),
+                           np.ascontiguousarray(samples, np.float32).reshape(-1, 7),
+                           np.ascontiguousarray(depths, np.int32).reshape(-1), e_buf,
+                           np.ascontiguousarray(ranges, np.int32).reshape(-1, 3), m_buf],
+                          [out.radiance, out.first_prim, out.first_hit, marks, out.pick, out.outline],
+                          lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)),
+                          written=3)
         self.dropped = int(marks.astype(np.int64).sum())
-        return out, prims, hits
+        return out
 
-    def path_vertices(self, film: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def path_vertices(self, film: np.ndarray, seed: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One later vertex of the camera path through each film position (N, 2) (the path_vertices kernel, random
         numbers of (seed, i)): its leaf-order triangle (N,) (-1: none), (N, 8) its barycentrics, the direction
-        back along the path and its throughput over the probability of the choice, and its bounce (N,)."""
+        back along the path and its throughput over the probability of the choice, and its bounce (N,); and the
+        camera ray's first hit: its leaf-order triangle (N,) (-1: none), (N, 3) its distance and barycentrics."""
         f = np.ascontiguousarray(film, np.float32).reshape(-1, 2)
         prims = np.full(len(f), -1, np.int32)
         vertex = np.zeros((len(f), 8), np.float32)
         depths = np.zeros(len(f), np.int32)
-        self._batched("path_vertices", len(f), self.scene.args(self.width, self.height), [f], [prims, vertex, depths],
-                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth)))
-        return prims, vertex, depths
-
-    def soft_edge_pick(self, points: np.ndarray, u: np.ndarray, edges: np.ndarray, ranges: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
-        """For each shading point (N, 3), one silhouette edge seen from it among the edges ``ranges[i]`` = (first,
-        count) of ``edges`` (E, 20) float32 records (the soft_edge_pick kernel's: end points, each face's point
-        and normal, the one-face flag), in proportion to the angle it subtends, with uniform numbers ``u`` (N,).
-        Returns the chosen edge (N,) relative to its range's first (-1: none) and the inverse of its
-        probability (N,)."""
-        pts = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
-        pick = np.full(len(pts), -1, np.int32)
-        inv_pdf = np.zeros(len(pts), np.float32)
-        if not len(pts) or not len(edges):
-            return pick, inv_pdf
-        e_buf = upload(self.device, np.ascontiguousarray(edges, np.float32).reshape(-1), "silhouette edges")
-        self._batched("soft_edge_pick", len(pts), (),
-                      [pts, np.ascontiguousarray(u, np.float32), e_buf, np.ascontiguousarray(ranges, np.int32)],
-                      [pick, inv_pdf], lambda count: (np.int32(count),))
-        return pick, inv_pdf
+        first_prims = np.full(len(f), -1, np.int32)
+        first_hits = np.zeros((len(f), 3), np.float32)
+        self._batched("path_vertices", len(f), self.scene.args(self.width, self.height), [f],
+                      [prims, vertex, depths, first_prims, first_hits],
+                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth)), written=5)
+        return prims, vertex, depths, first_prims, first_hits
 
     def _batched(self, name: str, n: int, head: tuple, inputs: list, outputs: list[np.ndarray],
-                 tail: Callable[[int], tuple]) -> None:
+                 tail: Callable[[int], tuple], written: int = 0) -> None:
         """Launch kernel ``name`` over n items, LAUNCH a time, one work-item an item, with the arguments ``head``,
         then ``inputs`` (host arrays, first axis the item: that launch's items uploaded; a cl.Buffer: whole), then
-        ``outputs`` (host arrays, first axis the item, zeroed on the device and filled from it), then
-        ``tail(count)``."""
+        ``outputs`` (host arrays, first axis the item, zeroed on the device and filled from it; the first
+        ``written`` ones are not zeroed: the kernel writes every item's), then ``tail(count)``."""
         kernel = self.kernel(name)
         q = self.device.queue
         for start in range(0, n, LAUNCH):
@@ -284,10 +284,11 @@ class PathReplay:
             ins = [a if isinstance(a, cl.Buffer) else upload(self.device, a[start:start + count], f"{name} input")
                    for a in inputs]
             outs = []
-            for a in outputs:
+            for k, a in enumerate(outputs):
                 nbytes = a[start:start + count].nbytes
                 outs.append(alloc(self.device, max(nbytes, 1), f"{name} output"))
-                fill_buffer(q, outs[-1], np.uint8(0), 0, nbytes)
+                if k >= written:
+                    fill_buffer(q, outs[-1], np.uint8(0), 0, nbytes)
             g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
             self.profile.record(name, kernel(q, (g,), (LOCAL_SIZE,), *head, *ins, *outs, *tail(count)))
             for a, b in zip(outputs, outs):

@@ -22,7 +22,7 @@ through specular bounces, instanced shapes (refused).
 
 Soft shadows (area lights, the environment, any incident light an occluder's silhouette cuts at the first
 bounce) are :func:`soft_shadow_boundary`'s: an outline per shading point, on the sphere of directions, sampled
-from each pixel's shading points with the ``incident_radiance`` kernel.
+from each pixel's shading points with the ``vertex_radiance`` kernel.
 """
 from __future__ import annotations
 
@@ -303,8 +303,8 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
 
 #: Angular offset (radians) of the two directions either side of a soft-shadow edge point.
 SOFT_SIDE_EPS = 1e-4
-#: Floats of an edge record of the soft_edge_pick kernel (EDGE_STRIDE of cl/gradients/soft_edge_pick.cl).
-EDGE_STRIDE = 20
+#: Floats of an edge record of the silhouette search (EDGE_STRIDE of cl/gradients/edge_pick.h).
+EDGE_STRIDE = 16
 
 
 @dataclass
@@ -326,18 +326,21 @@ class MeshEdges:
         face_b = np.where(count == 2, face[np.minimum(first + 1, len(pairs) - 1)], -1)
         return cls(pairs[first, 0], pairs[first, 1], face[first], face_b)
 
-    def records(self, positions: np.ndarray, indices: np.ndarray, face_normals: np.ndarray) -> np.ndarray:
-        """(E, EDGE_STRIDE) float32: the edges as the soft_edge_pick kernel reads them (cl/gradients/soft_edge_pick.cl):
-        end points, a vertex and the unit normal of each face (a boundary edge's second face repeats its first), and
-        1 for a boundary edge."""
+    def records(self, positions: np.ndarray, indices: np.ndarray, face_normals: np.ndarray, mesh: int = 0
+                ) -> np.ndarray:
+        """(E, EDGE_STRIDE) float32: the edges as the silhouette search reads them (cl/gradients/edge_pick.h):
+        end points, the unit normal n of each face and n . p for a vertex p of it (a boundary edge's second face
+        repeats its first), 1 for a boundary edge, and the index ``mesh`` of their mesh."""
         length = np.linalg.norm(face_normals, axis=1, keepdims=True)
         unit = np.divide(face_normals, length, out=np.zeros_like(face_normals), where=length > 0)
         fb = np.where(self.face_b >= 0, self.face_b, self.face_a)
         rec = np.zeros((len(self.v0), EDGE_STRIDE), np.float32)
         rec[:, 0:3], rec[:, 3:6] = positions[self.v0], positions[self.v1]
-        rec[:, 6:9], rec[:, 9:12] = positions[indices[self.face_a, 0]], unit[self.face_a]
-        rec[:, 12:15], rec[:, 15:18] = positions[indices[fb, 0]], unit[fb]
-        rec[:, 18] = self.face_b < 0
+        for at, face in ((6, self.face_a), (10, fb)):
+            rec[:, at:at + 3] = unit[face]
+            rec[:, at + 3] = np.einsum("ec,ec->e", unit[face], positions[indices[face, 0]])
+        rec[:, 14] = self.face_b < 0
+        rec[:, 15] = mesh
         return rec
 
 
@@ -411,11 +414,12 @@ class SoftSamples:
 def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
                       max_depth: int | None = None, device: Device | str | None = None,
                       receivers: Sequence[int] = (), camera: bool = False, later: bool = True) -> SoftSamples:
-    """``spp`` shading points a pixel, each with one point on an edge of ``scene.meshes[i]`` (i in
-    ``meshes``) that is a silhouette from it, chosen in proportion to the angle the edges subtend, and the
-    radiance either side from the ``incident_radiance`` kernel (see :func:`soft_shadow_boundary`). With
-    ``receivers`` (mesh indices) the shading points on those meshes also take a point on an edge of every other
-    mesh (their own motion moves the outlines they see); with ``camera``, every shading point does. With ``later``,
+    """``spp`` shading points a pixel (the camera rays' first hits, from the path_vertices kernel), each with one
+    point on an edge of the meshes ``scene.meshes[i]`` (i in ``meshes``, not the point's own) that is a silhouette
+    from it, chosen in proportion to the angle the edges subtend, and the radiance either side, both from the
+    vertex_radiance kernel (see :func:`soft_shadow_boundary`). With ``receivers`` (mesh indices) the shading points
+    on those meshes choose among the edges of every other mesh (their own motion moves the outlines they see);
+    with ``camera``, every shading point does. With ``later``,
     also one later vertex of a camera path through each of the same film positions (the path_vertices kernel: a
     vertex after the first bounce, weighted by the throughput that reached it), whose incident light's outlines
     move as its surface (attached), the occluders and what they hide move, not with the camera.
@@ -429,11 +433,6 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
     cell, u = np.stack([pix % width, pix // width], axis=1), rng.random((len(pix), 2))
     rfilter = scene.film.rfilter
     film = cell + u if rfilter.kind == "box" else cell + 0.5 + sample_offsets(rfilter, u)
-    org, dirs = _camera_rays(scene, film, width, height)
-    tracer = _HostTracer(scene)
-    t_hit, ng_hit, mesh_hit, tri_hit, bary_hit = tracer.hit_triangle(org, dirs)
-    ng_hit, _ = _unit(ng_hit)
-    x = org + np.where(np.isfinite(t_hit), t_hit, 0.0)[:, None] * dirs
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
     first = np.cumsum([0] + [m.triangle_count for m in scene.meshes])
     order = replay.scene.arrays.bvh.tri_order
@@ -442,140 +441,102 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         """The mesh (index in scene.meshes) of leaf-order triangles (-1: none)."""
         return np.where(prims >= 0, np.searchsorted(first, order[np.maximum(prims, 0)], side="right") - 1, -1)
 
-    # The later vertices of camera paths through the same film positions (path_vertices: one a path, attached to
-    # its surface, weighted by the throughput that reached it): the light they receive has outlines too.
+    # The shading points: the camera rays' first hits, and the later vertices of camera paths through the same
+    # film positions (path_vertices: one a path, attached to its surface, weighted by the throughput that reached
+    # it): the light they receive has outlines too. Each by its leaf-order triangle and barycentrics.
+    vprim, vert, vdepth, prim, hit = replay.path_vertices(film, int(rng.integers(2**32)))
+    # per shading point, as path_vertices gives a later vertex: barycentrics, the direction back along the path
+    # (the camera's hits: their film positions, vertex_radiance.cl), the throughput that reached it
     n_first = len(film)
-    valid = np.isfinite(t_hit)
-    beta = np.ones((n_first, 3))
+    table = np.zeros((n_first, 8), np.float32)
+    table[:, :2], table[:, 2:4], table[:, 5:] = hit[:, 1:], film, 1.0
     attached = np.zeros(n_first, bool)
-    prim = np.full(n_first, -1, np.int64)
-    depth = np.zeros(n_first, np.int64)
-    back_dir = -dirs
+    depth = np.zeros(n_first, np.int32)
     if later and (replay.max_depth < 0 or replay.max_depth > 2):  # a bounce after the camera's hit's
-        vprim, vert, vdepth = replay.path_vertices(film, int(rng.integers(2**32)))
         keep = np.flatnonzero(vprim >= 0)
-        vmesh = prim_mesh(vprim[keep])
-        vtri = order[vprim[keep]] - first[vmesh]
-        vbary = vert[keep, :2].astype(np.float64)
-        vx, vn = np.zeros((len(keep), 3)), np.zeros((len(keep), 3))
-        for i in np.unique(vmesh):
-            r = vmesh == i
-            p = scene.meshes[i].positions.astype(np.float64)
-            vx[r] = _point_motion(scene, i, vtri[r], vbary[r], p)  # the barycentric point
-            corners = p[scene.meshes[i].indices.astype(np.int64)[vtri[r]]]  # (n, 3, 3)
-            vn[r] = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        vn, _ = _unit(vn)
-        film, x, mesh_hit, tri_hit = (np.concatenate(v) for v in ((film, film[keep]), (x, vx), (mesh_hit, vmesh),
-                                                                   (tri_hit, vtri)))
-        pix = np.concatenate([pix, pix[keep]])
-        bary_hit, ng_hit, dirs = (np.concatenate(v) for v in ((bary_hit, vbary), (ng_hit, vn),
-                                                               (dirs, -vert[keep, 2:5])))
-        valid, beta = np.concatenate([valid, np.ones(len(keep), bool)]), np.concatenate([beta, vert[keep, 5:8]])
-        attached = np.concatenate([attached, np.ones(len(keep), bool)])
+        film, pix = np.concatenate([film, film[keep]]), np.concatenate([pix, pix[keep]])
         prim, depth = np.concatenate([prim, vprim[keep]]), np.concatenate([depth, vdepth[keep]])
-        back_dir = np.concatenate([back_dir, vert[keep, 2:5].astype(np.float64)])
+        table = np.concatenate([table, vert[keep]])
+        attached = np.concatenate([attached, np.ones(len(keep), bool)])
+    valid = prim >= 0
+    mesh_hit = prim_mesh(prim)
+    tri_hit = np.where(valid, order[np.maximum(prim, 0)] - first[np.maximum(mesh_hit, 0)], -1)
 
-    keys = ("pixel", "film", "jump", "mesh", "v0", "v1", "t", "velocity", "receiver", "tri", "bary", "ray",
-            "receiver_normal", "point", "attached", "background", "back_tri", "back_bary", "back_dist", "edge_dist")
-    parts: dict[str, list[np.ndarray]] = {k: [] for k in keys}
     # shading points that move: on a moving mesh, or (the camera's hits, sliding on its rays) with the camera
     moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | (camera & ~attached)
-    occluders = set(meshes)
-    # the silhouette search on the device, every mesh's in one launch: each shading point that can see mesh i's
-    # outline (not on i; i moves or the point does) against i's edges
-    found, entries, records, first_edge = [], [], [], 0
-    for i in sorted(occluders | (set(range(len(scene.meshes))) if len(receivers) or camera else set())):
+    # One sample a shading point: an edge, among those of the occluders (for a point that moves, of every mesh)
+    # that are silhouettes from it, picked in proportion to the angle it subtends, its own mesh's left out (its
+    # outlines on itself are not handled). The edge records in one array, the occluders' first.
+    occluders = sorted(set(meshes))
+    others = sorted(set(range(len(scene.meshes))) - set(occluders)) if len(receivers) or camera else []
+    records, v0s, v1s = [], [], []
+    for i in occluders + others:
         mesh = scene.meshes[i]
         p = mesh.positions.astype(np.float64)
         tri = mesh.indices.astype(np.int64)
         edges = MeshEdges.of(mesh)
-        live = np.flatnonzero(valid & (mesh_hit != i) & ((i in occluders) | moving))
-        if not len(live) or not len(edges.v0):
-            continue
-        records.append(edges.records(p, tri, np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])))
-        found.append((i, p, edges, live))
-        entries.append(np.broadcast_to(np.array([first_edge, len(edges.v0)], np.int32), (len(live), 2)))
-        first_edge += len(edges.v0)
-    if found:
-        lives = np.concatenate([f[3] for f in found])
-        picks, inv_pdfs = replay.soft_edge_pick(x[lives], rng.random(len(lives)), np.concatenate(records),
-                                                np.concatenate(entries))
-    # the edge points and the samples of the incident_radiance kernel, every mesh's in one launch
-    chosen, samples, at = [], [], 0
-    for i, p, edges, live in found:
-        k, inv_pdf = picks[at:at + len(live)], inv_pdfs[at:at + len(live)]
-        at += len(live)
-        ok = k >= 0
-        sel, k, w_pick = live[ok], k[ok].astype(np.int64), inv_pdf[ok].astype(np.float64)  # 1 / p(edge)
-        a, b = p[edges.v0[k]], p[edges.v1[k]]
-        t = rng.random(len(sel))
-        e = a + t[:, None] * (b - a)
-        w, dist = _unit(e - x[sel])
-        dw_dt = ((b - a) - w * np.einsum("nc,nc->n", w, b - a)[:, None]) / dist[:, None]
-        n, speed = _unit(np.cross(w, dw_dt))
-        keep = speed > 1e-12
-        sel, k, w_pick, t, w, dist, n, speed = (v[keep] for v in (sel, k, w_pick, t, w, dist, n, speed))
-        chosen.append((i, edges, sel, k, w_pick, t, dist, n, speed))
-        samples.append((sel, w, n))
-    if samples:  # the camera's hits through incident_radiance, the later vertices through vertex_radiance
-        sel, w, n = (np.concatenate(v) for v in zip(*samples))
-        radiances = np.zeros((len(sel), 2, 3), np.float32)
-        all_prims = np.full((len(sel), 2), -1, np.int32)
-        all_hits = np.zeros((len(sel), 2, 3), np.float32)
-        at_camera, later_ones = np.flatnonzero(~attached[sel]), np.flatnonzero(attached[sel])
-        if len(at_camera):
-            q = at_camera
-            radiances[q], all_prims[q], all_hits[q] = replay.incident_radiance(
-                np.concatenate([film[sel[q]], w[q], n[q]], axis=1), seed, SOFT_SIDE_EPS)
-        if len(later_ones):
-            q, v = later_ones, sel[later_ones]
-            radiances[q], all_prims[q], all_hits[q] = replay.vertex_radiance(
-                prim[v], np.concatenate([bary_hit[v], back_dir[v], w[q], n[q]], axis=1), depth[v], seed,
-                SOFT_SIDE_EPS)
-    at = 0
-    for i, edges, sel, k, w_pick, t, dist, n, speed in chosen:
-        radiance, prims, hits = (v[at:at + len(sel)] for v in (radiances, all_prims, all_hits))
-        at += len(sel)
-        if not len(sel):
-            continue
-        # The material form (the interior term's: points on the surfaces move with them): the occluder's own
-        # radiance has no jump at its outline (its points stay in its area integral), what it hides behind does:
-        # the side whose ray meets mesh i first counts 0, and the outline moves relative to that background.
-        pm = prim_mesh(prims)
-        radiance = np.where((pm == i)[..., None], 0.0, radiance.astype(np.float64))
-        # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel
-        jump = (radiance[:, 0] - radiance[:, 1]) * (speed * w_pick / spp)[:, None] * beta[sel]
-        # a sample with no jump contributes nothing (a third of them: both sides meet the occluder, or the same
-        # light): kept out of the tables
-        nz = np.flatnonzero(np.any(jump != 0.0, axis=1))
-        pm, prims, hits, jump, sel, k, t, dist, n = (v[nz] for v in (pm, prims, hits, jump, sel, k, t, dist, n))
-        rows = np.arange(len(pm))
-        side = np.where(pm[:, 0] != i, 0, 1)  # the side that passes the occluder (0 when both do)
-        back = np.where(pm[rows, side] != i, pm[rows, side], -1)
-        back_prim = np.maximum(prims[rows, side], 0)
-        parts["background"].append(back)
-        parts["back_tri"].append(np.where(back >= 0, order[back_prim] - first[np.maximum(back, 0)], -1))
-        parts["back_bary"].append(hits[rows, side, 1:].astype(np.float64))
-        parts["back_dist"].append(np.where(back >= 0, hits[rows, side, 0].astype(np.float64), np.inf))
-        parts["edge_dist"].append(dist)
-        parts["jump"].append(jump)
-        parts["film"].append(film[sel])
-        parts["mesh"].append(np.full(len(sel), i))
-        parts["v0"].append(edges.v0[k])
-        parts["v1"].append(edges.v1[k])
-        parts["t"].append(t)
-        parts["velocity"].append(n / dist[:, None])  # n is normal to w: n . (I - w w^T) / |e - x| = n / |e - x|
-        for key, v in (("receiver", mesh_hit), ("tri", tri_hit), ("bary", bary_hit), ("ray", dirs),
-                       ("receiver_normal", ng_hit), ("point", x), ("attached", attached), ("pixel", pix)):
-            parts[key].append(v[sel])
-    if not parts["film"]:
-        z, z3, zi = np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64)
-        return SoftSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), z3, zi, zi, zi, z, z3, zi, zi,
-                           np.zeros((0, 2)), np.zeros((0, 2)), z3, z3, z3, np.zeros(0, bool), zi, zi,
-                           np.zeros((0, 2)), z, z)
-    cat = {k: np.concatenate(v) for k, v in parts.items()}
-    pixel = cat.pop("pixel")
-    return SoftSamples(pixel[:, None], np.ones((len(pixel), 1)), **cat)
+        rec = edges.records(p, tri, np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]]), i)
+        # an edge between two faces of one plane (a quad's diagonal) is never a silhouette: left out
+        flat = np.all(rec[:, 6:10] == rec[:, 10:14], axis=1) & (rec[:, 14] == 0)
+        records.append(rec[~flat])
+        v0s.append(edges.v0[~flat])
+        v1s.append(edges.v1[~flat])
+    counts = [len(r) for r in records]
+    n_occluder_edges, n_edges = sum(counts[:len(occluders)]), sum(counts)
+    # the points that have an edge to pick: on no occluder or with another one to see, or moving
+    live = valid & ((moving & (n_edges > 0)) | ((n_occluder_edges > 0)
+                                                & (~np.isin(mesh_hit, occluders) | (len(occluders) > 1))))
+    sel = np.flatnonzero(live)
+    if not len(sel):
+        return _no_soft_samples()
+    edge_records = np.concatenate(records)
+    ranges = np.stack([np.zeros(len(sel), np.int32), np.where(moving[sel], n_edges, n_occluder_edges),
+                       mesh_hit[sel]], axis=1).astype(np.int32)
+    mesh_vertices = np.cumsum([0] + [m.positions.shape[0] for m in scene.meshes]).astype(np.int32)
+    samples = np.empty((len(sel), 7), np.float32)
+    samples[:, :5] = table[sel, :5]
+    samples[:, 5:] = u = rng.random((len(sel), 2)).astype(np.float32)  # the edge's pick, its point t
+    radiance, prims, hits, pick, outline = replay.vertex_radiance(prim[sel], samples, depth[sel], edge_records,
+                                                                  ranges, mesh_vertices, seed, SOFT_SIDE_EPS)
+    # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel (the side
+    # whose ray meets the occluder first is 0: the material form, cl/gradients/incident.h); a sample with no jump
+    # (no silhouette, both sides meet the occluder or pass it, the same light) contributes nothing: left out
+    nz = np.flatnonzero(np.any(radiance[:, 0] != radiance[:, 1], axis=1) & (outline[:, 0] > 0))
+    edge = pick[nz]
+    mesh = edge_records[edge, 15].astype(np.int64)
+    sel, prims, hits, outline = sel[nz], prims[nz], hits[nz], outline[nz].astype(np.float64)
+    jump = (radiance[nz, 0] - radiance[nz, 1]).astype(np.float64) * (outline[:, 0] / spp)[:, None] * table[sel, 5:]
+    # The material form (the interior term's: points on the surfaces move with them): the occluder's own radiance
+    # has no jump at its outline, what it hides behind does: the outline moves relative to that background, the
+    # first hit of the side that passes the occluder.
+    pm = prim_mesh(prims)
+    rows = np.arange(len(sel))
+    side = np.where(pm[:, 0] != mesh, 0, 1)
+    back = np.where(pm[rows, side] != mesh, pm[rows, side], -1)
+    back_prim = np.maximum(prims[rows, side], 0)
+    dist = outline[:, 1]
+    # the shading points (their barycentric points), their triangles' unit normals, the rays that reach them
+    bary = table[sel, :2].astype(np.float64)
+    positions = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
+    corners = positions[replay.scene.arrays.tri_vidx[prim[sel]]]  # (n, 3, 3), leaf order
+    x = ((1.0 - bary[:, 0] - bary[:, 1])[:, None] * corners[:, 0] + bary[:, :1] * corners[:, 1]
+         + bary[:, 1:] * corners[:, 2])
+    ng, _ = _unit(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+    ray = -table[sel, 2:5].astype(np.float64)
+    at_camera = np.flatnonzero(~attached[sel])
+    ray[at_camera] = _camera_rays(scene, film[sel[at_camera]], width, height)[1]
+    return SoftSamples(
+        pix[sel][:, None], np.ones((len(sel), 1)), jump, mesh, np.concatenate(v0s)[edge], np.concatenate(v1s)[edge],
+        u[nz, 1].astype(np.float64), outline[:, 2:5] / dist[:, None],  # n is normal to w: n / |e - x|
+        mesh_hit[sel], tri_hit[sel], bary, film[sel], ray, ng, x, attached[sel], back,
+        np.where(back >= 0, order[back_prim] - first[np.maximum(back, 0)], -1), hits[rows, side, 1:].astype(np.float64),
+        np.where(back >= 0, hits[rows, side, 0].astype(np.float64), np.inf), dist)
+
+
+def _no_soft_samples() -> SoftSamples:
+    z, z3, zi = np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64)
+    return SoftSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), z3, zi, zi, zi, z, z3, zi, zi, np.zeros((0, 2)),
+                       np.zeros((0, 2)), z3, z3, z3, np.zeros(0, bool), zi, zi, np.zeros((0, 2)), z, z)
 
 
 def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
@@ -586,10 +547,10 @@ def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[s
     given dLoss/dImage ``image_grad`` (H, W, 3): soft shadows of area lights and the environment, and every
     occluder's outline in the incident light (secondary visibility, Li et al. 2018), as occluders move and as
     the shading points move with the surface they lie on or with the camera (they slide along its rays).
-    ``spp`` shading points per pixel (stratified), each with one point on the edges that are silhouettes from
-    it, chosen in proportion to the angle they subtend; the radiance either side of it from the
-    ``incident_radiance`` kernel. Not included: a mesh's outlines on itself, later bounces' outlines, delta
-    lights (:func:`shadow_boundary`)."""
+    ``spp`` shading points per pixel and one later vertex of a camera path through each (:func:`sample_soft_edges`),
+    each with one point on the edges that are silhouettes from it, chosen in proportion to the angle they subtend;
+    the radiance either side of it from the ``vertex_radiance`` kernel. Not included: a mesh's outlines on itself,
+    outlines seen through delta (mirror, glass) bounces, delta lights (:func:`shadow_boundary`)."""
     g = np.asarray(image_grad, np.float64)
     if g.ndim != 3 or g.shape[2] != 3:
         raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
