@@ -61,10 +61,10 @@ static inline void side_store(__global float* radiance, __global int* first_prim
     store3(first_hit, f, st->found ? v3(st->hit.t, st->hit.u, st->hit.v) : v3_splat(0.0f));
 }
 
-/* Sample i at surface s (found: a surface at all; bsdf b, wi the local direction towards where the path came from,
- * on mesh `own`): an edge among edges[0 .. edge_count) (edge_pick.h; not mesh own's), picked with uniform u, and
- * its point at t; its mesh, the occluder, has packed vertices [mesh_vertices[j], mesh_vertices[j + 1]); two
- * directions w -+ eps n either side of the outline there; radiance[3 (2 i + side)] = f(wi, w -+ eps n) |cos|
+/* Sample i at surface s (bsdf b, wi the local direction towards where the path came from, on mesh `own`): an
+ * edge among edges[0 .. edge_count) (edge_pick.h; not mesh own's), picked with uniform u, and its point at t;
+ * its mesh, the occluder, has packed vertices [mesh_vertices[j], mesh_vertices[j + 1]); two directions
+ * w -+ eps n either side of the outline there; radiance[3 (2 i + side)] = f(wi, w -+ eps n) |cos|
  * L_i(w -+ eps n), L_i the estimator of path.h from there, its first ray at bounce `depth` (the emission it meets
  * counted whole, as after a delta sample); 0 where the direction is below the surface or `depth` allows no
  * bounce; a NaN or inf one 0 and 1 in drop_marks; the leaf-order triangle each side's ray meets first in
@@ -76,18 +76,17 @@ static inline void side_store(__global float* radiance, __global int* first_prim
  * is not traced and its radiance is 0; and unless exactly one side meets the occluder, the edge is no outline of
  * it from s (something nearer hides it, or both sides pass it): as eps -> 0 both sides' light is the same, so
  * neither path is traced and both are 0 (the host drops samples without a jump). */
-static inline void incident_sides(const Scene* sc, RngKey key, bool found, const Surface* s, const Bsdf* b, vec3 wi,
+static inline void incident_sides(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, vec3 wi,
                                   __global const float* edges, int edge_count, int own,
                                   __global const int* mesh_vertices, float u, float t, float eps, int depth,
                                   int max_depth, int i, __global float* radiance,
                                   __global int* first_prim, __global float* first_hit, __global uchar* drop_marks,
                                   __global int* pick, __global float* outline) {
-    found = found && depth_allows(depth, max_depth);
     SideStart minus, plus;
     minus.found = plus.found = false;
     vec3 out_minus = v3_splat(0.0f), out_plus = v3_splat(0.0f), w, n = v3_splat(0.0f);
     float inv_pdf = 0.0f, dist = 0.0f, speed = 0.0f;
-    int e = found ? edge_pick(edges, edge_count, s->p, own, u, &inv_pdf) : -1;
+    int e = depth_allows(depth, max_depth) ? edge_pick(edges, edge_count, s->p, own, u, &inv_pdf) : -1;
     if (e >= 0) speed = edge_point(edges, e, s->p, t, &w, &dist, &n);
     if (!(speed > 0.0f)) e = -1;
     if (e >= 0) {

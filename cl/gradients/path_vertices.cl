@@ -43,7 +43,8 @@ __kernel SCALAR_KERNEL void path_vertices(SCENE_PARAMS, __global const float* fi
         }
         Surface s = surface_hit(&sc, hit.prim, hit.u, hit.v, ps.dir);
         Bsdf b = bsdf_at(&sc, &s);
-        if (ps.depth > 0 && !(ps.flags & PATH_PREV_DELTA) && !bsdf_is_delta(&b) && depth_allows(ps.depth + 1, max_depth)) {
+        bool later = ps.depth > 0 && !(ps.flags & PATH_PREV_DELTA);
+        if (later && !bsdf_is_delta(&b) && depth_allows(ps.depth + 1, max_depth)) {
             seen += 1; /* a reservoir of one: the k-th such vertex replaces the kept one with probability 1 / k */
             if (rng_1d(key, ps.depth, DIM_VERTEX_CHOICE) * (float)seen < 1.0f) {
                 chosen = hit.prim;

@@ -47,6 +47,6 @@ __kernel SCALAR_KERNEL void vertex_radiance(SCENE_PARAMS, __global const int* pr
     Surface s = surface_hit(&sc, prims[i], q[0], q[1], v3_neg(back));
     Bsdf b = bsdf_at(&sc, &s);
     vec3 wi = to_local(s.sh, back);
-    incident_sides(&sc, key, true, &s, &b, wi, edges + EDGE_STRIDE * r[0], r[1], r[2], mesh_vertices, q[5], q[6],
+    incident_sides(&sc, key, &s, &b, wi, edges + EDGE_STRIDE * r[0], r[1], r[2], mesh_vertices, q[5], q[6],
                    eps, depths[i] + 1, max_depth, i, radiance, first_prim, first_hit, drop_marks, pick, outline);
 }
