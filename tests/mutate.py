@@ -198,8 +198,8 @@ MUTANTS: list[Mutant] = [
     Mutant("roulette-not-compensated", "ps->beta = v3_divs(ps->beta, q);", "ps->beta = v3_divs(ps->beta, 1.0f);",
            (T_FURNACE,),
            "surviving paths not divided by the survival probability"),
-    Mutant("image-upside-down", "float sy = 1.0f - 2.0f * (((float)py + j.y) / (float)height);",
-           "float sy = 2.0f * (((float)py + j.y) / (float)height) - 1.0f;",
+    Mutant("image-upside-down", "float sy = 1.0f - 2.0f * (y / c[CONST_HEIGHT]);",
+           "float sy = 2.0f * (y / c[CONST_HEIGHT]) - 1.0f;",
            ("tests/test_render.py::test_depth_one_shows_only_emitters",), "the camera's image rows reversed"),
     Mutant("diffuse-without-1-over-pi", "return v3_scale(b->color, INV_PI_F * wo.z);",
            "return v3_scale(b->color, wo.z);",
@@ -219,8 +219,8 @@ MUTANTS: list[Mutant] = [
            "return seen ? v2(cur.x - prev.x, cur.y - prev.y)",
            ("tests/test_aovs.py::test_motion_of_a_camera_translation",),
            "motion vectors pointing from the previous frame to this one instead of back"),
-    Mutant("aov-ids-of-the-last-sample", "float id = first ? slots[c * n + p] : sum[c * pixels + p];",
-           "float id = first ? slots[c * n + (frames - 1) * pixels + p] : sum[c * pixels + p];",
+    Mutant("aov-ids-of-the-last-sample", "float id = first ? slots[c * n + f] : sum[c * pixels + p];",
+           "float id = first ? slots[c * n + (frames - 1) * frame_pixels + f] : sum[c * pixels + p];",
            ("tests/test_aovs.py::test_aovs_average_the_samples_in_sample_order",),
            "a pixel's ids taken from the last sample of its first batch, not its first sample"),
     Mutant("reprojection-ignores-material", "return (mq == mat) & (surface == surface_q) & (!surface | same);",
@@ -253,7 +253,7 @@ MUTANTS: list[Mutant] = [
     Mutant("gaussian-table-host-t-squared", "target = 1.0 - t ** 4", "target = 1.0 - t ** 2",
            ("tests/test_rfilter.py::test_offsets_follow_mitsubas_filter",),
            "the host tabulates the gaussian's inverse CDF at other nodes than the device reads", root="host"),
-    Mutant("filter-only-along-x", "j.y = rfilter_position(c, j.y);", "j.y = j.y;",
+    Mutant("filter-only-along-x", "rfilter_position(c, j.y));", "j.y);",
            ("tests/test_rfilter.py::test_filter_matches_mitsuba",),
            "the filter applied along x only: rows keep the box's jitter"),
     # ---- differentiable rendering (issue 13) --------------------------------------------------------
@@ -353,11 +353,11 @@ MUTANTS: list[Mutant] = [
            "indices=mesh.indices[:, ::-1].copy() if np.linalg.det(m[:3, :3]) < 0 else mesh.indices))",
            "indices=mesh.indices))", (f"{T_INST}::test_mirrored_instance_outline",),
            "a flattened mirroring instance keeps its winding: its outline seen from its back", root="host"),
-    Mutant("soft-boundary-occluder-side-counted", "radiance = np.where((pm == i)[..., None], 0.0, "
-           "radiance.astype(np.float64))", "radiance = radiance.astype(np.float64)",
+    Mutant("soft-boundary-occluder-side-counted", "if (on_plus) out_minus = side_radiance(",
+           "out_plus = side_radiance(sc, key, s, &plus, depth, max_depth); if (true) out_minus = side_radiance(",
            ("tests/test_interior.py::test_receiver_moving_under_a_soft_shadow",),
-           "the soft-shadow term counts the occluder's own radiance, which the interior term's area integral has",
-           root="host"),
+           "the soft-shadow term traces the side that meets the occluder first as well (incident_sides): it counts "
+           "the occluder's own radiance, which the interior term's area integral has"),
     Mutant("soft-boundary-background-fixed", "return 1.0 - self.edge_dist / self.back_dist",
            "return 1.0 + 0.0 * self.back_dist", ("tests/test_interior.py::test_receiver_moving_under_a_soft_shadow",),
            "the outline moves against fixed directions, not against the (attached) background behind it",
@@ -383,7 +383,7 @@ MUTANTS: list[Mutant] = [
     Mutant("instance-drops-the-uv-frame", "    if (mat_flags(scene_material(sc, s.material)) & MAT_FLAG_UV_FRAME) {",
            "    if (false) {", ("tests/test_instances.py::test_instanced_scene_renders_as_flattened[False-True]",),
            "an instanced anisotropic material's tangent frame rebuilt from the normal, not turned with it",
-           after="    int bits = inst_tri_bits(sc->nodes);"),
+           after="Surface s = surface_local(sc, prim & ((1 << bits) - 1), u, v);"),
 ]
 
 

@@ -553,7 +553,7 @@ def _lifted_box(dx: float = 0.0) -> pyclpt.Scene:
 def test_the_light_after_the_first_bounce_has_outlines_too():
     """The Cornell box's small box moving along x at depth 3: what the walls and the floor receive after a bounce
     changes with its shadows there (the outlines in the light that later vertices of the paths receive:
-    sample_soft_edges(later=True), path_vertices / vertex_radiance). Interior + camera silhouettes + soft shadows
+    soft_sample_chunks(later=True), path_vertices / vertex_radiance). Interior + camera silhouettes + soft shadows
     (24 seeds of 64 shading points a pixel, at 24x24) against central differences (h = 0.01, 4096 spp, two seeds):
     6.8 here; 5.5 with them (one standard error 1.3), 0.3 without (a mutant: the first-bounce outlines alone; at depth
     8 they missed the box's x derivative by a factor of -8, docs/differentiable.md)."""
@@ -566,14 +566,14 @@ def test_the_light_after_the_first_bounce_has_outlines_too():
     kw = dict(width=size, height=size, max_depth=depth)
 
     def soft(later: bool) -> float:
-        sample = shadows.sample_soft_edges
+        sample = shadows.soft_sample_chunks
         try:
             if not later:
-                shadows.sample_soft_edges = lambda *a, **k: sample(*a, **{**k, "later": False})
+                shadows.soft_sample_chunks = lambda *a, **k: sample(*a, **{**k, "later": False})
             return float(np.mean([shadows.soft_shadow_boundary_forward(scene, name, t, spp=64, seed=s, **kw).sum()
                                   for s in range(24)]))
         finally:
-            shadows.sample_soft_edges = sample
+            shadows.soft_sample_chunks = sample
 
     rest = float(np.mean([pyclpt.render_forward(scene, name, t, spp=64, seed=s, boundary=False, **kw).sum()
                           + edges.primary_boundary_forward(scene, name, t, samples=65536, seed=s, **kw).sum()

@@ -27,7 +27,7 @@ from each pixel's shading points with the ``vertex_radiance`` kernel.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -303,6 +303,8 @@ def shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], 
 
 #: Angular offset (radians) of the two directions either side of a soft-shadow edge point.
 SOFT_SIDE_EPS = 1e-4
+# camera shading points a band of pixels of the soft-shadow term (soft_sample_chunks)
+SOFT_CHUNK = 1 << 16
 #: Floats of an edge record of the silhouette search (EDGE_STRIDE of cl/gradients/edge_pick.h).
 EDGE_STRIDE = 16
 
@@ -411,9 +413,10 @@ class SoftSamples:
         return -self.velocity * (self.edge_dist / self.back_dist)[:, None]
 
 
-def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
-                      max_depth: int | None = None, device: Device | str | None = None,
-                      receivers: Sequence[int] = (), camera: bool = False, later: bool = True) -> SoftSamples:
+def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
+                       max_depth: int | None = None, device: Device | str | None = None,
+                       receivers: Sequence[int] = (), camera: bool = False, later: bool = True
+                       ) -> Iterator[SoftSamples]:
     """``spp`` shading points a pixel (the camera rays' first hits, from the path_vertices kernel), each with one
     point on an edge of the meshes ``scene.meshes[i]`` (i in ``meshes``, not the point's own) that is a silhouette
     from it, chosen in proportion to the angle the edges subtend, and the radiance either side, both from the
@@ -426,13 +429,12 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
     A shading point stands for its own pixel alone (``pixels`` (N, 1), ``weights`` 1): its film position is drawn
     from the pixel's filter (filter importance sampling, :func:`pyclpt.buffers.rfilter.sample_offsets`; the box:
     uniform in the pixel), rather than spread over the 16 pixels Mitsuba's gaussian reaches (its (N, 16) tables
-    took a third of the term's time)."""
+    took a third of the term's time).
+    The pixels go in bands of SOFT_CHUNK // spp (each band's random numbers keyed by (seed, its first pixel)), one
+    SoftSamples a band: every host array of a band stays a few MB, so the allocator reuses the last band's
+    memory instead of mapping fresh pages (on a VM that maps them slowly, a third of the term's time)."""
     Projection.of(scene, width, height)  # perspective cameras only (the others are refused by name)
-    rng = np.random.default_rng([seed, 0x736F6674])  # "soft"
-    pix = np.repeat(np.arange(width * height), spp)
-    cell, u = np.stack([pix % width, pix // width], axis=1), rng.random((len(pix), 2))
     rfilter = scene.film.rfilter
-    film = cell + u if rfilter.kind == "box" else cell + 0.5 + sample_offsets(rfilter, u)
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
     first = np.cumsum([0] + [m.triangle_count for m in scene.meshes])
     order = replay.scene.arrays.bvh.tri_order
@@ -441,29 +443,6 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         """The mesh (index in scene.meshes) of leaf-order triangles (-1: none)."""
         return np.where(prims >= 0, np.searchsorted(first, order[np.maximum(prims, 0)], side="right") - 1, -1)
 
-    # The shading points: the camera rays' first hits, and the later vertices of camera paths through the same
-    # film positions (path_vertices: one a path, attached to its surface, weighted by the throughput that reached
-    # it): the light they receive has outlines too. Each by its leaf-order triangle and barycentrics.
-    vprim, vert, vdepth, prim, hit = replay.path_vertices(film, int(rng.integers(2**32)))
-    # per shading point, as path_vertices gives a later vertex: barycentrics, the direction back along the path
-    # (the camera's hits: their film positions, vertex_radiance.cl), the throughput that reached it
-    n_first = len(film)
-    table = np.zeros((n_first, 8), np.float32)
-    table[:, :2], table[:, 2:4], table[:, 5:] = hit[:, 1:], film, 1.0
-    attached = np.zeros(n_first, bool)
-    depth = np.zeros(n_first, np.int32)
-    if later and (replay.max_depth < 0 or replay.max_depth > 2):  # a bounce after the camera's hit's
-        keep = np.flatnonzero(vprim >= 0)
-        film, pix = np.concatenate([film, film[keep]]), np.concatenate([pix, pix[keep]])
-        prim, depth = np.concatenate([prim, vprim[keep]]), np.concatenate([depth, vdepth[keep]])
-        table = np.concatenate([table, vert[keep]])
-        attached = np.concatenate([attached, np.ones(len(keep), bool)])
-    valid = prim >= 0
-    mesh_hit = prim_mesh(prim)
-    tri_hit = np.where(valid, order[np.maximum(prim, 0)] - first[np.maximum(mesh_hit, 0)], -1)
-
-    # shading points that move: on a moving mesh, or (the camera's hits, sliding on its rays) with the camera
-    moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | (camera & ~attached)
     # One sample a shading point: an edge, among those of the occluders (for a point that moves, of every mesh)
     # that are silhouettes from it, picked in proportion to the angle it subtends, its own mesh's left out (its
     # outlines on itself are not handled). The edge records in one array, the occluders' first.
@@ -483,54 +462,104 @@ def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: i
         v1s.append(edges.v1[~flat])
     counts = [len(r) for r in records]
     n_occluder_edges, n_edges = sum(counts[:len(occluders)]), sum(counts)
-    # the points that have an edge to pick: on no occluder or with another one to see, or moving
-    live = valid & ((moving & (n_edges > 0)) | ((n_occluder_edges > 0)
-                                                & (~np.isin(mesh_hit, occluders) | (len(occluders) > 1))))
-    sel = np.flatnonzero(live)
-    if not len(sel):
-        return _no_soft_samples()
-    edge_records = np.concatenate(records)
-    ranges = np.stack([np.zeros(len(sel), np.int32), np.where(moving[sel], n_edges, n_occluder_edges),
-                       mesh_hit[sel]], axis=1).astype(np.int32)
+    if not n_edges:
+        return
+    edge_records, edge_v0, edge_v1 = np.concatenate(records), np.concatenate(v0s), np.concatenate(v1s)
     mesh_vertices = np.cumsum([0] + [m.positions.shape[0] for m in scene.meshes]).astype(np.int32)
-    samples = np.empty((len(sel), 7), np.float32)
-    samples[:, :5] = table[sel, :5]
-    samples[:, 5:] = u = rng.random((len(sel), 2)).astype(np.float32)  # the edge's pick, its point t
-    radiance, prims, hits, pick, outline = replay.vertex_radiance(prim[sel], samples, depth[sel], edge_records,
-                                                                  ranges, mesh_vertices, seed, SOFT_SIDE_EPS)
-    # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel (the side
-    # whose ray meets the occluder first is 0: the material form, cl/gradients/incident.h); a sample with no jump
-    # (no silhouette, both sides meet the occluder or pass it, the same light) contributes nothing: left out
-    nz = np.flatnonzero(np.any(radiance[:, 0] != radiance[:, 1], axis=1) & (outline[:, 0] > 0))
-    edge = pick[nz]
-    mesh = edge_records[edge, 15].astype(np.int64)
-    sel, prims, hits, outline = sel[nz], prims[nz], hits[nz], outline[nz].astype(np.float64)
-    jump = (radiance[nz, 0] - radiance[nz, 1]).astype(np.float64) * (outline[:, 0] / spp)[:, None] * table[sel, 5:]
-    # The material form (the interior term's: points on the surfaces move with them): the occluder's own radiance
-    # has no jump at its outline, what it hides behind does: the outline moves relative to that background, the
-    # first hit of the side that passes the occluder.
-    pm = prim_mesh(prims)
-    rows = np.arange(len(sel))
-    side = np.where(pm[:, 0] != mesh, 0, 1)
-    back = np.where(pm[rows, side] != mesh, pm[rows, side], -1)
-    back_prim = np.maximum(prims[rows, side], 0)
-    dist = outline[:, 1]
-    # the shading points (their barycentric points), their triangles' unit normals, the rays that reach them
-    bary = table[sel, :2].astype(np.float64)
     positions = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
-    corners = positions[replay.scene.arrays.tri_vidx[prim[sel]]]  # (n, 3, 3), leaf order
-    x = ((1.0 - bary[:, 0] - bary[:, 1])[:, None] * corners[:, 0] + bary[:, :1] * corners[:, 1]
-         + bary[:, 1:] * corners[:, 2])
-    ng, _ = _unit(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
-    ray = -table[sel, 2:5].astype(np.float64)
-    at_camera = np.flatnonzero(~attached[sel])
-    ray[at_camera] = _camera_rays(scene, film[sel[at_camera]], width, height)[1]
-    return SoftSamples(
-        pix[sel][:, None], np.ones((len(sel), 1)), jump, mesh, np.concatenate(v0s)[edge], np.concatenate(v1s)[edge],
-        u[nz, 1].astype(np.float64), outline[:, 2:5] / dist[:, None],  # n is normal to w: n / |e - x|
-        mesh_hit[sel], tri_hit[sel], bary, film[sel], ray, ng, x, attached[sel], back,
-        np.where(back >= 0, order[back_prim] - first[np.maximum(back, 0)], -1), hits[rows, side, 1:].astype(np.float64),
-        np.where(back >= 0, hits[rows, side, 0].astype(np.float64), np.inf), dist)
+
+    def band(p0: int, p1: int) -> SoftSamples:
+        """The samples of pixels p0 .. p1 - 1."""
+        rng = np.random.default_rng([seed, 0x736F6674, p0])  # "soft"
+        pix = np.repeat(np.arange(p0, p1), spp)
+        cell, u = np.stack([pix % width, pix // width], axis=1), rng.random((len(pix), 2))
+        film = cell + u if rfilter.kind == "box" else cell + 0.5 + sample_offsets(rfilter, u)
+        # The shading points: the camera rays' first hits, and the later vertices of camera paths through the same
+        # film positions (path_vertices: one a path, attached to its surface, weighted by the throughput that reached
+        # it): the light they receive has outlines too. Each by its leaf-order triangle and barycentrics.
+        vprim, vert, vdepth, prim, hit = replay.path_vertices(film, int(rng.integers(2**32)))
+        # per shading point, as path_vertices gives a later vertex: barycentrics, the direction back along the path
+        # (the camera's hits: their film positions, vertex_radiance.cl), the throughput that reached it
+        n_first = len(film)
+        table = np.zeros((n_first, 8), np.float32)
+        table[:, :2], table[:, 2:4], table[:, 5:] = hit[:, 1:], film, 1.0
+        attached = np.zeros(n_first, bool)
+        depth = np.zeros(n_first, np.int32)
+        if later and (replay.max_depth < 0 or replay.max_depth > 2):  # a bounce after the camera's hit's
+            keep = np.flatnonzero(vprim >= 0)
+            film, pix = np.concatenate([film, film[keep]]), np.concatenate([pix, pix[keep]])
+            prim, depth = np.concatenate([prim, vprim[keep]]), np.concatenate([depth, vdepth[keep]])
+            table = np.concatenate([table, vert[keep]])
+            attached = np.concatenate([attached, np.ones(len(keep), bool)])
+        valid = prim >= 0
+        mesh_hit = prim_mesh(prim)
+        tri_hit = np.where(valid, order[np.maximum(prim, 0)] - first[np.maximum(mesh_hit, 0)], -1)
+
+        # shading points that move: on a moving mesh, or (the camera's hits, sliding on its rays) with the camera
+        moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | (camera & ~attached)
+        # the points that have an edge to pick: on no occluder or with another one to see, or moving
+        live = valid & ((moving & (n_edges > 0)) | ((n_occluder_edges > 0)
+                                                    & (~np.isin(mesh_hit, occluders) | (len(occluders) > 1))))
+        sel = np.flatnonzero(live)
+        if not len(sel):
+            return _no_soft_samples()
+        ranges = np.stack([np.zeros(len(sel), np.int32), np.where(moving[sel], n_edges, n_occluder_edges),
+                           mesh_hit[sel]], axis=1).astype(np.int32)
+        samples = np.empty((len(sel), 7), np.float32)
+        samples[:, :5] = table[sel, :5]
+        samples[:, 5:] = u = rng.random((len(sel), 2)).astype(np.float32)  # the edge's pick, its point t
+        radiance, prims, hits, pick, outline = replay.vertex_radiance(
+            prim[sel], samples, depth[sel], edge_records, ranges, mesh_vertices, int(rng.integers(2**32)),
+            SOFT_SIDE_EPS)
+        # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel (the side
+        # whose ray meets the occluder first is 0: the material form, cl/gradients/incident.h); a sample with no jump
+        # (no silhouette, both sides meet the occluder or pass it, the same light) contributes nothing: left out
+        nz = np.flatnonzero(np.any(radiance[:, 0] != radiance[:, 1], axis=1) & (outline[:, 0] > 0))
+        edge = pick[nz]
+        mesh = edge_records[edge, 15].astype(np.int64)
+        sel, prims, hits, outline = sel[nz], prims[nz], hits[nz], outline[nz].astype(np.float64)
+        jump = (radiance[nz, 0] - radiance[nz, 1]).astype(np.float64) * (outline[:, 0] / spp)[:, None] * table[sel, 5:]
+        # The material form (the interior term's: points on the surfaces move with them): the occluder's own radiance
+        # has no jump at its outline, what it hides behind does: the outline moves relative to that background, the
+        # first hit of the side that passes the occluder.
+        pm = prim_mesh(prims)
+        rows = np.arange(len(sel))
+        side = np.where(pm[:, 0] != mesh, 0, 1)
+        back = np.where(pm[rows, side] != mesh, pm[rows, side], -1)
+        back_prim = np.maximum(prims[rows, side], 0)
+        dist = outline[:, 1]
+        # the shading points (their barycentric points), their triangles' unit normals, the rays that reach them
+        bary = table[sel, :2].astype(np.float64)
+        corners = positions[replay.scene.arrays.tri_vidx[prim[sel]]]  # (n, 3, 3), leaf order
+        x = ((1.0 - bary[:, 0] - bary[:, 1])[:, None] * corners[:, 0] + bary[:, :1] * corners[:, 1]
+             + bary[:, 1:] * corners[:, 2])
+        ng, _ = _unit(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+        ray = -table[sel, 2:5].astype(np.float64)
+        at_camera = np.flatnonzero(~attached[sel])
+        ray[at_camera] = _camera_rays(scene, film[sel[at_camera]], width, height)[1]
+        return SoftSamples(
+            pix[sel][:, None], np.ones((len(sel), 1)), jump, mesh, edge_v0[edge], edge_v1[edge],
+            u[nz, 1].astype(np.float64), outline[:, 2:5] / dist[:, None],  # n is normal to w: n / |e - x|
+            mesh_hit[sel], tri_hit[sel], bary, film[sel], ray, ng, x, attached[sel], back,
+            np.where(back >= 0, order[back_prim] - first[np.maximum(back, 0)], -1),
+            hits[rows, side, 1:].astype(np.float64),
+            np.where(back >= 0, hits[rows, side, 0].astype(np.float64), np.inf), dist)
+
+    step = max(1, SOFT_CHUNK // spp)
+    for p0 in range(0, width * height, step):
+        yield band(p0, min(p0 + step, width * height))
+
+
+def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
+                      max_depth: int | None = None, device: Device | str | None = None,
+                      receivers: Sequence[int] = (), camera: bool = False, later: bool = True) -> SoftSamples:
+    """All of :func:`soft_sample_chunks` in one SoftSamples."""
+    bands = list(soft_sample_chunks(scene, meshes, width, height, spp=spp, seed=seed, max_depth=max_depth,
+                                    device=device, receivers=receivers, camera=camera, later=later))
+    if not bands:
+        return _no_soft_samples()
+    return SoftSamples(*(np.concatenate([getattr(b, f.name) for b in bands])
+                         for f in dataclasses.fields(SoftSamples)))
 
 
 def _no_soft_samples() -> SoftSamples:
@@ -559,14 +588,20 @@ def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[s
     wanted = _meshes_of(scene, names)
     cameras = [n for n in names if n in sensor_names(scene)]
     out = {name: np.zeros_like(np.asarray(params[name], np.float32)) for ns in wanted.values() for name in ns}
-    ss = sample_soft_edges(scene, sorted(wanted), width, height, spp=spp, seed=seed, max_depth=max_depth,
-                           device=device, receivers=sorted(wanted), camera=bool(cameras))
-    weight = sample_weights(ss.pixels, ss.weights, g, ss.jump)
+    sums = {i: np.zeros((scene.meshes[i].positions.shape[0], 3)) for i in wanted}
+    camera_sums = {name: np.zeros(np.shape(params[name])) for name in cameras}
+    for ss in soft_sample_chunks(scene, sorted(wanted), width, height, spp=spp, seed=seed, max_depth=max_depth,
+                                 device=device, receivers=sorted(wanted), camera=bool(cameras)):
+        weight = sample_weights(ss.pixels, ss.weights, g, ss.jump)
+        for i in wanted:
+            sums[i] += _vertex_sums(scene, i, ss, weight)
+        for name in cameras:
+            camera_sums[name] += np.tensordot(weight, _shading_camera_velocity(scene, width, height, ss, name),
+                                              axes=1).reshape(camera_sums[name].shape)
     for i, mesh_names in wanted.items():
-        vertex_gradients(params, scene, i, mesh_names, _vertex_sums(scene, i, ss, weight), out)
+        vertex_gradients(params, scene, i, mesh_names, sums[i], out)
     for name in cameras:
-        out[name] = np.tensordot(weight, _shading_camera_velocity(scene, width, height, ss, name), axes=1
-                                 ).reshape(np.shape(params[name])).astype(np.float32)
+        out[name] = camera_sums[name].astype(np.float32)
     return out
 
 
@@ -632,22 +667,24 @@ def soft_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *
     width, height = width or scene.film.width, height or scene.film.height
     params = parameters if parameters is not None else traverse(scene)
     tan = np.asarray(tangent, np.float64)
+    image = np.zeros((height, width, 3))
     if name in sensor_names(scene):
-        ss = sample_soft_edges(scene, [], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device,
-                               camera=True)
-        velocity = _shading_camera_velocity(scene, width, height, ss, name)
-        dx = along(velocity, tan)
-    else:
-        i, dp = vertex_motion(params, scene, name, tan)
-        ss = sample_soft_edges(scene, [i], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device,
-                               receivers=[i])
+        for ss in soft_sample_chunks(scene, [], width, height, spp=spp, seed=seed, max_depth=max_depth,
+                                     device=device, camera=True):
+            dx = along(_shading_camera_velocity(scene, width, height, ss, name), tan)
+            image += splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
+        return image.astype(np.float32)
+    i, dp = vertex_motion(params, scene, name, tan)
+    for ss in soft_sample_chunks(scene, [i], width, height, spp=spp, seed=seed, max_depth=max_depth, device=device,
+                                 receivers=[i]):
         dx = np.where(ss.mesh == i, edge_point_motion(ss.velocity, ss.v0, ss.v1, ss.t, dp), 0.0)
         for owner, tri, bary, velocity in ((ss.receiver, ss.tri, ss.bary, ss.receiver_velocity()),
                                            (ss.background, ss.back_tri, ss.back_bary, ss.background_velocity())):
             r = owner == i
             if np.any(r):
                 dx[r] += np.einsum("nc,nc->n", velocity[r], _point_motion(scene, i, tri[r], bary[r], dp))
-    return splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
+        image += splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
+    return image.astype(np.float32)
 
 
 def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
