@@ -24,13 +24,27 @@
 /* The index of edge e's mesh. */
 static inline int edge_mesh(__global const float* edges, int e) { return (int)edges[EDGE_STRIDE * e + 15]; }
 
-/* The angle edge e subtends at x if it is a silhouette from x, else 0 (and 0 for an edge of mesh `own`: a mesh's
- * outlines on itself are left out). */
-static inline float edge_angle(__global const float* edges, int e, vec3 x, int own) {
+/* The relative tolerance of x's side of a face's plane (edge_plane_offset): nearer, x lies in the plane (a point of
+ * the face itself, or of a face of the same plane, rounded), from where the edge is seen edge-on. */
+#define EDGE_PLANE_TOL 1e-5f
+
+/* x's signed offset from the plane (n, n . p) at r[0 .. 3], and whether it is off the plane: beyond
+ * tol (|n . p| + scale), scale the largest of |x|'s coordinates (and what else sets the rounding). */
+static inline float edge_plane_offset(__global const float* r, vec3 x, float tol, float scale, bool* off) {
+    float h = r[0] * x.x + r[1] * x.y + r[2] * x.z - r[3];
+    *off = m_abs(h) > tol * (m_abs(r[3]) + scale);
+    return h;
+}
+
+/* The angle edge e subtends at x if it is a silhouette from x, else 0. A mesh's outlines on itself count (a fold
+ * shadowing the rest of its mesh): only an edge one of whose faces' planes holds x (the edges of x's own triangle)
+ * is left out. (From a point on a convex mesh no edge of it is a silhouette: the point is behind its other faces.) */
+static inline float edge_angle(__global const float* edges, int e, vec3 x, float xmax) {
     __global const float* r = edges + EDGE_STRIDE * e;
-    if ((int)r[15] == own) return 0.0f;
-    bool side_a = r[6] * x.x + r[7] * x.y + r[8] * x.z > r[9];
-    bool side_b = r[10] * x.x + r[11] * x.y + r[12] * x.z > r[13];
+    bool off_a, off_b;
+    bool side_a = edge_plane_offset(r + 6, x, EDGE_PLANE_TOL, xmax, &off_a) > 0.0f;
+    bool side_b = edge_plane_offset(r + 10, x, EDGE_PLANE_TOL, xmax, &off_b) > 0.0f;
+    if (!off_a || !off_b) return 0.0f; /* x in a face's plane: the edge edge-on */
     if (!(r[14] > 0.5f || side_a != side_b)) return 0.0f; /* not a silhouette from x */
     vec3 da = v3_sub(v3(r[0], r[1], r[2]), x), db = v3_sub(v3(r[3], r[4], r[5]), x);
     if (!(m_dot(da, da) > 0.0f) || !(m_dot(db, db) > 0.0f)) return 0.0f;
@@ -38,14 +52,15 @@ static inline float edge_angle(__global const float* edges, int e, vec3 x, int o
     return m_isfinite(angle) ? angle : 0.0f;
 }
 
-/* Among edges [0, count) of `edges` (those of mesh `own` left out), one that is a silhouette from x, with
- * probability its angle over their total (uniform v in [0, 1)): its index (-1: none is, or they subtend no angle),
- * and *inv_pdf = the total over its angle (0 with -1). */
-static inline int edge_pick(__global const float* edges, int count, vec3 x, int own, float v, float* inv_pdf) {
+/* Among edges [0, count) of `edges`, one that is a silhouette from x, with probability its angle over their total
+ * (uniform v in [0, 1)): its index (-1: none is, or they subtend no angle), and *inv_pdf = the total over its
+ * angle (0 with -1). */
+static inline int edge_pick(__global const float* edges, int count, vec3 x, float v, float* inv_pdf) {
     float total = 0.0f, chosen_angle = 0.0f;
+    float xmax = m_max(m_max(m_abs(x.x), m_abs(x.y)), m_abs(x.z));
     int chosen = -1;
     for (int e = 0; e < count; ++e) {
-        float angle = edge_angle(edges, e, x, own);
+        float angle = edge_angle(edges, e, x, xmax);
         if (!(angle > 0.0f)) continue;
         total += angle;
         float keep = angle / total;

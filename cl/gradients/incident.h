@@ -7,6 +7,12 @@
 #include "gradients/edge_pick.h"
 #include "integrators/path.h"
 
+/* first_prim of the side whose ray meets the occluder at the edge (side_on_occluder): not traced. */
+#define SIDE_OCCLUDER (-2)
+/* The relative tolerance of a side's first hit in the plane of one of the edge's faces (edge_plane_offset's, at
+ * the hit point, whose distance adds to the scale). */
+#define SIDE_PLANE_TOL 1e-4f
+
 /* One side's direction from surface s, f(wi, wo) |cos| there (0: below the surface) and its ray's first hit. */
 typedef struct {
     vec3 dir, f;
@@ -30,11 +36,22 @@ static inline SideStart side_start(const Scene* sc, RngKey key, const Surface* s
     return st;
 }
 
-/* Whether a side's ray met the occluder first: its triangle's vertices in the occluder's packed range [lo, hi). */
-static inline bool side_on_occluder(const Scene* sc, const SideStart* st, int lo, int hi) {
+/* Whether a side's ray met the occluder at the edge first: its first hit is a triangle of the occluder (its
+ * vertices in the occluder's packed range [lo, hi)) in the plane of one of the edge's two faces (the record r,
+ * edge_pick.h). Only the side that meets the edge's faces does: the other passes the edge, and a ray meets a
+ * plane once, where it passes, so whatever it meets beyond, the occluder's other parts included (a concave
+ * occluder, a mesh shadowing itself), is off those planes. */
+static inline bool side_on_occluder(const Scene* sc, const Surface* s, const SideStart* st,
+                                    __global const float* r, float dist, int lo, int hi) {
     if (!st->found) return false;
     int k = sc->tri_vidx[3 * st->hit.prim];
-    return k >= lo && k < hi;
+    if (k < lo || k >= hi) return false;
+    vec3 p = v3_add(spawn_origin(s, st->dir), v3_scale(st->dir, st->hit.t));
+    float scale = m_max(m_max(m_abs(p.x), m_abs(p.y)), m_abs(p.z)) + dist;
+    bool off_a, off_b;
+    (void)edge_plane_offset(r + 6, p, SIDE_PLANE_TOL, scale, &off_a);
+    (void)edge_plane_offset(r + 10, p, SIDE_PLANE_TOL, scale, &off_b);
+    return !off_a || !off_b;
 }
 
 /* f |cos| L_i along a side's direction: L_i the estimator of path.h from s, its first ray at bounce `depth`. */
@@ -55,29 +72,29 @@ static inline vec3 side_radiance(const Scene* sc, RngKey key, const Surface* s, 
 }
 
 static inline void side_store(__global float* radiance, __global int* first_prim, __global float* first_hit,
-                              __global uchar* drop_marks, int f, const SideStart* st, vec3 out) {
+                              __global uchar* drop_marks, int f, const SideStart* st, bool occluder, vec3 out) {
     film_commit(radiance, drop_marks, f, out);
-    first_prim[f] = st->found ? st->hit.prim : -1;
+    first_prim[f] = occluder ? SIDE_OCCLUDER : st->found ? st->hit.prim : -1;
     store3(first_hit, f, st->found ? v3(st->hit.t, st->hit.u, st->hit.v) : v3_splat(0.0f));
 }
 
-/* Sample i at surface s (bsdf b, wi the local direction towards where the path came from, on mesh `own`): an
- * edge among edges[0 .. edge_count) (edge_pick.h; not mesh own's), picked with uniform u, and its point at t;
- * its mesh, the occluder, has packed vertices [mesh_vertices[j], mesh_vertices[j + 1]); two directions
- * w -+ eps n either side of the outline there; radiance[3 (2 i + side)] = f(wi, w -+ eps n) |cos|
- * L_i(w -+ eps n), L_i the estimator of path.h from there, its first ray at bounce `depth` (the emission it meets
- * counted whole, as after a delta sample); 0 where the direction is below the surface or `depth` allows no
- * bounce; a NaN or inf one 0 and 1 in drop_marks; the leaf-order triangle each side's ray meets first in
- * first_prim (-1: none) and its distance and barycentrics in first_hit; pick[i] the edge (-1: none, the sides 0)
+/* Sample i at surface s (bsdf b, wi the local direction towards where the path came from): an edge among
+ * edges[0 .. edge_count) (edge_pick.h), picked with uniform u, and its point at t; its mesh, the occluder, has
+ * packed vertices [mesh_vertices[j], mesh_vertices[j + 1]); two directions w -+ eps n either side of the outline
+ * there; radiance[3 (2 i + side)] = f(wi, w -+ eps n) |cos| L_i(w -+ eps n), L_i the estimator of path.h from
+ * there, its first ray at bounce `depth` (the emission it meets counted whole, as after a delta sample); 0 where the
+ * direction is below the surface or `depth` allows no bounce; a NaN or inf one 0 and 1 in drop_marks; the
+ * leaf-order triangle each side's ray meets first in first_prim (-1: none; SIDE_OCCLUDER: the side that meets the
+ * edge's faces, below) and its distance and barycentrics in first_hit; pick[i] the edge (-1: none, the sides 0)
  * and outline[5 i ..] the outline's measure per sample (its speed over the pick's probability), the distance to
  * the edge point and the outline's unit normal n (3).
  * The boundary term takes the material form, in which the side
- * whose ray meets the occluder first has no jump (the occluder's points stay in its area integral), so its path
- * is not traced and its radiance is 0; and unless exactly one side meets the occluder, the edge is no outline of
+ * whose ray meets the occluder at the edge first has no jump (the occluder's points stay in its area integral), so
+ * its path is not traced and its radiance is 0; and unless exactly one side meets it, the edge is no outline of
  * it from s (something nearer hides it, or both sides pass it): as eps -> 0 both sides' light is the same, so
  * neither path is traced and both are 0 (the host drops samples without a jump). */
 static inline void incident_sides(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, vec3 wi,
-                                  __global const float* edges, int edge_count, int own,
+                                  __global const float* edges, int edge_count,
                                   __global const int* mesh_vertices, float u, float t, float eps, int depth,
                                   int max_depth, int i, __global float* radiance,
                                   __global int* first_prim, __global float* first_hit, __global uchar* drop_marks,
@@ -86,22 +103,24 @@ static inline void incident_sides(const Scene* sc, RngKey key, const Surface* s,
     minus.found = plus.found = false;
     vec3 out_minus = v3_splat(0.0f), out_plus = v3_splat(0.0f), w, n = v3_splat(0.0f);
     float inv_pdf = 0.0f, dist = 0.0f, speed = 0.0f;
-    int e = depth_allows(depth, max_depth) ? edge_pick(edges, edge_count, s->p, own, u, &inv_pdf) : -1;
+    bool on_minus = false, on_plus = false;
+    int e = depth_allows(depth, max_depth) ? edge_pick(edges, edge_count, s->p, u, &inv_pdf) : -1;
     if (e >= 0) speed = edge_point(edges, e, s->p, t, &w, &dist, &n);
     if (!(speed > 0.0f)) e = -1;
     if (e >= 0) {
         minus = side_start(sc, key, s, b, wi, w, n, -eps, depth);
         plus = side_start(sc, key, s, b, wi, w, n, eps, depth);
+        __global const float* r = edges + EDGE_STRIDE * e;
         int j = edge_mesh(edges, e), lo = mesh_vertices[j], hi = mesh_vertices[j + 1];
-        bool on_minus = side_on_occluder(sc, &minus, lo, hi);
-        bool on_plus = side_on_occluder(sc, &plus, lo, hi);
+        on_minus = side_on_occluder(sc, s, &minus, r, dist, lo, hi);
+        on_plus = side_on_occluder(sc, s, &plus, r, dist, lo, hi);
         if (on_minus != on_plus) {
             if (on_plus) out_minus = side_radiance(sc, key, s, &minus, depth, max_depth);
             else out_plus = side_radiance(sc, key, s, &plus, depth, max_depth);
         }
     }
-    side_store(radiance, first_prim, first_hit, drop_marks, 2 * i, &minus, out_minus);
-    side_store(radiance, first_prim, first_hit, drop_marks, 2 * i + 1, &plus, out_plus);
+    side_store(radiance, first_prim, first_hit, drop_marks, 2 * i, &minus, on_minus, out_minus);
+    side_store(radiance, first_prim, first_hit, drop_marks, 2 * i + 1, &plus, on_plus, out_plus);
     pick[i] = e;
     outline[5 * i] = e >= 0 ? speed * inv_pdf : 0.0f;
     outline[5 * i + 1] = dist;

@@ -8,9 +8,9 @@
  *           world direction back along the path (3; at the camera's hit, depth 0: the film position x, y of the
  *           camera ray, whose direction is found again here, and 0), a uniform for the edge's pick and t in [0, 1)
  *           for its point;
- *           depths[i] the vertex's bounce (the camera's hit: 0); ranges[3 i ..] = the first of the sample's edges
- *           in `edges` (every mesh's records, cl/gradients/edge_pick.h), their number, and the index of the mesh the
- *           vertex lies on (its edges are left out); mesh_vertices[j], [j + 1]: the packed vertex range of mesh j.
+ *           depths[i] the vertex's bounce (the camera's hit: 0); ranges[2 i ..] = the first of the sample's edges
+ *           in `edges` (every mesh's records, cl/gradients/edge_pick.h) and their number (the vertex's own mesh's
+ *           among them: a mesh's outlines on itself); mesh_vertices[j], [j + 1]: the packed vertex range of mesh j.
  * Produces: pick[i] the edge, counted from the sample's first, picked in proportion to the angle it subtends among
  *           those that are silhouettes from the vertex (-1: none), the occluder its mesh; outline[5 i ..] the
  *           outline's measure per sample, the distance to the edge point and the outline's unit normal n (3);
@@ -18,11 +18,12 @@
  *           w the direction to the edge's point at t, radiance[3 (2 i + 1)] the same for w + eps n: L_i the
  *           estimator of path.h from there, its first ray at bounce depths[i] + 1 (both sides with the random numbers
  *           of key (seed, i, 0); the emission it meets counted whole, as after a delta sample); 0 for the side that
- *           meets the occluder first (untraced), for both unless exactly one side meets it, where the direction is
- *           below the surface or the depth allows no bounce; a NaN or inf one gives 0 and adds 1 to drop_marks[2 i
- *           (+ 1)]; first_prim[2 i (+ 1)] the leaf-order triangle that side's ray meets first (-1: none) and
- *           first_hit[3 (2 i (+ 1))] its distance and barycentrics there, so that the host can tell the occluder's
- *           side from the one that passes it, and what lies behind (cl/gradients/incident.h, incident_sides). */
+ *           meets the occluder at the edge first (untraced), for both unless exactly one side meets it, where the
+ *           direction is below the surface or the depth allows no bounce; a NaN or inf one gives 0 and adds 1 to
+ *           drop_marks[2 i (+ 1)]; first_prim[2 i (+ 1)] the leaf-order triangle that side's ray meets first (-1:
+ *           none; -2, SIDE_OCCLUDER: the occluder at the edge) and first_hit[3 (2 i (+ 1))] its distance and
+ *           barycentrics there: what lies behind the outline on the side that passes it (cl/gradients/incident.h,
+ *           incident_sides). */
 #include "gradients/incident.h"
 
 __kernel SCALAR_KERNEL void vertex_radiance(SCENE_PARAMS, __global const int* prims, __global const float* samples,
@@ -37,7 +38,7 @@ __kernel SCALAR_KERNEL void vertex_radiance(SCENE_PARAMS, __global const int* pr
     Scene sc = SCENE_INIT;
     RngKey key = rng_key(seed, (uint)i, 0u);
     __global const float* q = samples + 7 * i;
-    __global const int* r = ranges + 3 * i;
+    __global const int* r = ranges + 2 * i;
     vec3 back = v3(q[2], q[3], q[4]);
     if (depths[i] == 0) { /* the camera ray through film position (q[2], q[3]) (perspective: no random numbers) */
         PathState cam;
@@ -47,6 +48,6 @@ __kernel SCALAR_KERNEL void vertex_radiance(SCENE_PARAMS, __global const int* pr
     Surface s = surface_hit(&sc, prims[i], q[0], q[1], v3_neg(back));
     Bsdf b = bsdf_at(&sc, &s);
     vec3 wi = to_local(s.sh, back);
-    incident_sides(&sc, key, &s, &b, wi, edges + EDGE_STRIDE * r[0], r[1], r[2], mesh_vertices, q[5], q[6],
+    incident_sides(&sc, key, &s, &b, wi, edges + EDGE_STRIDE * r[0], r[1], mesh_vertices, q[5], q[6],
                    eps, depths[i] + 1, max_depth, i, radiance, first_prim, first_hit, drop_marks, pick, outline);
 }

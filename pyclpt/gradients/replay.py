@@ -61,12 +61,17 @@ def moved_alpha_records(scene: Scene, step: float = BSDF_DIFF_STEP) -> tuple[np.
     return up, down
 
 
+SIDE_OCCLUDER = -2  # SideSamples.first_prim of the side that meets the occluder at the edge (cl/gradients/incident.h)
+
+
 @dataclasses.dataclass
 class SideSamples:
     """The outputs of the vertex_radiance kernel (cl/gradients/incident.h), per sample."""
 
     radiance: np.ndarray  # (N, 2, 3) f |cos| L_i either side of the outline (minus, plus)
-    first_prim: np.ndarray  # (N, 2) the leaf-order triangle each side's ray meets first (-1: none)
+    # (N, 2) the leaf-order triangle each side's ray meets first (-1: none; SIDE_OCCLUDER: the occluder at the edge,
+    # untraced)
+    first_prim: np.ndarray
     first_hit: np.ndarray  # (N, 2, 3) its distance and barycentrics there
     pick: np.ndarray  # (N,) the edge picked, counted from the sample's first (-1: none)
     outline: np.ndarray  # (N, 5) the outline's measure per sample, the distance to the edge point, its normal n (3)
@@ -230,12 +235,13 @@ class PathReplay:
         along the path (at depth 0: the camera ray's film position x, y and 0) and the uniforms of the edge's pick
         and of its point t, and the vertices' bounces ``depths`` (N,): one edge that is a silhouette from the
         vertex x among the ``ranges[:, 1]`` records of ``edges`` (E, EDGE_STRIDE:
-        :meth:`pyclpt.gradients.shadows.MeshEdges.records`, the mesh's index last) from ``ranges[:, 0]``, those
-        of mesh ``ranges[:, 2]`` (x's) left out, picked in proportion to the angle it subtends, and f |cos| L_i
-        either side of its point at t, both sides with the random numbers of (seed, sample) (the vertex_radiance
-        kernel). ``mesh_vertices`` (M + 1,): the meshes' packed vertex ranges: the side that meets the edge's mesh
-        first gives 0 untraced, and both do unless exactly one side meets it (cl/gradients/incident.h). NaN or
-        inf ones give 0 and are counted in :attr:`dropped`."""
+        :meth:`pyclpt.gradients.shadows.MeshEdges.records`, the mesh's index last) from ``ranges[:, 0]`` (x's
+        own mesh's included, but not the edges of x's triangle), picked in proportion to the angle it subtends,
+        and f |cos| L_i either side of its point at t, both sides with the random numbers of (seed, sample) (the
+        vertex_radiance kernel). ``mesh_vertices`` (M + 1,): the meshes' packed vertex ranges: the side that
+        meets the edge's mesh at the edge's faces first gives 0 untraced (its ``first_prim`` -2), and both do
+        unless exactly one side meets it (cl/gradients/incident.h). NaN or inf ones give 0 and are counted in
+        :attr:`dropped`."""
         n = len(prims)
         out = SideSamples(np.zeros((n, 2, 3), np.float32), np.full((n, 2), -1, np.int32),
                           np.zeros((n, 2, 3), np.float32), np.full(n, -1, np.int32), np.zeros((n, 5), np.float32))
@@ -247,7 +253,7 @@ class PathReplay:
                           [np.ascontiguousarray(prims, np.int32).reshape(-1),
                            np.ascontiguousarray(samples, np.float32).reshape(-1, 7),
                            np.ascontiguousarray(depths, np.int32).reshape(-1), e_buf,
-                           np.ascontiguousarray(ranges, np.int32).reshape(-1, 3), m_buf],
+                           np.ascontiguousarray(ranges, np.int32).reshape(-1, 2), m_buf],
                           [out.radiance, out.first_prim, out.first_hit, marks, out.pick, out.outline],
                           lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)),
                           written=3)

@@ -55,6 +55,7 @@ from pyclpt.gradients.edges import (
     vertex_motion,
 )
 from pyclpt.gradients.parameters import SceneParameters, traverse
+from pyclpt.gradients.replay import SIDE_OCCLUDER
 from pyclpt.gradients.session import replay_for
 from pyclpt.scene.model import Camera, PointLight, Scene, SpotLight
 
@@ -418,7 +419,7 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
                        receivers: Sequence[int] = (), camera: bool = False, later: bool = True
                        ) -> Iterator[SoftSamples]:
     """``spp`` shading points a pixel (the camera rays' first hits, from the path_vertices kernel), each with one
-    point on an edge of the meshes ``scene.meshes[i]`` (i in ``meshes``, not the point's own) that is a silhouette
+    point on an edge of the meshes ``scene.meshes[i]`` (i in ``meshes``, the point's own too) that is a silhouette
     from it, chosen in proportion to the angle the edges subtend, and the radiance either side, both from the
     vertex_radiance kernel (see :func:`soft_shadow_boundary`). With ``receivers`` (mesh indices) the shading points
     on those meshes choose among the edges of every other mesh (their own motion moves the outlines they see);
@@ -444,8 +445,8 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
         return np.where(prims >= 0, np.searchsorted(first, order[np.maximum(prims, 0)], side="right") - 1, -1)
 
     # One sample a shading point: an edge, among those of the occluders (for a point that moves, of every mesh)
-    # that are silhouettes from it, picked in proportion to the angle it subtends, its own mesh's left out (its
-    # outlines on itself are not handled). The edge records in one array, the occluders' first.
+    # that are silhouettes from it, picked in proportion to the angle it subtends, its own mesh's included (a mesh's
+    # outlines on itself; not the edges of its own triangle). The edge records in one array, the occluders' first.
     occluders = sorted(set(meshes))
     others = sorted(set(range(len(scene.meshes))) - set(occluders)) if len(receivers) or camera else []
     records, v0s, v1s = [], [], []
@@ -497,14 +498,13 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
 
         # shading points that move: on a moving mesh, or (the camera's hits, sliding on its rays) with the camera
         moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | (camera & ~attached)
-        # the points that have an edge to pick: on no occluder or with another one to see, or moving
-        live = valid & ((moving & (n_edges > 0)) | ((n_occluder_edges > 0)
-                                                    & (~np.isin(mesh_hit, occluders) | (len(occluders) > 1))))
+        # the points that have an edge to pick: every point that sees the occluders, or that moves
+        live = valid & (moving | (n_occluder_edges > 0))
         sel = np.flatnonzero(live)
         if not len(sel):
             return _no_soft_samples()
-        ranges = np.stack([np.zeros(len(sel), np.int32), np.where(moving[sel], n_edges, n_occluder_edges),
-                           mesh_hit[sel]], axis=1).astype(np.int32)
+        ranges = np.zeros((len(sel), 2), np.int32)
+        ranges[:, 1] = np.where(moving[sel], n_edges, n_occluder_edges)
         samples = np.empty((len(sel), 7), np.float32)
         samples[:, :5] = table[sel, :5]
         samples[:, 5:] = u = rng.random((len(sel), 2)).astype(np.float32)  # the edge's pick, its point t
@@ -521,12 +521,13 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
         jump = (radiance[nz, 0] - radiance[nz, 1]).astype(np.float64) * (outline[:, 0] / spp)[:, None] * table[sel, 5:]
         # The material form (the interior term's: points on the surfaces move with them): the occluder's own radiance
         # has no jump at its outline, what it hides behind does: the outline moves relative to that background, the
-        # first hit of the side that passes the occluder.
-        pm = prim_mesh(prims)
+        # first hit of the side that passes the occluder at the edge (the other side's is SIDE_OCCLUDER), which may
+        # be the occluder itself further on (a concave mesh, a mesh shadowing itself).
         rows = np.arange(len(sel))
-        side = np.where(pm[:, 0] != mesh, 0, 1)
-        back = np.where(pm[rows, side] != mesh, pm[rows, side], -1)
-        back_prim = np.maximum(prims[rows, side], 0)
+        side = np.where(prims[:, 0] == SIDE_OCCLUDER, 1, 0)
+        back_prim = prims[rows, side]
+        back = prim_mesh(back_prim)
+        back_prim = np.maximum(back_prim, 0)
         dist = outline[:, 1]
         # the shading points (their barycentric points), their triangles' unit normals, the rays that reach them
         bary = table[sel, :2].astype(np.float64)
@@ -578,8 +579,8 @@ def soft_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[s
     the shading points move with the surface they lie on or with the camera (they slide along its rays).
     ``spp`` shading points per pixel and one later vertex of a camera path through each (:func:`sample_soft_edges`),
     each with one point on the edges that are silhouettes from it, chosen in proportion to the angle they subtend;
-    the radiance either side of it from the ``vertex_radiance`` kernel. Not included: a mesh's outlines on itself,
-    outlines seen through delta (mirror, glass) bounces, delta lights (:func:`shadow_boundary`)."""
+    the radiance either side of it from the ``vertex_radiance`` kernel; a mesh's outlines on itself included. Not
+    included: outlines seen through delta (mirror, glass) bounces, delta lights (:func:`shadow_boundary`)."""
     g = np.asarray(image_grad, np.float64)
     if g.ndim != 3 or g.shape[2] != 3:
         raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
