@@ -30,7 +30,8 @@ KERNELS = {"megakernel", "path_init", "intersect", "miss", "process_hit", "shado
            "sample_bsdf", "compact_count", "compact_scatter", "finish_paths", "accumulate_frame", "accumulate_batch",
            "resolve", "aov_accumulate", "count_dropped", "demodulate", "reproject", "clip_history", "antilag",
            "variance", "atrous", "conserve", "conserve_gain", "modulate", "deficit", "deficit_gain", "blend",
-           "backward", "forward", "edge_radiance", "path_vertices", "vertex_radiance", "splat_axes", "splat_gather"}
+           "backward", "forward", "edge_radiance", "path_vertices", "vertex_radiance", "delta_shadow_sides",
+           "splat_axes", "splat_gather"}
 
 
 @pytest.fixture(scope="module")

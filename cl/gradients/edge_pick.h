@@ -52,28 +52,70 @@ static inline float edge_angle(__global const float* edges, int e, vec3 x, float
     return m_isfinite(angle) ? angle : 0.0f;
 }
 
-/* Among edges [0, count) of `edges`, one that is a silhouette from x, with probability its angle over their total
- * (uniform v in [0, 1)): its index (-1: none is, or they subtend no angle), and *inv_pdf = the total over its
- * angle (0 with -1). */
-static inline int edge_pick(__global const float* edges, int count, vec3 x, float v, float* inv_pdf) {
+/* Edges [first, first + count) of `edges`: one more pass of edge_pick's reservoir (total, chosen, its angle, the
+ * rescaled uniform v). */
+static inline void edge_reservoir(__global const float* edges, int first, int count, vec3 x, float xmax, float* v,
+                                  float* total, int* chosen, float* chosen_angle) {
+    for (int e = first; e < first + count; ++e) {
+        float angle = edge_angle(edges, e, x, xmax);
+        if (!(angle > 0.0f)) continue;
+        *total += angle;
+        float keep = angle / *total;
+        if (*v < keep) {
+            *chosen = e;
+            *chosen_angle = angle;
+            *v = *v / keep;
+        } else {
+            *v = (*v - keep) / (1.0f - keep);
+        }
+        *v = m_min(*v, 0.99999994f); /* in [0, 1) whatever the rounding (the float below 1) */
+    }
+}
+
+/* The share of a still shading point's samples that pick among the moving meshes' edges (the rest pick among the
+ * still meshes' edges near them, below). */
+#define SOFT_MOVING_SHARE 0.75f
+
+/* Whether the cones from x around bounding spheres s1 and s2 (centre, radius) overlap: the angle between their
+ * axes at most the sum of their half-angles (x inside one: yes). */
+static inline bool cones_overlap(vec3 x, __global const float* s1, __global const float* s2) {
+    vec3 d1 = v3_sub(v3(s1[0], s1[1], s1[2]), x), d2 = v3_sub(v3(s2[0], s2[1], s2[2]), x);
+    float l1 = m_length(d1), l2 = m_length(d2);
+    if (!(l1 > s1[3]) || !(l2 > s2[3])) return true;
+    float sin1 = s1[3] / l1, sin2 = s2[3] / l2;
+    float cos1 = m_sqrt(1.0f - sin1 * sin1), cos2 = m_sqrt(1.0f - sin2 * sin2);
+    float cos_sum = cos1 * cos2 - sin1 * sin2; /* cos of the half-angles' sum (< 0: past a right angle) */
+    return cos_sum <= 0.0f || m_dot(d1, d2) >= cos_sum * l1 * l2;
+}
+
+/* The edges in blocks, one a mesh: blocks[3 k ..] = its first edge, their number and 1 if the mesh moves;
+ * spheres[4 k ..] its bounding sphere. One edge that is a silhouette from x, picked in proportion to its angle
+ * (uniform v in [0, 1)): its index (-1: none), and *inv_pdf = 1 / its probability (0 with -1).
+ * A shading point that moves (`moves`) picks among every edge. A still one picks among the moving meshes' edges
+ * with probability SOFT_MOVING_SHARE (coin below it), else among the still meshes' edges whose mesh's cone from x
+ * overlaps a moving mesh's: their outline over a moving background moves relative to it (the material form). Each
+ * strategy stands for its own part of the edges, so each pick is weighted by its strategy's probability alone. */
+static inline int edge_pick(__global const float* edges, __global const int* blocks, __global const float* spheres,
+                            int n_blocks, vec3 x, bool moves, float v, float coin, float* inv_pdf) {
     float total = 0.0f, chosen_angle = 0.0f;
     float xmax = m_max(m_max(m_abs(x.x), m_abs(x.y)), m_abs(x.z));
     int chosen = -1;
-    for (int e = 0; e < count; ++e) {
-        float angle = edge_angle(edges, e, x, xmax);
-        if (!(angle > 0.0f)) continue;
-        total += angle;
-        float keep = angle / total;
-        if (v < keep) {
-            chosen = e;
-            chosen_angle = angle;
-            v = v / keep;
-        } else {
-            v = (v - keep) / (1.0f - keep);
+    bool moving_part = coin < SOFT_MOVING_SHARE;
+    for (int k = 0; k < n_blocks; ++k) {
+        bool moving = blocks[3 * k + 2] != 0;
+        if (!moves) {
+            if (moving != moving_part) continue;
+            if (!moving) {
+                bool near = false;
+                for (int j = 0; j < n_blocks && !near; ++j)
+                    near = blocks[3 * j + 2] != 0 && cones_overlap(x, spheres + 4 * k, spheres + 4 * j);
+                if (!near) continue;
+            }
         }
-        v = m_min(v, 0.99999994f); /* in [0, 1) whatever the rounding (the float below 1) */
+        edge_reservoir(edges, blocks[3 * k], blocks[3 * k + 1], x, xmax, &v, &total, &chosen, &chosen_angle);
     }
-    *inv_pdf = chosen >= 0 ? total / chosen_angle : 0.0f;
+    float share = moves ? 1.0f : moving_part ? SOFT_MOVING_SHARE : 1.0f - SOFT_MOVING_SHARE;
+    *inv_pdf = chosen >= 0 ? total / (chosen_angle * share) : 0.0f;
     return chosen;
 }
 

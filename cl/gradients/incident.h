@@ -7,6 +7,30 @@
 #include "gradients/edge_pick.h"
 #include "integrators/path.h"
 
+/* The candidate edges of the soft-shadow term and what moves: the records (edge_pick.h) in blocks, one a mesh
+ * (edge_pick's blocks, spheres, n_blocks), the meshes' packed vertex ranges (mesh_vertices[j], [j + 1]) and
+ * whether each moves (mesh_moving[j]). */
+typedef struct {
+    __global const float* edges;
+    __global const int* blocks;
+    __global const float* spheres;
+    int n_blocks;
+    __global const int* mesh_vertices;
+    __global const int* mesh_moving;
+    int n_meshes;
+} EdgeSet;
+
+/* The mesh whose packed vertex range holds vertex k (a binary search of mesh_vertices). */
+static inline int mesh_of_vertex(const EdgeSet* set, int k) {
+    int lo = 0, hi = set->n_meshes; /* mesh_vertices[lo] <= k < mesh_vertices[hi] */
+    while (hi - lo > 1) {
+        int mid = (lo + hi) / 2;
+        if (set->mesh_vertices[mid] <= k) lo = mid;
+        else hi = mid;
+    }
+    return lo;
+}
+
 /* first_prim of the side whose ray meets the occluder at the edge (side_on_occluder): not traced. */
 #define SIDE_OCCLUDER (-2)
 /* The relative tolerance of a side's first hit in the plane of one of the edge's faces (edge_plane_offset's, at
@@ -78,9 +102,10 @@ static inline void side_store(__global float* radiance, __global int* first_prim
     store3(first_hit, f, st->found ? v3(st->hit.t, st->hit.u, st->hit.v) : v3_splat(0.0f));
 }
 
-/* Sample i at surface s (bsdf b, wi the local direction towards where the path came from): an edge among
- * edges[0 .. edge_count) (edge_pick.h), picked with uniform u, and its point at t; its mesh, the occluder, has
- * packed vertices [mesh_vertices[j], mesh_vertices[j + 1]); two directions w -+ eps n either side of the outline
+/* Sample i at surface s (bsdf b, wi the local direction towards where the path came from; `moves`: whether s moves
+ * with what is differentiated): an edge of `set` (edge_pick.h: picked with uniforms u and coin), and its point at
+ * t; its mesh, the occluder, has packed vertices [mesh_vertices[j], mesh_vertices[j + 1]); two directions
+ * w -+ eps n either side of the outline
  * there; radiance[3 (2 i + side)] = f(wi, w -+ eps n) |cos| L_i(w -+ eps n), L_i the estimator of path.h from
  * there, its first ray at bounce `depth` (the emission it meets counted whole, as after a delta sample); 0 where the
  * direction is below the surface or `depth` allows no bounce; a NaN or inf one 0 and 1 in drop_marks; the
@@ -92,19 +117,23 @@ static inline void side_store(__global float* radiance, __global int* first_prim
  * whose ray meets the occluder at the edge first has no jump (the occluder's points stay in its area integral), so
  * its path is not traced and its radiance is 0; and unless exactly one side meets it, the edge is no outline of
  * it from s (something nearer hides it, or both sides pass it): as eps -> 0 both sides' light is the same, so
- * neither path is traced and both are 0 (the host drops samples without a jump). */
+ * neither path is traced and both are 0 (the host drops samples without a jump); nor where neither s, the
+ * occluder nor what the passing side meets first moves (the outline stays where it is on that background). */
 static inline void incident_sides(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, vec3 wi,
-                                  __global const float* edges, int edge_count,
-                                  __global const int* mesh_vertices, float u, float t, float eps, int depth,
+                                  const EdgeSet* set, bool moves, float u, float coin, float t, float eps, int depth,
                                   int max_depth, int i, __global float* radiance,
                                   __global int* first_prim, __global float* first_hit, __global uchar* drop_marks,
                                   __global int* pick, __global float* outline) {
+    __global const float* edges = set->edges;
+    __global const int* mesh_vertices = set->mesh_vertices;
     SideStart minus, plus;
     minus.found = plus.found = false;
     vec3 out_minus = v3_splat(0.0f), out_plus = v3_splat(0.0f), w, n = v3_splat(0.0f);
     float inv_pdf = 0.0f, dist = 0.0f, speed = 0.0f;
     bool on_minus = false, on_plus = false;
-    int e = depth_allows(depth, max_depth) ? edge_pick(edges, edge_count, s->p, u, &inv_pdf) : -1;
+    int e = depth_allows(depth, max_depth)
+                ? edge_pick(edges, set->blocks, set->spheres, set->n_blocks, s->p, moves, u, coin, &inv_pdf)
+                : -1;
     if (e >= 0) speed = edge_point(edges, e, s->p, t, &w, &dist, &n);
     if (!(speed > 0.0f)) e = -1;
     if (e >= 0) {
@@ -114,7 +143,11 @@ static inline void incident_sides(const Scene* sc, RngKey key, const Surface* s,
         int j = edge_mesh(edges, e), lo = mesh_vertices[j], hi = mesh_vertices[j + 1];
         on_minus = side_on_occluder(sc, s, &minus, r, dist, lo, hi);
         on_plus = side_on_occluder(sc, s, &plus, r, dist, lo, hi);
-        if (on_minus != on_plus) {
+        /* a still point, a still occluder and a still background: nothing moves there, nothing to trace */
+        const SideStart* passing = on_plus ? &minus : &plus;
+        bool still = !moves && !set->mesh_moving[j] &&
+                     !(passing->found && set->mesh_moving[mesh_of_vertex(set, sc->tri_vidx[3 * passing->hit.prim])]);
+        if (on_minus != on_plus && !still) {
             if (on_plus) out_minus = side_radiance(sc, key, s, &minus, depth, max_depth);
             else out_plus = side_radiance(sc, key, s, &plus, depth, max_depth);
         }

@@ -289,11 +289,9 @@ static inline vec3 spot_texture(const Scene* sc, __global const float* l, __glob
 
 /* ---- sampling any emitter ----------------------------------------------------- */
 
-/* Sample an emitter and a point on it as seen from p; false when the sample carries nothing. */
-static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u, LightSample* ls) {
-    int n = num_lights(sc);
-    if (n == 0) return false;
-    int id = light_choose(sc, u_select);
+/* Sample a point on emitter `id` as seen from p (u: a 2D uniform; a delta light needs none); ls->pdf the
+ * probability of choosing it times the point's density. False when the sample carries nothing. */
+static inline bool light_sample_id(const Scene* sc, int id, vec3 p, vec2 u, LightSample* ls) {
     __global const float* l = sc->lights + LIGHT_STRIDE * id;
     int type = (int)l[LIGHT_TYPE];
     ls->delta = false;
@@ -369,6 +367,12 @@ static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u,
                                                                     sc->tri_info[2 * prim], b.x, b.y)));
 #endif
     return ls->pdf > 0.0f;
+}
+
+/* Sample an emitter and a point on it as seen from p; false when the sample carries nothing. */
+static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u, LightSample* ls) {
+    if (num_lights(sc) == 0) return false;
+    return light_sample_id(sc, light_choose(sc, u_select), p, u, ls);
 }
 
 /* Radiance an emissive triangle sends along -dir (one-sided: front faces only) from its point at uv. */

@@ -63,6 +63,7 @@ def scene_programs(scene: Scene, device: Device, every_variant: bool = True, wav
     replay.kernel("edge_radiance")  # the boundary term of primary visibility (pyclpt.gradients.edges)
     replay.kernel("path_vertices")  # ... of soft shadows (pyclpt.gradients.shadows): the shading points
     replay.kernel("vertex_radiance")  # ... their silhouette search and the radiance either side
+    replay.kernel("delta_shadow_sides")  # ... hard shadows' outlines after a bounce
 
 
 def collect_programs(scenes: Iterable[Scene | str], *, device_class: str | None = "gpu",

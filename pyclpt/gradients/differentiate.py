@@ -14,7 +14,8 @@ spot light's ``to_world``) is differentiated when named, in scenes with or witho
 by the replay (``cl/gradients/geometry.h``: the material form, shading that follows the moving surfaces) plus the
 boundary terms of camera silhouettes (:func:`pyclpt.gradients.edges.primary_boundary`),
 of what the first surface seen receives (:func:`pyclpt.gradients.shadows.soft_shadow_boundary`) and of point
-lights' hard shadows (:func:`pyclpt.gradients.shadows.shadow_boundary`); an instanced scene's boundary terms are
+and spot lights' hard shadows, at the first surface seen (:func:`pyclpt.gradients.shadows.shadow_boundary`) and
+after a bounce (:func:`pyclpt.gradients.shadows.delta_shadow_boundary`); an instanced scene's boundary terms are
 its flattened scene's (:mod:`pyclpt.gradients.flatten`).
 """
 from __future__ import annotations
@@ -49,6 +50,8 @@ from pyclpt.gradients.normals import normals_backward, normals_forward
 from pyclpt.gradients.parameters import Parameter, SceneParameters
 from pyclpt.gradients.session import clear_cache, replay_for  # noqa: F401 (clear_cache: the public name)
 from pyclpt.gradients.shadows import (
+    delta_shadow_boundary,
+    delta_shadow_boundary_forward,
     moving_light_names,
     shadow_boundary,
     shadow_boundary_forward,
@@ -201,6 +204,8 @@ def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str]
         add(soft_shadow_boundary(scene, g, meshes + cameras, spp=spp, **common))
     if delta and bounce:
         add(shadow_boundary(scene, g, list(names), samples=samples, **common))
+    if delta and (max_depth < 0 or max_depth > 2):  # seen after a bounce
+        add(delta_shadow_boundary(scene, g, list(names), spp=spp, **common))
     return out
 
 
@@ -224,6 +229,8 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
         image += soft_shadow_boundary_forward(scene, name, tangent, spp=spp, **common)
     if bounce and any(isinstance(light, (PointLight, SpotLight)) for light in scene.lights):
         image += shadow_boundary_forward(scene, name, tangent, samples=samples, **common)
+        if max_depth < 0 or max_depth > 2:  # seen after a bounce
+            image += delta_shadow_boundary_forward(scene, name, tangent, spp=spp, **common)
     return image
 
 

@@ -61,6 +61,16 @@ def moved_alpha_records(scene: Scene, step: float = BSDF_DIFF_STEP) -> tuple[np.
     return up, down
 
 
+@dataclasses.dataclass
+class DeltaSides:
+    """The outputs of the delta_shadow_sides kernel (cl/gradients/delta_sides.h), per sample."""
+
+    radiance: np.ndarray  # (N, 2, 3) f |cos| x the light's direct contribution either side of the outline
+    receiver_prim: np.ndarray  # (N,) the leaf-order triangle of the outline's point (-1: no outline seen)
+    receiver_hit: np.ndarray  # (N, 3) the light's ray's distance beyond the edge point, barycentrics there
+    outline: np.ndarray  # (N, 5) the curve's measure per unit t, the distance to the outline's point, its normal
+
+
 SIDE_OCCLUDER = -2  # SideSamples.first_prim of the side that meets the occluder at the edge (cl/gradients/incident.h)
 
 
@@ -105,7 +115,7 @@ class PathReplay:
 
     def kernel(self, name: str, kinds: Iterable[str] = ()) -> cl.Kernel:
         """Kernel ``backward`` or ``forward`` (specialised for the parameter kinds differentiated), or one of the
-        boundary terms' (``edge_radiance``, ``path_vertices``, ``vertex_radiance``)."""
+        boundary terms' (``edge_radiance``, ``path_vertices``, ``vertex_radiance``, ``delta_shadow_sides``)."""
         kinds = tuple(sorted(set(kinds)))
         key = (name, *kinds)
         if key not in self._programs:
@@ -228,35 +238,67 @@ class PathReplay:
         self.dropped = int(marks.astype(np.int64).sum())
         return out
 
-    def vertex_radiance(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, edges: np.ndarray,
-                        ranges: np.ndarray, mesh_vertices: np.ndarray, seed: int, eps: float) -> SideSamples:
+    def vertex_radiance(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, moves: np.ndarray,
+                        edges: np.ndarray, blocks: np.ndarray, spheres: np.ndarray, mesh_vertices: np.ndarray,
+                        mesh_moving: np.ndarray, seed: int, eps: float) -> SideSamples:
         """At vertices of camera paths (:meth:`path_vertices`: the camera rays' first hits, depth 0, and later
-        vertices), the leaf-order triangles ``prims`` (N,), ``samples`` (N, 7) = barycentrics, the direction back
-        along the path (at depth 0: the camera ray's film position x, y and 0) and the uniforms of the edge's pick
-        and of its point t, and the vertices' bounces ``depths`` (N,): one edge that is a silhouette from the
-        vertex x among the ``ranges[:, 1]`` records of ``edges`` (E, EDGE_STRIDE:
-        :meth:`pyclpt.gradients.shadows.MeshEdges.records`, the mesh's index last) from ``ranges[:, 0]`` (x's
-        own mesh's included, but not the edges of x's triangle), picked in proportion to the angle it subtends,
-        and f |cos| L_i either side of its point at t, both sides with the random numbers of (seed, sample) (the
-        vertex_radiance kernel). ``mesh_vertices`` (M + 1,): the meshes' packed vertex ranges: the side that
-        meets the edge's mesh at the edge's faces first gives 0 untraced (its ``first_prim`` -2), and both do
-        unless exactly one side meets it (cl/gradients/incident.h). NaN or inf ones give 0 and are counted in
-        :attr:`dropped`."""
+        vertices), the leaf-order triangles ``prims`` (N,), ``samples`` (N, 8) = barycentrics, the direction back
+        along the path (at depth 0: the camera ray's film position x, y and 0), the uniforms of the edge's pick
+        and of its point t, and the uniform of the pick's strategy, the vertices' bounces ``depths`` (N,) and
+        whether each moves ``moves`` (N,): one edge that is a silhouette from the vertex x among the records of
+        ``edges`` (E, EDGE_STRIDE: :meth:`pyclpt.gradients.shadows.MeshEdges.records`, the mesh's index last) in
+        ``blocks`` (B, 3: first edge, count, 1 if the mesh moves) with bounding ``spheres`` (B, 4) (x's own mesh's
+        included, but not the edges of x's triangle; a still x picks among the still meshes' edges near a moving
+        mesh too: cl/gradients/edge_pick.h), picked in proportion to the angle it subtends, and f |cos| L_i
+        either side of its point at t, both sides with the random numbers of (seed, sample) (the vertex_radiance
+        kernel). ``mesh_vertices`` (M + 1,): the meshes' packed vertex ranges, ``mesh_moving`` (M,) whether each
+        moves: the side that meets the edge's mesh at the edge's faces first gives 0 untraced (its ``first_prim``
+        -2), and both do unless exactly one side meets it, or where nothing there moves (cl/gradients/incident.h).
+        NaN or inf ones give 0 and are counted in :attr:`dropped`."""
         n = len(prims)
         out = SideSamples(np.zeros((n, 2, 3), np.float32), np.full((n, 2), -1, np.int32),
                           np.zeros((n, 2, 3), np.float32), np.full(n, -1, np.int32), np.zeros((n, 5), np.float32))
         marks = np.zeros((n, 2), np.uint8)
         if n and len(edges):
-            e_buf = upload(self.device, np.ascontiguousarray(edges, np.float32).reshape(-1), "silhouette edges")
-            m_buf = upload(self.device, np.ascontiguousarray(mesh_vertices, np.int32), "mesh vertex ranges")
+            tables = [upload(self.device, np.ascontiguousarray(a, dtype).reshape(-1), f"silhouette {what}")
+                      for a, dtype, what in ((edges, np.float32, "edges"), (blocks, np.int32, "blocks"),
+                                             (spheres, np.float32, "spheres"), (mesh_vertices, np.int32, "ranges"),
+                                             (mesh_moving, np.int32, "motion"))]
             self._batched("vertex_radiance", n, self.scene.args(self.width, self.height),
                           [np.ascontiguousarray(prims, np.int32).reshape(-1),
-                           np.ascontiguousarray(samples, np.float32).reshape(-1, 7),
-                           np.ascontiguousarray(depths, np.int32).reshape(-1), e_buf,
-                           np.ascontiguousarray(ranges, np.int32).reshape(-1, 2), m_buf],
+                           np.ascontiguousarray(samples, np.float32).reshape(-1, 8),
+                           np.ascontiguousarray(depths, np.int32).reshape(-1),
+                           np.ascontiguousarray(moves, np.int32).reshape(-1), *tables],
                           [out.radiance, out.first_prim, out.first_hit, marks, out.pick, out.outline],
-                          lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)),
+                          lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps),
+                                         np.int32(len(blocks)), np.int32(len(mesh_moving))),
                           written=3)
+        self.dropped = int(marks.astype(np.int64).sum())
+        return out
+
+    def delta_shadow_sides(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, edge_ids: np.ndarray,
+                           edges: np.ndarray, seed: int, eps: float) -> DeltaSides:
+        """At vertices of camera paths (as :meth:`vertex_radiance`'s: leaf-order triangles ``prims`` (N,), their
+        bounces ``depths`` (N,), ``samples`` (N, 6) = barycentrics, the direction back along the path (at depth 0:
+        the camera ray's film position x, y and 0) and the edge point's t), the outline that candidate edge
+        ``edges[edge_ids]`` (E, DELTA_EDGE_STRIDE: its end points and the record of the point or spot light that
+        sees it as a silhouette) casts, seen from there, and the vertex's BSDF and cosine times that light's
+        direct contribution either side of it (the delta_shadow_sides kernel, cl/gradients/delta_sides.h). NaN or
+        inf ones give 0 and are counted in :attr:`dropped`."""
+        n = len(prims)
+        out = DeltaSides(np.zeros((n, 2, 3), np.float32), np.full(n, -1, np.int32), np.zeros((n, 3), np.float32),
+                         np.zeros((n, 5), np.float32))
+        marks = np.zeros((n, 2), np.uint8)
+        if n and len(edges):
+            e_buf = upload(self.device, np.ascontiguousarray(edges, np.float32).reshape(-1), "shadow edges")
+            self._batched("delta_shadow_sides", n, self.scene.args(self.width, self.height),
+                          [np.ascontiguousarray(prims, np.int32).reshape(-1),
+                           np.ascontiguousarray(samples, np.float32).reshape(-1, 6),
+                           np.ascontiguousarray(depths, np.int32).reshape(-1),
+                           np.ascontiguousarray(edge_ids, np.int32).reshape(-1), e_buf],
+                          [out.radiance, out.receiver_prim, out.receiver_hit, marks, out.outline],
+                          lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)),
+                          written=5)
         self.dropped = int(marks.astype(np.int64).sum())
         return out
 

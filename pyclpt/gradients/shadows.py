@@ -414,6 +414,33 @@ class SoftSamples:
         return -self.velocity * (self.edge_dist / self.back_dist)[:, None]
 
 
+def shading_points(replay, rfilter, width: int, p0: int, p1: int, spp: int, rng: np.random.Generator,
+                   later: bool) -> tuple[np.ndarray, ...]:
+    """The shading points of pixels p0 .. p1 - 1 (flat indices, rows of ``width``), ``spp`` film positions each
+    drawn from the pixel's filter: the camera rays' first hits, and (with ``later``, where the depth allows a
+    bounce after them) the later vertices of camera paths through the same film positions (path_vertices: one a
+    path, attached to its surface, weighted by the throughput that reached it). Returns their film positions
+    (N, 2), pixels (N,), leaf-order triangles (N,) (-1: none), bounces (N,), tables (N, 8) (barycentrics, the
+    direction back along the path, for the camera's hits their film positions and 0, the vertex_radiance.cl
+    convention, and the throughput that reached them) and whether each is attached (a later vertex) (N,)."""
+    pix = np.repeat(np.arange(p0, p1), spp)
+    cell, u = np.stack([pix % width, pix // width], axis=1), rng.random((len(pix), 2))
+    film = cell + u if rfilter.kind == "box" else cell + 0.5 + sample_offsets(rfilter, u)
+    vprim, vert, vdepth, prim, hit = replay.path_vertices(film, int(rng.integers(2**32)))
+    n_first = len(film)
+    table = np.zeros((n_first, 8), np.float32)
+    table[:, :2], table[:, 2:4], table[:, 5:] = hit[:, 1:], film, 1.0
+    attached = np.zeros(n_first, bool)
+    depth = np.zeros(n_first, np.int32)
+    if later and (replay.max_depth < 0 or replay.max_depth > 2):  # a bounce after the camera's hit's
+        keep = np.flatnonzero(vprim >= 0)
+        film, pix = np.concatenate([film, film[keep]]), np.concatenate([pix, pix[keep]])
+        prim, depth = np.concatenate([prim, vprim[keep]]), np.concatenate([depth, vdepth[keep]])
+        table = np.concatenate([table, vert[keep]])
+        attached = np.concatenate([attached, np.ones(len(keep), bool)])
+    return film, pix, prim, depth, table, attached
+
+
 def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
                        max_depth: int | None = None, device: Device | str | None = None,
                        receivers: Sequence[int] = (), camera: bool = False, later: bool = True
@@ -444,12 +471,15 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
         """The mesh (index in scene.meshes) of leaf-order triangles (-1: none)."""
         return np.where(prims >= 0, np.searchsorted(first, order[np.maximum(prims, 0)], side="right") - 1, -1)
 
-    # One sample a shading point: an edge, among those of the occluders (for a point that moves, of every mesh)
-    # that are silhouettes from it, picked in proportion to the angle it subtends, its own mesh's included (a mesh's
-    # outlines on itself; not the edges of its own triangle). The edge records in one array, the occluders' first.
+    # One sample a shading point: an edge that is a silhouette from it, picked in proportion to the angle it
+    # subtends, its own mesh's included (a mesh's outlines on itself; not the edges of its own triangle): for a
+    # point that moves, among every mesh's; for a still one, among the moving meshes' (SOFT_MOVING_SHARE of them)
+    # or the still meshes' near a moving one, whose outline over a moving background moves relative to it
+    # (cl/gradients/edge_pick.h). The edge records in one array, a block a mesh, the occluders' first.
     occluders = sorted(set(meshes))
-    others = sorted(set(range(len(scene.meshes))) - set(occluders)) if len(receivers) or camera else []
-    records, v0s, v1s = [], [], []
+    others = sorted(set(range(len(scene.meshes))) - set(occluders))
+    moving_meshes = set(occluders) | set(receivers)
+    records, v0s, v1s, blocks, spheres = [], [], [], [], []
     for i in occluders + others:
         mesh = scene.meshes[i]
         p = mesh.positions.astype(np.float64)
@@ -461,56 +491,39 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
         records.append(rec[~flat])
         v0s.append(edges.v0[~flat])
         v1s.append(edges.v1[~flat])
-    counts = [len(r) for r in records]
-    n_occluder_edges, n_edges = sum(counts[:len(occluders)]), sum(counts)
+        # a block a mesh (edge_pick.h): its first edge, count, whether it moves, its bounding sphere
+        blocks.append([sum(len(r) for r in records[:-1]), len(records[-1]), i in moving_meshes])
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        spheres.append([*(0.5 * (lo + hi)), 0.5 * np.linalg.norm(hi - lo) * (1 + 1e-4) + 1e-6])
+    n_edges = sum(len(r) for r in records)
     if not n_edges:
         return
     edge_records, edge_v0, edge_v1 = np.concatenate(records), np.concatenate(v0s), np.concatenate(v1s)
+    block_table, sphere_table = np.asarray(blocks, np.int32), np.asarray(spheres, np.float32)
     mesh_vertices = np.cumsum([0] + [m.positions.shape[0] for m in scene.meshes]).astype(np.int32)
+    mesh_moving = np.isin(np.arange(len(scene.meshes)), sorted(moving_meshes)).astype(np.int32)
     positions = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
 
     def band(p0: int, p1: int) -> SoftSamples:
         """The samples of pixels p0 .. p1 - 1."""
         rng = np.random.default_rng([seed, 0x736F6674, p0])  # "soft"
-        pix = np.repeat(np.arange(p0, p1), spp)
-        cell, u = np.stack([pix % width, pix // width], axis=1), rng.random((len(pix), 2))
-        film = cell + u if rfilter.kind == "box" else cell + 0.5 + sample_offsets(rfilter, u)
-        # The shading points: the camera rays' first hits, and the later vertices of camera paths through the same
-        # film positions (path_vertices: one a path, attached to its surface, weighted by the throughput that reached
-        # it): the light they receive has outlines too. Each by its leaf-order triangle and barycentrics.
-        vprim, vert, vdepth, prim, hit = replay.path_vertices(film, int(rng.integers(2**32)))
-        # per shading point, as path_vertices gives a later vertex: barycentrics, the direction back along the path
-        # (the camera's hits: their film positions, vertex_radiance.cl), the throughput that reached it
-        n_first = len(film)
-        table = np.zeros((n_first, 8), np.float32)
-        table[:, :2], table[:, 2:4], table[:, 5:] = hit[:, 1:], film, 1.0
-        attached = np.zeros(n_first, bool)
-        depth = np.zeros(n_first, np.int32)
-        if later and (replay.max_depth < 0 or replay.max_depth > 2):  # a bounce after the camera's hit's
-            keep = np.flatnonzero(vprim >= 0)
-            film, pix = np.concatenate([film, film[keep]]), np.concatenate([pix, pix[keep]])
-            prim, depth = np.concatenate([prim, vprim[keep]]), np.concatenate([depth, vdepth[keep]])
-            table = np.concatenate([table, vert[keep]])
-            attached = np.concatenate([attached, np.ones(len(keep), bool)])
+        film, pix, prim, depth, table, attached = shading_points(replay, rfilter, width, p0, p1, spp, rng, later)
         valid = prim >= 0
         mesh_hit = prim_mesh(prim)
         tri_hit = np.where(valid, order[np.maximum(prim, 0)] - first[np.maximum(mesh_hit, 0)], -1)
 
         # shading points that move: on a moving mesh, or (the camera's hits, sliding on its rays) with the camera
         moving = np.isin(mesh_hit, np.asarray(list(receivers), np.int64)) | (camera & ~attached)
-        # the points that have an edge to pick: every point that sees the occluders, or that moves
-        live = valid & (moving | (n_occluder_edges > 0))
-        sel = np.flatnonzero(live)
+        sel = np.flatnonzero(valid)
         if not len(sel):
             return _no_soft_samples()
-        ranges = np.zeros((len(sel), 2), np.int32)
-        ranges[:, 1] = np.where(moving[sel], n_edges, n_occluder_edges)
-        samples = np.empty((len(sel), 7), np.float32)
+        samples = np.empty((len(sel), 8), np.float32)
         samples[:, :5] = table[sel, :5]
-        samples[:, 5:] = u = rng.random((len(sel), 2)).astype(np.float32)  # the edge's pick, its point t
+        # the edge's pick, its point t, the pick's strategy (edge_pick.h)
+        samples[:, 5:] = u = rng.random((len(sel), 3)).astype(np.float32)
         radiance, prims, hits, pick, outline = replay.vertex_radiance(
-            prim[sel], samples, depth[sel], edge_records, ranges, mesh_vertices, int(rng.integers(2**32)),
-            SOFT_SIDE_EPS)
+            prim[sel], samples, depth[sel], moving[sel], edge_records, block_table, sphere_table, mesh_vertices,
+            mesh_moving, int(rng.integers(2**32)), SOFT_SIDE_EPS)
         # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel (the side
         # whose ray meets the occluder first is 0: the material form, cl/gradients/incident.h); a sample with no jump
         # (no silhouette, both sides meet the occluder or pass it, the same light) contributes nothing: left out
@@ -720,3 +733,209 @@ def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wid
         receiving = splat_image(rs.pixels, rs.weights, rs.jump * dr[:, None], width, height)
         return splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height) + receiving
     return splat_image(ss.pixels, ss.weights, ss.jump * dx[:, None], width, height)
+
+
+#: Floats a candidate edge of the later hard shadows (cl/gradients/delta_sides.h): its end points, the record
+#: index of the light that sees it as a silhouette (int bits).
+DELTA_EDGE_STRIDE = 7
+
+
+@dataclass
+class DeltaSamples:
+    """Points of point and spot lights' shadow outlines seen from the vertices of camera paths (after the first
+    bounce), and what each contributes (:func:`delta_sample_chunks`)."""
+
+    pixels: np.ndarray  # (N, 1) the pixel the vertex's camera path goes through
+    weights: np.ndarray  # (N, 1) 1
+    jump: np.ndarray  # (N, 3) f |cos| (L- - L+) x the curve's measure per sample x the path's throughput
+    light: np.ndarray  # (N,) index in scene.lights
+    mesh: np.ndarray  # (N,) index in scene.meshes of the occluder, its edge's vertices, the point's parameter
+    v0: np.ndarray
+    v1: np.ndarray
+    t: np.ndarray
+    sigma: np.ndarray  # (N,) |r - l| / |q - l|
+    velocity: np.ndarray  # (N, 3) n^T P / |r - y|: the outline's normal motion per motion of its point r
+    receiver: np.ndarray  # (N,) the receiver's mesh, its triangle (index in the mesh), barycentrics (N, 2)
+    rtri: np.ndarray
+    rbary: np.ndarray
+
+
+def _delta_edge_table(scene: Scene, replay) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The candidate edges of the later hard shadows: every mesh's edges that a point or spot light sees as
+    silhouettes (mesh_edges from its position), as (E, DELTA_EDGE_STRIDE) records, with their scene light (E,),
+    mesh (E,) and vertex pairs (E, 2)."""
+    packed = replay.scene.arrays.lights
+    types = packed.lights[:, 7].astype(np.int64)  # LIGHT_TYPE
+    prims = packed.lights[:, 0].view(np.int32)  # LIGHT_PRIM: the offset of its position in light_data
+    rows, lights, meshes, pairs = [], [], [], []
+    for k, pos in delta_lights(scene):
+        kind = 5 if isinstance(scene.lights[k], SpotLight) else 1  # LIGHT_SPOT, LIGHT_POINT
+        record = [r for r in np.flatnonzero(types == kind)
+                  if np.allclose(packed.light_data[prims[r]:prims[r] + 3], pos, rtol=1e-6, atol=1e-6)]
+        if not record:  # no power: no record, no shadow
+            continue
+        for i, mesh in enumerate(scene.meshes):
+            vp, _ = mesh_edges(mesh, pos)
+            if not len(vp):
+                continue
+            p = mesh.positions.astype(np.float64)
+            rec = np.zeros((len(vp), DELTA_EDGE_STRIDE), np.float32)
+            rec[:, 0:3], rec[:, 3:6] = p[vp[:, 0]], p[vp[:, 1]]
+            rec[:, 6] = np.int32(record[0]).view(np.float32)
+            rows.append(rec)
+            lights.append(np.full(len(vp), k))
+            meshes.append(np.full(len(vp), i))
+            pairs.append(vp)
+    if not rows:
+        return (np.zeros((0, DELTA_EDGE_STRIDE), np.float32), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                np.zeros((0, 2), np.int64))
+    return np.concatenate(rows), np.concatenate(lights), np.concatenate(meshes), np.concatenate(pairs)
+
+
+def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed: int, max_depth: int | None = None,
+                        device: Device | str | None = None) -> Iterator[DeltaSamples]:
+    """Point and spot lights' hard shadows seen after the first bounce: at ``spp`` shading points a pixel and one
+    later vertex of a camera path through each (:func:`shading_points`, as the soft term's), one point on an edge
+    that a delta light sees as a silhouette (every mesh's, chosen in proportion to its length), the outline it
+    casts on the first surface behind it, and, where the vertex sees that point, the vertex's BSDF and cosine
+    times the light's direct contribution either side of the outline (the delta_shadow_sides kernel,
+    cl/gradients/delta_sides.h). The outline lies on the receiver's surface, at the next vertex of a path through
+    the shading point, which the interior term holds attached to its surface (the material form): it moves
+    relative to the receiver's material point r by P (sigma dq + (1 - sigma) dl - dr), P projecting along the
+    light's ray onto the receiver's plane, and on the shading point's sphere of directions by that over |r - y|
+    (the shading point's own motion moves both alike). In bands of pixels as :func:`soft_sample_chunks`."""
+    Projection.of(scene, width, height)
+    rfilter = scene.film.rfilter
+    replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
+    if not (replay.max_depth < 0 or replay.max_depth > 2):  # a light sample after a bounce
+        return
+    table_e, light_e, mesh_e, pairs_e = _delta_edge_table(scene, replay)
+    lengths = np.linalg.norm(table_e[:, 3:6].astype(np.float64) - table_e[:, 0:3], axis=1)
+    total = float(lengths.sum())
+    if not total > 0:
+        return
+    cdf = np.cumsum(lengths) / total
+    first = np.cumsum([0] + [m.triangle_count for m in scene.meshes])
+    order = replay.scene.arrays.bvh.tri_order
+    positions = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
+    light_pos = {k: pos for k, pos in delta_lights(scene)}
+
+    def band(p0: int, p1: int) -> DeltaSamples:
+        rng = np.random.default_rng([seed, 0x64656C7461, p0])  # "delta"
+        film, pix, prim, depth, table, _ = shading_points(replay, rfilter, width, p0, p1, spp, rng, True)
+        sel = np.flatnonzero(prim >= 0)
+        u = rng.random((len(sel), 2))
+        e = np.minimum(np.searchsorted(cdf, u[:, 0], side="right"), len(cdf) - 1)
+        samples = np.empty((len(sel), 6), np.float32)
+        samples[:, :5], samples[:, 5] = table[sel, :5], u[:, 1]
+        out = replay.delta_shadow_sides(prim[sel], samples, depth[sel], e, table_e, int(rng.integers(2**32)),
+                                        SOFT_SIDE_EPS)
+        nz = np.flatnonzero(np.any(out.radiance[:, 0] != out.radiance[:, 1], axis=1) & (out.receiver_prim >= 0))
+        sel, e, t = sel[nz], e[nz], u[nz, 1]
+        # in float64: the shading point y, the edge point q, the light l, the receiver point r and its normal
+        corners = positions[replay.scene.arrays.tri_vidx[prim[sel]]]
+        bary = table[sel, :2].astype(np.float64)
+        y = ((1 - bary[:, 0] - bary[:, 1])[:, None] * corners[:, 0] + bary[:, :1] * corners[:, 1]
+             + bary[:, 1:] * corners[:, 2])
+        a, b = table_e[e, 0:3].astype(np.float64), table_e[e, 3:6].astype(np.float64)
+        q = a + t[:, None] * (b - a)
+        lp = np.stack([light_pos[k] for k in light_e[e]]) if len(e) else np.zeros((0, 3))
+        d, qdist = _unit(q - lp)
+        rprim = out.receiver_prim[nz]
+        rc = positions[replay.scene.arrays.tri_vidx[rprim]]
+        rb = out.receiver_hit[nz, 1:].astype(np.float64)
+        r = (1 - rb[:, 0] - rb[:, 1])[:, None] * rc[:, 0] + rb[:, :1] * rc[:, 1] + rb[:, 1:] * rc[:, 2]
+        n_r, _ = _unit(np.cross(rc[:, 1] - rc[:, 0], rc[:, 2] - rc[:, 0]))
+        sigma, proj = receiver_motion(r, q, lp, n_r)
+        w, dist = _unit(r - y)
+        dr_dt = np.einsum("nij,nj->ni", proj, b - a) * sigma[:, None]
+        dw_dt = (dr_dt - w * np.einsum("nc,nc->n", w, dr_dt)[:, None]) / dist[:, None]
+        normal, speed = _unit(np.cross(w, dw_dt))
+        # the kernel's sides are either side of its (float32) normal: the same one
+        ok = (speed > 0) & (np.einsum("nc,nc->n", normal, out.outline[nz, 2:5]) > 0.5) & np.isfinite(qdist)
+        k = np.flatnonzero(ok)
+        measure = speed[k] * total / lengths[e[k]] / spp
+        radiance = out.radiance[nz[k]].astype(np.float64)
+        jump = (radiance[:, 0] - radiance[:, 1]) * (measure[:, None] * table[sel[k], 5:])
+        rmesh = np.searchsorted(first, order[rprim[k]], side="right") - 1
+        return DeltaSamples(pix[sel[k]][:, None], np.ones((len(k), 1)), jump, light_e[e[k]], mesh_e[e[k]],
+                            pairs_e[e[k], 0], pairs_e[e[k], 1], t[k], sigma[k],
+                            np.einsum("nc,ncj->nj", normal[k], proj[k]) / dist[k, None], rmesh,
+                            order[rprim[k]] - first[rmesh], rb[k])
+
+    step = max(1, SOFT_CHUNK // spp)
+    for p0 in range(0, width * height, step):
+        yield band(p0, min(p0 + step, width * height))
+
+
+def delta_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
+                          seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
+                          device: Device | str | None = None) -> dict[str, np.ndarray]:
+    """Reverse mode: the boundary term of point and spot lights' hard shadows seen after the first bounce
+    (:func:`delta_sample_chunks`) for ``names`` (meshes' ``vertex_positions`` and ``to_world``, as occluders and
+    as receivers; point lights' ``position``, spot lights' ``to_world``), given dLoss/dImage ``image_grad``
+    (H, W, 3). The sensor's parameters get none: a shading point's motion moves the outline and the receiver's
+    point it covers alike. Add it to :func:`shadow_boundary`'s (the first bounce's)."""
+    g = np.asarray(image_grad, np.float64)
+    if g.ndim != 3 or g.shape[2] != 3:
+        raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
+    height, width = g.shape[:2]
+    params = parameters if parameters is not None else traverse(scene)
+    light_names = {n: k for n, k in moving_light_names(scene).items() if n in names}
+    wanted = _meshes_of(scene, [n for n in names if n not in moving_light_names(scene)
+                                and n not in sensor_names(scene)])
+    sums = {i: np.zeros((scene.meshes[i].positions.shape[0], 3)) for i in wanted}
+    light_sums = {n: np.zeros(3) for n in light_names}
+    for ds in delta_sample_chunks(scene, width, height, spp=spp, seed=seed, max_depth=max_depth, device=device):
+        weight = sample_weights(ds.pixels, ds.weights, g, ds.jump)
+        for i in wanted:
+            m = ds.mesh == i
+            add_on_edges(sums[i], ds.v0[m], ds.v1[m], ds.t[m], ds.velocity[m] * (ds.sigma[m] * weight[m])[:, None])
+            r = ds.receiver == i
+            add_on_triangles(sums[i], scene.meshes[i].indices, ds.rtri[r], ds.rbary[r],
+                             -ds.velocity[r] * weight[r][:, None])
+        for name, k in light_names.items():
+            m = ds.light == k
+            light_sums[name] += (ds.velocity[m] * ((1 - ds.sigma[m]) * weight[m])[:, None]).sum(0)
+    out: dict[str, np.ndarray] = {}
+    for i, mesh_names in wanted.items():
+        vertex_gradients(params, scene, i, mesh_names, sums[i], out)
+    for name, gl in light_sums.items():
+        if name.endswith(".to_world"):  # a spot light's pose: its translation moves the outlines
+            pose = np.zeros((4, 4))
+            pose[:3, 3] = gl
+            gl = pose
+        out[name] = gl.astype(np.float32)
+    for name in names:
+        if name in sensor_names(scene):
+            out[name] = np.zeros(np.shape(params[name]), np.float32)
+    return out
+
+
+def delta_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
+                                  height: int | None = None, spp: int = 4, seed: int = 0,
+                                  max_depth: int | None = None, parameters: SceneParameters | None = None,
+                                  device: Device | str | None = None) -> np.ndarray:
+    """Forward mode of :func:`delta_shadow_boundary`: d image (H, W, 3) along ``tangent`` (shaped as ``name``'s
+    value), from the same samples for the same seed and size."""
+    width, height = width or scene.film.width, height or scene.film.height
+    params = parameters if parameters is not None else traverse(scene)
+    tan = np.asarray(tangent, np.float64)
+    image = np.zeros((height, width, 3))
+    lights = moving_light_names(scene)
+    if name in sensor_names(scene):
+        return image.astype(np.float32)
+    if name in lights:
+        move = tan.reshape(4, 4)[:3, 3] if name.endswith(".to_world") else tan.reshape(3)
+        for ds in delta_sample_chunks(scene, width, height, spp=spp, seed=seed, max_depth=max_depth, device=device):
+            dx = np.where(ds.light == lights[name], (1 - ds.sigma) * (ds.velocity @ move), 0.0)
+            image += splat_image(ds.pixels, ds.weights, ds.jump * dx[:, None], width, height)
+        return image.astype(np.float32)
+    i, dp = vertex_motion(params, scene, name, tan)
+    for ds in delta_sample_chunks(scene, width, height, spp=spp, seed=seed, max_depth=max_depth, device=device):
+        dx = np.where(ds.mesh == i, ds.sigma * edge_point_motion(ds.velocity, ds.v0, ds.v1, ds.t, dp), 0.0)
+        r = ds.receiver == i
+        if np.any(r):
+            dx[r] -= np.einsum("nc,nc->n", ds.velocity[r], _point_motion(scene, i, ds.rtri[r], ds.rbary[r], dp))
+        image += splat_image(ds.pixels, ds.weights, ds.jump * dx[:, None], width, height)
+    return image.astype(np.float32)
