@@ -38,7 +38,8 @@ static inline float recut(float w, float w_cut) { return w < 1.0f ? (w_cut - w) 
 
 __kernel void antilag(__global const float* temporal, __global const float* emission, __global const float* lag,
                       __global const float* sample, __global float* deficit, __global float* accum,
-                      __global float* fast, __global float* moments, __global float* len, __global float* emis, int width, int height,
+                      __global float* fast, __global float* moments, __global float* len, __global float* emis,
+                      int width, int height,
                       float antilag, float alpha_min, float moments_alpha_min, float fast_alpha) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;

@@ -10,7 +10,7 @@
  * tile and channel this writes the gain
  *   G = sum d max(H, 0) / sum d max(F, 0)
  * over the tile's surface pixels (depth > 0), H the filter's input (the long history), F its output,
- * d the albedo's divisor (so the sums weigh each pixel as its colour does); 1 where the tile has no
+ * d the footprint albedo (reproject; the sums weigh each pixel as its colour does); 1 where the tile has no
  * light in F, clamped into [1 / CONSERVE_MAX, CONSERVE_MAX]; then moved towards 1 by the share of the
  * tile's surface pixels whose history is short (1 - the mean of conserve_ramp(N), svgf.h). Where the
  * anti-lag has just cut histories, the light the filter takes from the uncut ones is largely the old
@@ -26,12 +26,12 @@
  *
  * Consumes: accum[c * pixels + p] (c < 3: the long history, the filter's input), src[c * pixels + p]
  *           (c < 3: the last a-trous iteration's output), geo (GEO_DEPTH), len (N), all padded
- *           (svgf.h, PAD); aovs (cl/film/aovs.h: the albedo).
+ *           (svgf.h, PAD); albedo (reproject: the footprint albedo A, padded).
  * Produces: gains[c * tile_count + ty * tiles_x + tx], c < 3: the tile's gain G. */
 #include "denoise/svgf.h"
 
 __kernel void conserve(__global const float* accum, __global const float* src, __global const float* geo,
-                       __global const float* len, __global const float* aovs, __global float* gains, int width,
+                       __global const float* len, __global const float* albedo, __global float* gains, int width,
                        int height) {
     int tx = get_global_id(0), ty = get_global_id(1);
     int ntx = conserve_tiles(width), nty = conserve_tiles(height);
@@ -41,6 +41,7 @@ __kernel void conserve(__global const float* accum, __global const float* src, _
     src += PAD;
     geo += PAD;
     len += PAD;
+    albedo += PAD;
     /* per channel: the sums of the unfiltered and the filtered light */
     float sh[3] = {0.0f, 0.0f, 0.0f}, sf[3] = {0.0f, 0.0f, 0.0f}, ramp = 0.0f, surface = 0.0f;
     int x1 = min((tx + 1) * CONSERVE_TILE, width), y1 = min((ty + 1) * CONSERVE_TILE, height);
@@ -50,7 +51,7 @@ __kernel void conserve(__global const float* accum, __global const float* src, _
             float w = geo[GEO_DEPTH * n + p] > 0.0f ? 1.0f : 0.0f;
             ramp += w * conserve_ramp(len[p]);
             surface += w;
-            vec3 d = v3_scale(aov_divisor(aovs, n, p), w);
+            vec3 d = v3_scale(planar3(albedo, n, p), w);
             vec3 h = planar3(accum, n, p), f = planar3(src, n, p);
             float dc[3] = {d.x, d.y, d.z}, hc[3] = {h.x, h.y, h.z}, fc[3] = {f.x, f.y, f.z};
             for (int c = 0; c < 3; ++c) {

@@ -6,30 +6,32 @@
  * clamped one, accumulated with the long history's weights (shrunk where the clip lowered the long
  * history for a change of the lighting, joined by what the clip moved where that was noise, cut where
  * the anti-lag cut). Per tile and channel this writes the share sum d D / sum d H, H the long
- * history, d the albedo's divisor (the sums weigh each pixel as its colour does), 0 under DEFICIT_EPS
+ * history, d the footprint albedo (reproject; the sums weigh each pixel as its colour does), 0 under DEFICIT_EPS
  * (rounding), at most DEFICIT_MAX, and the tile's level sum d H / sum d. modulate gives the shares
  * back, robustly: a lone firefly's deficit is one tile's outlier and is dropped (docs/denoising.md,
  * "The clamp's deficit given back").
  *
  * Consumes: accum[c * pixels + p] (c < 3: the long history, after antilag), deficit[c * pixels + p]
- *           (c < 3: the deficit history), both padded (svgf.h, PAD); aovs (cl/film/aovs.h: the
- *           albedo).
+ *           (c < 3: the deficit history), albedo (reproject: the footprint albedo), all padded (svgf.h,
+ *           PAD).
  * Produces: tiles[c * tile_count + ty * tiles_x + tx]: c < 3 the tile's share, 3 <= c < 6 its level. */
 #include "denoise/svgf.h"
 
-__kernel void deficit(__global const float* accum, __global const float* deficit, __global const float* aovs, __global float* tiles, int width, int height) {
+__kernel void deficit(__global const float* accum, __global const float* deficit, __global const float* albedo,
+                      __global float* tiles, int width, int height) {
     int tx = get_global_id(0), ty = get_global_id(1);
     int ntx = deficit_tiles(width), nty = deficit_tiles(height);
     if (tx >= ntx || ty >= nty) return;
     int n = width * height;
     accum += PAD;
     deficit += PAD;
+    albedo += PAD;
     vec3 sh = v3_splat(0.0f), sd = v3_splat(0.0f), sw = v3_splat(0.0f);
     int x1 = min((tx + 1) * DEFICIT_TILE, width), y1 = min((ty + 1) * DEFICIT_TILE, height);
     for (int y = ty * DEFICIT_TILE; y < y1; ++y) {
         for (int x = tx * DEFICIT_TILE; x < x1; ++x) {
             int p = y * width + x;
-            vec3 d = aov_divisor(aovs, n, p);
+            vec3 d = planar3(albedo, n, p);
             vec3 h = planar3(accum, n, p), f = planar3(deficit, n, p);
             sh = v3_add(sh, v3_mul(d, v3(m_max(h.x, 0.0f), m_max(h.y, 0.0f), m_max(h.z, 0.0f))));
             sd = v3_add(sd, v3_mul(d, f));

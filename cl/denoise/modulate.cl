@@ -6,9 +6,10 @@
  * ramped in with the pixel's history length N (svgf.h, conserve_ramp: none up to 2 frames, all from
  * 8 on).
  *
- * The albedo divides as in demodulate (svgf.h, albedo_divisors: floored at ALBEDO_REL x the largest
- * channel; 1 where no channel is above ALBEDO_MIN, or the channel is not finite), so a pixel
- * whose illumination came through unfiltered gets its colour back exactly.
+ * The albedo is the footprint albedo A of reproject (the pixel's divisors, svgf.h albedo_divisors,
+ * blended as its long history), which demodulated the samples, so a pixel whose illumination came
+ * through unfiltered gets its colour history back exactly (A x the long history is the colour's
+ * moving average; with a constant albedo, A is its divisor and the frame's colour comes back).
  * Then the emission history (reproject: the emitted part of the colour, never filtered) is added back.
  * With give_back, the firefly clamp's deficit first (cl/denoise/deficit.cl): the illumination gets
  * g x level added, g the tiles' shares and level their mean illumination (sum d H / sum d), both
@@ -21,13 +22,13 @@
  *
  * Consumes: src[c * pixels + p] (padded, svgf.h; c < 3: the filtered illumination, the last
  *           a-trous iteration);
- *           aovs (cl/film/aovs.h: the albedo); emis[c * pixels + p] (padded: reproject's emission
+ *           albedo (reproject: the footprint albedo A, padded); emis[c * pixels + p] (padded: reproject's emission
  *           history); gains (deficit_gain: shares and levels per tile); conserve (conserve_gain: the
  *           gain per 8x8 tile, c < 3); geo (GEO_DEPTH, padded), len (N, padded).
  * Produces: out[3 p + c] (interleaved RGB, written through the opaque stride unit = 1). */
 #include "denoise/svgf.h"
 
-__kernel void modulate(__global const float* src, __global const float* aovs, __global const float* emis,
+__kernel void modulate(__global const float* src, __global const float* albedo, __global const float* emis,
                        __global const float* gains, __global const float* conserve, __global const float* geo,
                        __global const float* len, __global float* out, int width, int height, int unit,
                        int give_back, int conserve_on) {
@@ -38,6 +39,7 @@ __kernel void modulate(__global const float* src, __global const float* aovs, __
     emis += PAD;
     geo += PAD;
     len += PAD;
+    albedo += PAD;
     vec3 il = planar3(src, n, p);
     /* the filter's energy balance (conserve.cl), bilinear between the tiles' centres, ramped in with
      * the history as the a-trous weight's symmetry is (conserve_ramp) */
@@ -62,7 +64,7 @@ __kernel void modulate(__global const float* src, __global const float* aovs, __
         lev = v3(lc[0], lc[1], lc[2]);
     }
     il = v3_add(il, v3_mul(lev, g)); /* g = 0: il exactly */
-    vec3 c = v3_add(v3_mul(il, aov_divisor(aovs, n, p)), planar3(emis, n, p));
+    vec3 c = v3_add(v3_mul(il, planar3(albedo, n, p)), planar3(emis, n, p));
     c = all_finite3(c) ? c : v3_splat(0.0f);
     __global float* o = out + 3 * p;
     o[0] = c.x;

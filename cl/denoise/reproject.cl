@@ -1,7 +1,8 @@
 /* reproject: SVGF's temporal pass (Schied et al. 2017; Falcor's SVGFReproject), with the fast
  * history of NRD's RELAX. One work-item per pixel, 2D range; after demodulate.
  *
- * 1. The frame's sample (demodulate's illumination) firefly-clamped: its luminance is scaled down to
+ * 1. The frame's sample (demodulate's illumination, demodulated by the footprint's albedo, 4.)
+ *    firefly-clamped: its luminance is scaled down to
  *    at most sqrt(N) x the largest of firefly_ratio x a spatial reference (the largest of the mean
  *    luminance of its neighbours in the 3x3 around p inside the image, centre excluded, the mean of
  *    their temporal means (the moments' m1 over the same 3x3 as the neighbourhood's sigma below)
@@ -25,22 +26,28 @@
  *    where the history is valid, else the sample's own (an isolated pixel whose neighbours are black
  *    is clamped to 0 on its first frame, but its moments keep it, and it converges).
  * 2. The previous frame's history at p + motion: the 2x2 bilinear taps around it, each accepted only
- *    if inside the image, holding a history (length >= 1) and the same surface (consistent(): same
- *    material id; both background, or both surfaces with |z - z_prev| <= depth_threshold x (GEO_GRAD
- *    + 0.01 z) and normals with cos >= min(normal_threshold, cos_spread), cos_spread the smallest
- *    normal cosine from p to its surface neighbours, as Falcor scales its normal test by fwidth);
- *    the bilinear weights renormalised over the
- *    accepted taps (accepted if their weight sums to more than 0.01). Else the 3x3 pixels around the
- *    rounded previous position (itself inside the image), equally weighted (Falcor's fallback: a
- *    branch, taken at disocclusions only). Else a disocclusion: the history restarts.
+ *    if inside the image, holding a history (length >= 1) and either the same surface (consistent():
+ *    same material id; both background, or both surfaces with |z - z_prev| <= depth_threshold x
+ *    (GEO_GRAD + 0.01 z) and normals with cos >= min(normal_threshold, cos_spread), cos_spread the
+ *    smallest normal cosine from p to its surface neighbours, as Falcor scales its normal test by
+ *    fwidth) or a sample that moves with p's (moves_with: their motions within MOTION_TOLERANCE of
+ *    a pixel; the same footprint, whatever surface each jittered sample hit); the bilinear weights
+ *    renormalised over the accepted taps (accepted if their weight sums to more than 0.01). Else the
+ *    3x3 pixels around the rounded previous position (itself inside the image), equally weighted
+ *    (Falcor's fallback: a branch, taken at disocclusions only). Else a disocclusion: the history restarts.
  * 3. The emission history (the emitted part of the colour, demodulate, kept apart from the filtered
- *    illumination and added back by modulate): the reprojected one clipped into the [min, max] box of
- *    this frame's emission over the 3x3 pixels around p inside the image (an emitter is noise-free, so
- *    its box is tight inside it and spans [dark, bright] on its jittered edges; a light that changes
- *    leaves the box at once) where it lies outside the box widened by EMISSION_MARGIN x its width
- *    (emission_clip), then blended with weight max(alpha_min, 1/N), as the long history: a
- *    static emitter's edge converges to the plain average of its frames.
- * 4. History length N = min(N_prev + 1, max_history) (N_prev: the accepted taps' weighted mean,
+ *    illumination and added back by modulate): where an emitter changed (emitter_moved: the emitting
+ *    samples of one material in this frame's 3x3 around p and in the previous frame's 3x3 around the
+ *    rounded previous position, their ranges apart, or most of one 3x3 emitting and none of the
+ *    other), the reprojected one clipped into the [min, max] box of this frame's emission over the
+ *    3x3 pixels around p inside the image (an emitter is noise-free, so its box is tight inside it);
+ *    then blended with weight max(alpha_min, 1/N), as the long history: a static emitter's edge,
+ *    or a window's sky behind a bar, converges to the plain average of its frames.
+ * 4. The footprint's albedo A (the divisors of the pixel's samples blended as the long history):
+ *    the sample is demodulated by A, not by its own divisor, and the histories reprojected in units
+ *    of the previous A rescaled to this one, so that A x the long history is the colour's moving
+ *    average, exactly (below; modulate, conserve and deficit multiply by A).
+ * 5. History length N = min(N_prev + 1, max_history) (N_prev: the accepted taps' weighted mean,
  *    rounded), 1 at a disocclusion; moments of luminance blended with max(moments_alpha_min, 1/N),
  *    the fast history with max(fast_alpha, 1/N). The long history is blended by clip_history. Where
  *    the lighting changed, the antilag pass (cl/denoise/antilag.cl) cuts N, the moments and the
@@ -49,18 +56,21 @@
  * The depth gradient GEO_GRAD: |dz/dx| + |dz/dy|, each the smaller of the one-sided differences to
  * the surface neighbours (a depth edge on one side does not count).
  *
- * Consumes: sample (demodulate: illumination, luminance); emission (demodulate: the emitted part); geo (this frame's record from demodulate:
- *           depth, normal, material); aovs[c * pixels + p] (cl/film/aovs.h: the motion); the
+ * Consumes: sample (demodulate: illumination, luminance); emission, emission_prev (demodulate, this
+ *           frame's and the previous one's: the emitted part); geo (this frame's record from
+ *           demodulate: depth, normal, motion, material); aovs[c * pixels + p] (cl/film/aovs.h: the
+ *           motion, the albedo); the
  *           previous frame's geo_prev (GEO_*), hist_prev (long history colour, channels 0..2),
  *           fast_prev (3), moments_prev (2), len_prev (history length; 0 = none, after a reset),
  *           emis_prev (3, the emission history), deficit_prev (3, the clamp's deficit history of
- *           clip_history).
+ *           clip_history), albedo_prev (3, the footprint albedo A).
  *           All but aovs padded (svgf.h, PAD).
  * Produces: geo[GEO_GRAD]; temporal[0..2] the sample clamped, temporal[3..5] the long history
  *           reprojected (0 at a disocclusion); fast (the fast history accumulated), moments
  *           (luminance mean and mean of squares), len (N, a float), emis (the emission history),
  *           deficit (the clamp's deficit history reprojected with the same taps, blended by
- *           clip_history); all padded. */
+ *           clip_history), albedo (A); sample[0..2] (p's own, in place: the sample demodulated by A,
+ *           before the clamp, as clip_history and antilag read it); all padded. */
 #include "denoise/svgf.h"
 
 /* The firefly clamp's neighbourhood term is mean + POOLED_SIGMA x firefly_sigma x the pooled sigma:
@@ -81,20 +91,56 @@ static inline bool consistent(__global const float* geo_prev, int n, int q, floa
     return (mq == mat) & (surface == surface_q) & (!surface | same);
 }
 
-/* The emission history is clipped into this frame's 3x3 [min, max] box only where it lies outside the
- * box widened by EMISSION_MARGIN x the box's width on either side; then into the box itself. A
- * changed light leaves the widened box at once (a noise-free emitter's box has no width); what stays
- * inside it is the jitter of a pixel that shows an emitter only in part (the living room's windows:
- * the sky in one frame, a window bar in the next, whose box is then [0, 0] around a sky history),
- * which the plain box clipped towards the frame: 0.3 to 0.4 % of the room's light at 32 frames
- * (0.9817 / 0.9875 / 0.9951 of the plain average's; 0.9849 / 0.9902 / 0.9961 with a margin of 0.5,
- * 0.9856 / 0.9904 / 0.9961 unclipped; docs/denoising.md, "Energy at 32 frames"). */
+/* The emission history is clipped into this frame's 3x3 [min, max] box of emission only where an
+ * emitter changed (emitter_moved): like with like, the emission of one material's emitting samples in
+ * the two frames' 3x3, their ranges apart by more than EMISSION_MARGIN x the wider one's width +
+ * EMISSION_REL x the higher top (an environment map's sky varies across a 3x3: each previous sample's
+ * emission tested against this frame's range, with 0.01 to 0.1 for EMISSION_REL, left the room's
+ * temporal accumulation 0.2 to 0.4 % off; rounding), or at least EMITTER_MOST of one 3x3 emitting and
+ * none of the other's (switched on or off). A light that changes leaves its range at once (the
+ * light-change tests: the cornell-box's emitter shares its material with the walls, so a material's
+ * non-emitting samples do not count); a pixel that shows an emitter only in part (the living room's
+ * windows: the sky in one frame, a window's bar in the next) keeps its history, the plain average of
+ * what it drew. The box alone, widened by half its width, clipped such a history to [0, 0] when its
+ * 3x3 drew only bars and to the sky's when it drew none: 0.3 to 0.4 % of the room's light at 32 frames
+ * and more beside thinner bars (docs/denoising.md, "Energy at 32 frames"). A change under EMISSION_REL
+ * is followed by the blend alone. */
 #define EMISSION_MARGIN 0.5f
+#define EMISSION_REL 0.01f
+#define EMITTER_MOST 5
+#define NOT_EMITTING INT_MIN /* a material id below every real one (-1 is the background) */
 
-static inline float emission_clip(float h, float lo, float hi) {
-    float m = EMISSION_MARGIN * (hi - lo);
-    bool out = h < lo - m || h > hi + m;
-    return out ? m_clamp(h, lo, hi) : h;
+static inline bool apart(float lo, float hi, float lo_p, float hi_p) {
+    float m = EMISSION_MARGIN * m_max(hi - lo, hi_p - lo_p) + EMISSION_REL * m_max(hi, hi_p);
+    return lo > hi_p + m || hi < lo_p - m;
+}
+
+static inline bool emitting(vec3 e) { return e.x > 0.0f || e.y > 0.0f || e.z > 0.0f; }
+
+/* Whether the emitting samples of one material in this frame's 3x3 (count, their range [lo, hi]) and
+ * in the previous frame's (count_p, [lo_p, hi_p]) tell of a change: both there and their ranges apart,
+ * or at least EMITTER_MOST of the 9 in one frame and none in the other (a light switched on or off). */
+static inline bool emitter_moved(vec3 lo, vec3 hi, int count, vec3 lo_p, vec3 hi_p, int count_p) {
+    if (count == 0 || count_p == 0) return count + count_p >= EMITTER_MOST;
+    return apart(lo.x, hi.x, lo_p.x, hi_p.x) || apart(lo.y, hi.y, lo_p.y, hi_p.y) || apart(lo.z, hi.z, lo_p.z, hi_p.z);
+}
+
+/* The largest difference, per axis in pixels, between the motions of two samples that reproject still
+ * takes for the same footprint when their surfaces differ (moves_with). */
+#define MOTION_TOLERANCE 0.25f
+
+/* Whether the current pixel's sample (motion mx, my, seen) moves with the sample that the previous
+ * frame's pixel q showed: then q's footprint has moved with p's, whatever surface each of the two
+ * jittered samples hit, and q's history is that footprint's mean. The G-buffer is one sample a frame,
+ * so a pixel on an edge, a texture boundary or a hole shows one side in one frame and the other in
+ * the next: rejecting the history then depends on the sample drawn, which biases the mean (the living
+ * room's temporal accumulation alone, without albedo or emission: 0.991 / 0.990 / 0.989 of the plain
+ * average's at 32 frames, 1.0000 with this test: the 3x3 fallback gave a quarter of the pixels their
+ * neighbours' histories of the side drawn, and a hole's or a thin bar's rare sample restarted them).
+ * A disocclusion is where the two surfaces move apart (an occluder over its background, parallax). */
+static inline bool moves_with(__global const float* geo_prev, int n, int q, float mx, float my, bool seen) {
+    float dx = m_abs(mx - geo_prev[GEO_MOTION * n + q]), dy = m_abs(my - geo_prev[(GEO_MOTION + 1) * n + q]);
+    return seen & (dx <= MOTION_TOLERANCE) & (dy <= MOTION_TOLERANCE);
 }
 
 /* |z - zn| for a surface neighbour, INFINITY for a background one. */
@@ -102,30 +148,33 @@ static inline float depth_step(float z, float zn) { return zn > 0.0f ? m_abs(z -
 
 /* The previous frame's history, summed over accepted taps with their weights. */
 typedef struct {
-    vec3 color, fast, emis, dfc;
+    vec3 color, fast, emis, dfc, alb;
     float m1, m2, len, weight;
 } history_t;
 
 static inline void add_tap(history_t* h, __global const float* hist_prev, __global const float* fast_prev,
                            __global const float* moments_prev, __global const float* len_prev,
-                           __global const float* emis_prev, __global const float* deficit_prev, int n, int q,
-                           float w) {
+                           __global const float* emis_prev, __global const float* deficit_prev,
+                           __global const float* albedo_prev, int n, int q, float w) {
     h->color = v3_add(h->color, v3_scale(planar3(hist_prev, n, q), w));
     h->fast = v3_add(h->fast, v3_scale(planar3(fast_prev, n, q), w));
     h->emis = v3_add(h->emis, v3_scale(planar3(emis_prev, n, q), w));
     h->dfc = v3_add(h->dfc, v3_scale(planar3(deficit_prev, n, q), w));
+    h->alb = v3_add(h->alb, v3_scale(planar3(albedo_prev, n, q), w));
     h->m1 += w * moments_prev[q];
     h->m2 += w * moments_prev[n + q];
     h->len += w * len_prev[q];
     h->weight += w;
 }
 
-__kernel void reproject(__global const float* sample, __global const float* emission, __global float* geo,
+__kernel void reproject(__global float* sample, __global const float* emission,
+                        __global const float* emission_prev, __global float* geo,
                         __global const float* aovs,
                         __global const float* geo_prev, __global const float* hist_prev,
                         __global const float* fast_prev, __global const float* moments_prev,
                         __global const float* len_prev, __global const float* emis_prev,
-                        __global const float* deficit_prev, __global float* temporal, __global float* deficit,
+                        __global const float* deficit_prev, __global const float* albedo_prev,
+                        __global float* temporal, __global float* deficit, __global float* albedo,
                         __global float* fast, __global float* moments, __global float* len, __global float* emis,
                         int width, int height, float depth_threshold, float normal_threshold, float firefly_ratio,
                         float firefly_sigma, float max_history, float alpha_min, float moments_alpha_min,
@@ -135,10 +184,13 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     int n = width * height, p = y * width + x;
     sample += PAD;
     emission += PAD;
+    emission_prev += PAD;
     emis_prev += PAD;
     emis += PAD;
     deficit_prev += PAD;
     deficit += PAD;
+    albedo_prev += PAD;
+    albedo += PAD;
     geo += PAD;
     geo_prev += PAD;
     hist_prev += PAD;
@@ -181,12 +233,14 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     vec3 e = planar3(emission, n, p);
     vec3 e_lo = e, e_hi = e; /* the box of this frame's emission around p */
     float around = 0.0f, count = 0.0f;
+    bool any_emitting = false; /* an emitting sample in the 3x3 around p or around the previous position */
     UNROLL for (int dy = -1; dy <= 1; ++dy) {
         UNROLL for (int dx = -1; dx <= 1; ++dx) {
-            if (dx == 0 && dy == 0) continue;
             int tx = x + dx, ty = y + dy;
             float w = (tx >= 0 && tx < width && ty >= 0 && ty < height) ? 1.0f : 0.0f;
             int q = row_at(y, dy, width, height) + tx;
+            any_emitting |= w > 0.0f && emitting(planar3(emission, n, q));
+            if (dx == 0 && dy == 0) continue;
             around += w * sample[3 * n + q];
             count += w;
             vec3 eq = planar3(emission, n, q);
@@ -208,20 +262,24 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     float fx0 = m_floor(px), fy0 = m_floor(py);
     float fx = px - fx0, fy = py - fy0;
     int x0 = (int)fx0, y0 = (int)fy0;
-    history_t h = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
+    history_t h = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f),
+                   0.0f, 0.0f, 0.0f, 0.0f};
     UNROLL for (int t = 0; t < 4; ++t) {
         int tx = x0 + (t & 1), ty = y0 + (t >> 1);
         bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
         int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
-        bool ok = inside & (len_prev[q] >= 1.0f) & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
+        bool ok = inside & (len_prev[q] >= 1.0f)
+                  & (consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min) | moves_with(geo_prev, n, q, mx, my, seen));
         float bw = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
-        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, deficit_prev, n, q, ok ? bw : 0.0f);
+        add_tap(&h, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, deficit_prev, albedo_prev, n, q,
+                ok ? bw : 0.0f);
     }
     /* none (a weight below 0.01): Falcor's fallback, the 3x3 pixels around the rounded position,
      * equally weighted; a branch, taken at disocclusions only */
     if (!(h.weight > 0.01f)) {
         int rx = (int)m_floor(px + 0.5f), ry = (int)m_floor(py + 0.5f);
-        history_t f = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), 0.0f, 0.0f, 0.0f, 0.0f};
+        history_t f = {v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f), v3_splat(0.0f),
+                       0.0f, 0.0f, 0.0f, 0.0f};
         if (rx >= 0 && rx < width && ry >= 0 && ry < height) {
             for (int dy = -1; dy <= 1; ++dy) {
                 for (int dx = -1; dx <= 1; ++dx) {
@@ -230,8 +288,8 @@ __kernel void reproject(__global const float* sample, __global const float* emis
                     int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
                     bool ok = inside & (len_prev[q] >= 1.0f)
                               & consistent(geo_prev, n, q, z, nrm, mat, ztol, cos_min);
-                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, deficit_prev, n, q,
-                            ok ? 1.0f : 0.0f);
+                    add_tap(&f, hist_prev, fast_prev, moments_prev, len_prev, emis_prev, deficit_prev, albedo_prev,
+                            n, q, ok ? 1.0f : 0.0f);
                 }
             }
         }
@@ -241,6 +299,26 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     float inv = valid ? 1.0f / h.weight : 0.0f;
     vec3 hist = v3_scale(h.color, inv), hist_fast = v3_scale(h.fast, inv);
     float N = valid ? m_min(m_floor(h.len * inv + 0.5f) + 1.0f, max_history) : 1.0f;
+
+    /* the footprint's albedo: the divisors of the pixel's samples blended as its long history is
+     * (weight max(alpha_min, 1/N)). The G-buffer is one jittered sample a frame: demodulated by each
+     * frame's own divisor d_k and modulated by the last one's, the history came out at E[d] E[c / d],
+     * not E[c], wherever the albedo (or the surface, or the sky's divisor 1) changes within a pixel
+     * (the living room: 1.9 % of the red light at 32 frames, temporal accumulation alone). The sample
+     * is demodulated by this albedo A instead, and the histories reprojected in units of the previous
+     * A are rescaled to this one (A_prev / A), so that A x the long history is the colour's own moving
+     * average, exactly (the filter sees each pixel's colour over its footprint's albedo, as from a
+     * G-buffer of many samples a pixel). A depends on the albedos only, not on the light's noise. */
+    vec3 d_k = aov_divisor(aovs, n, p);
+    vec3 d_prev = v3_scale(h.alb, inv);
+    bool d_ok = valid && d_prev.x > 0.0f && d_prev.y > 0.0f && d_prev.z > 0.0f && all_finite3(d_prev);
+    vec3 A = d_ok ? lerp3(d_prev, d_k, m_max(alpha_min, 1.0f / N)) : d_k;
+    vec3 rescale = d_ok ? v3_div(d_prev, A) : v3_splat(1.0f);
+    hist = v3_mul(hist, rescale);
+    hist_fast = v3_mul(hist_fast, rescale);
+    h.dfc = v3_mul(h.dfc, rescale);
+    s = v3_div(v3_mul(s, d_k), A);
+    store_planar3(sample, n, p, s); /* the raw sample as clip_history and antilag read it (p's own) */
 
     /* the neighbourhood's temporal spread: the mean of the previous frame's luminance variances
      * (m2 - m1^2) over the 3x3 pixels around the rounded previous position that hold a history of
@@ -254,6 +332,7 @@ __kernel void reproject(__global const float* sample, __global const float* emis
             int tx = rx + dx, ty = ry + dy;
             bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
             int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
+            any_emitting |= inside && emitting(planar3(emission_prev, n, q));
             float lq = len_prev[q];
             bool use = inside & (lq >= 1.0f) & (lq <= N) & (as_int(geo_prev[GEO_MATERIAL * n + q]) == mat);
             float w = use ? 1.0f : 0.0f;
@@ -261,6 +340,45 @@ __kernel void reproject(__global const float* sample, __global const float* emis
             nvar += w * m_max(moments_prev[n + q] - m1q * m1q, 0.0f);
             nmean += w * m1q;
             nw += w;
+        }
+    }
+    /* an emitter changed (emitter_moved): the emitting samples of a material in the previous frame's
+     * 3x3 around the previous position and in this frame's 3x3 around p, compared (a branch: taken
+     * where an emitter is near) */
+    bool emitter_changed = false;
+    if (any_emitting) { /* a branch: taken near an emitter */
+        /* the emitting samples of the 3x3 around p (k < 9) and around the previous position: their
+         * materials (NOT_EMITTING for the others and outside the image) and emissions */
+        int emat[18];
+        vec3 emits[18];
+        for (int k = 0; k < 18; ++k) {
+            bool now = k < 9;
+            int tx = (now ? x : rx) + (k % 3) - 1, ty = (now ? y : ry) + (k % 9) / 3 - 1;
+            bool inside = tx >= 0 && tx < width && ty >= 0 && ty < height;
+            int q = clampi(ty, 0, height - 1) * width + clampi(tx, 0, width - 1);
+            vec3 ek = planar3(now ? emission : emission_prev, n, q);
+            int mk = as_int((now ? geo : geo_prev)[GEO_MATERIAL * n + q]);
+            emat[k] = inside && emitting(ek) ? mk : NOT_EMITTING;
+            emits[k] = ek;
+        }
+        for (int j = 0; j < 18; ++j) {
+            int m = emat[j];
+            bool first = m != NOT_EMITTING; /* an emitting sample, its material not met before */
+            for (int i = 0; i < j; ++i) first &= emat[i] != m;
+            if (!first) continue;
+            vec3 lo = v3_splat(INFINITY), hi = v3_splat(-INFINITY), lo_p = lo, hi_p = hi;
+            int count = 0, count_p = 0;
+            for (int k = 0; k < 9; ++k) {
+                vec3 ek = emits[k], ep = emits[k + 9];
+                bool on = emat[k] == m, on_p = emat[k + 9] == m;
+                lo = on ? v3(m_min(lo.x, ek.x), m_min(lo.y, ek.y), m_min(lo.z, ek.z)) : lo;
+                hi = on ? v3(m_max(hi.x, ek.x), m_max(hi.y, ek.y), m_max(hi.z, ek.z)) : hi;
+                lo_p = on_p ? v3(m_min(lo_p.x, ep.x), m_min(lo_p.y, ep.y), m_min(lo_p.z, ep.z)) : lo_p;
+                hi_p = on_p ? v3(m_max(hi_p.x, ep.x), m_max(hi_p.y, ep.y), m_max(hi_p.z, ep.z)) : hi_p;
+                count += on ? 1 : 0;
+                count_p += on_p ? 1 : 0;
+            }
+            emitter_changed |= emitter_moved(lo, hi, count, lo_p, hi_p, count_p);
         }
     }
     float nsigma = m_sqrt(nvar / m_max(nw, 1.0f));
@@ -287,12 +405,14 @@ __kernel void reproject(__global const float* sample, __global const float* emis
     moments[n + p] = lerpf(h.m2 * inv, l * l, am);
     len[p] = N;
     vec3 he = v3_scale(h.emis, inv);
-    he = v3(emission_clip(he.x, e_lo.x, e_hi.x), emission_clip(he.y, e_lo.y, e_hi.y),
-            emission_clip(he.z, e_lo.z, e_hi.z));
+    he = emitter_changed
+             ? v3(m_clamp(he.x, e_lo.x, e_hi.x), m_clamp(he.y, e_lo.y, e_hi.y), m_clamp(he.z, e_lo.z, e_hi.z))
+             : he;
     vec3 e_out = lerp3(he, e, m_max(alpha_min, 1.0f / N)); /* N = 1 (a new history): e itself */
     store_planar3(emis, n, p, all_finite3(e_out) ? e_out : e);
     store_planar3(temporal, n, p, s);
     store_planar3(temporal + 3 * n, n, p, hist);
     store_planar3(deficit, n, p, v3_scale(h.dfc, inv)); /* clip_history blends it */
+    store_planar3(albedo, n, p, A);
     geo[GEO_GRAD * n + p] = grad;
 }

@@ -19,6 +19,9 @@
  *                 tests and weights then pass
  *   GEO_GRAD      the depth gradient: |dz/dx| + |dz/dy|, each the smaller of the two one-sided
  *                 differences to surface neighbours (so a depth edge on one side does not count)
+ *   GEO_MOTION    2: the sample's motion (aovs.h, AOV_MOTION: previous position - pixel), AOV_OFFSCREEN in both
+ *                 where it was not seen or not finite; the next frame's reproject compares it with its own
+ *                 (moves_with)
  *   GEO_MATERIAL  the material id as int bits (-1 background)
  * The illumination buffers (temporal, history colour, the a-trous ping-pong) hold RGB and, in the
  * 4-channel ones, the luminance variance in channel 3. */
@@ -31,8 +34,9 @@
 #define GEO_DEPTH 0
 #define GEO_NORMAL 1
 #define GEO_GRAD 4
-#define GEO_MATERIAL 5 /* last: its int bits (NaN patterns as floats) are never read as a neighbour's float */
-#define GEO_COUNT 6
+#define GEO_MOTION 5
+#define GEO_MATERIAL 7 /* last: its int bits (NaN patterns as floats) are never read as a neighbour's float */
+#define GEO_COUNT 8
 
 /* Floats of padding before and after an internal buffer: at least the farthest x offset of a tap,
  * 2 x 2^(iterations - 1) for the a-trous filter (iterations <= 8, DenoiserSettings). */

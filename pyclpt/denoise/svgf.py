@@ -3,15 +3,16 @@ SVGFPass), with NRD RELAX's fast history clipping the long one.
 
 One frame is twelve passes, one kernel each in ``cl/denoise/`` and one method here of the same name:
 :meth:`Svgf.demodulate` (sanitize, divide by the albedo, this frame's geometry),
-:meth:`Svgf.reproject` (firefly clamp, reproject and accumulate the fast history, moments and
-history length), :meth:`Svgf.clip_history` (clip the long history into the fast one's neighbourhood
-and blend; the anti-lag statistic; the clamp's deficit history), :meth:`Svgf.antilag` (cut the
-histories where the statistic says the lighting changed, in the same frame), :meth:`Svgf.deficit` and
-:meth:`Svgf.deficit_gain` (per tile, the share of the light that the firefly clamp took, which
-modulate gives back), :meth:`Svgf.variance` (temporal or, on a short history, spatial variance),
+:meth:`Svgf.reproject` (the footprint albedo that the sample is demodulated by, firefly clamp,
+reproject and accumulate the fast history, moments and history length), :meth:`Svgf.clip_history` (clip
+the long history into the fast one's neighbourhood and blend; the anti-lag statistic; the clamp's
+deficit history), :meth:`Svgf.antilag` (cut the histories where the statistic says the lighting
+changed, in the same frame), :meth:`Svgf.deficit` and :meth:`Svgf.deficit_gain` (per tile, the share
+of the light that the firefly clamp took, which modulate gives back), :meth:`Svgf.variance` (temporal
+or, on a short history, spatial variance),
 :meth:`Svgf.atrous` (``iterations`` a-trous iterations), :meth:`Svgf.conserve` and
 :meth:`Svgf.conserve_gain` (per tile, the gain that gives the filtered light the sum of the unfiltered
-light, robust to a lone firefly) and :meth:`Svgf.modulate` (times the albedo,
+light, robust to a lone firefly) and :meth:`Svgf.modulate` (times the footprint albedo,
 plus the emission's own temporal history: the emitted part of the colour is kept out of the filter).
 :meth:`Svgf.count_dropped` adds up the NaN/inf inputs (``cl/film/count_dropped.cl``).
 
@@ -53,7 +54,7 @@ CONSERVE_TILE = 8
 #: frames"; its light-change lag there).
 CLIP_NOISE = 1.0
 #: Channels of a geometry record (cl/denoise/svgf.h, GEO_COUNT).
-GEO_COUNT = 6
+GEO_COUNT = 8
 #: Floats of padding before and after each internal buffer (cl/denoise/svgf.h, PAD).
 PAD = 256
 #: Marks summed by one work-item of cl/film/count_dropped.cl.
@@ -113,8 +114,8 @@ class Svgf:
         self.global_size = (-(-self.width // lx) * lx, -(-self.height // ly) * ly)
         n, f = self.pixels, 4
         size = f"{self.width}x{self.height}"
-        needs = {"denoiser history": 2 * f * n * (GEO_COUNT + 4 + 3 + 2 + 1 + 3 + 3),
-                 "denoiser work buffers": f * n * (6 + 4 + 4 + 3 + 3 + 3) + n}
+        needs = {"denoiser history": 2 * f * n * (GEO_COUNT + 4 + 3 + 2 + 1 + 3 + 3 + 3),
+                 "denoiser work buffers": f * n * (6 + 4 + 4 + 3 + 3 + 3 + 3) + n}
         check_memory(self.device, needs, hint="denoise a smaller image")
         self._padded: list[tuple[cl.Buffer, int]] = []
         self._geo = [self._alloc(GEO_COUNT, f"denoiser geometry {size}") for _ in range(2)]
@@ -124,6 +125,7 @@ class Svgf:
         self._len = [self._alloc(1, f"denoiser history length {size}") for _ in range(2)]
         self._emis = [self._alloc(3, f"denoiser emission history {size}") for _ in range(2)]
         self._deficit = [self._alloc(3, f"denoiser clamp deficit history {size}") for _ in range(2)]
+        self._albedo = [self._alloc(3, f"denoiser albedo history {size}") for _ in range(2)]
         self._tiles_x = -(-self.width // DEFICIT_TILE)
         self._tiles_y = -(-self.height // DEFICIT_TILE)
         self._tiles = [alloc(self.device, f * 6 * self._tiles_x * self._tiles_y, f"denoiser deficit tiles {size}")
@@ -132,7 +134,7 @@ class Svgf:
         self._ctiles_y = -(-self.height // CONSERVE_TILE)
         self._conserve = [alloc(self.device, f * 3 * self._ctiles_x * self._ctiles_y, f"denoiser conserve tiles {size}")
                           for _ in range(2)]
-        self._emission = self._alloc(3, f"denoiser frame emission {size}")
+        self._emission_pair = [self._alloc(3, f"denoiser frame emission {size}") for _ in range(2)]
         self._lag = self._alloc(3, f"denoiser anti-lag statistic {size}")
         self._temporal = self._alloc(6, f"denoiser temporal {size}")
         self._ping = [self._alloc(4, f"denoiser a-trous {size}") for _ in range(2)]
@@ -203,7 +205,8 @@ class Svgf:
         q = self.device.queue
         n = self.pixels
         for bufs, channels in ((self._geo, GEO_COUNT), (self._hist, 4), (self._fast, 3), (self._moments, 2),
-                               (self._len, 1), (self._emis, 3), (self._deficit, 3), ([self._lag], 3)):
+                               (self._len, 1), (self._emis, 3), (self._deficit, 3), (self._albedo, 3), ([self._lag], 3),
+                               (self._emission_pair, 3)):
             for buf in bufs:
                 fill_buffer(q, buf, np.float32(0), 4 * PAD, 4 * n * channels)
         self.frames = 0
@@ -260,17 +263,21 @@ class Svgf:
         the a-trous buffer, free until the variance pass), this frame's geometry, the NaN/inf marks."""
         ev = self._kernels["demodulate"](
             self.device.queue, self.global_size, self.local, color, aovs, self._ping[0], self._geo[self._cur],
-            self._emission, self._marks, *self._args2d(), np.int32(1))
+            self._emission_pair[self._cur], self._marks, *self._args2d(), np.int32(1))
         return self._record("demodulate", ev)
 
     def reproject(self, aovs: cl.Buffer) -> cl.Event:
-        """Pass 2 (cl/denoise/reproject.cl): the firefly-clamped sample and the reprojected history; the
-        fast history, moments and history length of this frame (cut by :meth:`antilag`)."""
+        """Pass 2 (cl/denoise/reproject.cl): the footprint albedo (the pixel's albedo divisors blended as its
+        long history), the sample demodulated by it and firefly-clamped, the reprojected histories (a
+        previous pixel is taken where it shows the same surface or its sample moves with this one's);
+        the fast history, moments and history length of this frame (cut by :meth:`antilag`)."""
         s, c, p = self._settings, self._cur, self._prev
         ev = self._kernels["reproject"](
-            self.device.queue, self.global_size, self.local, self._ping[0], self._emission, self._geo[c], aovs,
+            self.device.queue, self.global_size, self.local, self._ping[0], self._emission_pair[c],
+            self._emission_pair[p], self._geo[c], aovs,
             self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p],
-            self._deficit[p], self._temporal, self._deficit[c], self._fast[c], self._moments[c], self._len[c],
+            self._deficit[p], self._albedo[p], self._temporal, self._deficit[c], self._albedo[c], self._fast[c],
+            self._moments[c], self._len[c],
             self._emis[c], *self._args2d(),
             np.float32(s.depth_threshold), np.float32(s.normal_threshold), np.float32(s.firefly_ratio),
             np.float32(s.firefly_sigma), np.float32(s.max_history), np.float32(s.alpha_min),
@@ -307,7 +314,8 @@ class Svgf:
         history length, moments and fast and long histories of this frame cut, in place."""
         s, c = self._settings, self._cur
         ev = self._kernels["antilag"](
-            self.device.queue, self.global_size, self.local, self._temporal, self._emission, self._lag, self._ping[0],
+            self.device.queue, self.global_size, self.local, self._temporal, self._emission_pair[c], self._lag,
+            self._ping[0],
             self._deficit[c], self._accum, self._fast[c], self._moments[c], self._len[c], self._emis[c],
             *self._args2d(),
             np.float32(s.antilag if s.clip_gamma >= 0 else 0.0), np.float32(s.alpha_min),
@@ -319,7 +327,7 @@ class Svgf:
         firefly clamp took (the clamp's deficit history over the long one), which modulate gives back."""
         ev = self._kernels["deficit"](
             self.device.queue, (self._tiles_x, self._tiles_y), None, self._accum, self._deficit[self._cur],
-            aovs, self._tiles[0], *self._args2d())
+            self._albedo[self._cur], self._tiles[0], *self._args2d())
         return self._record("deficit", ev)
 
     def deficit_gain(self) -> cl.Event:
@@ -367,7 +375,7 @@ class Svgf:
         src = self._src if self._src is not None else self._ping[0]
         ev = self._kernels["conserve"](
             self.device.queue, (self._ctiles_x, self._ctiles_y), None, self._accum, src, self._geo[self._cur],
-            self._len[self._cur], aovs, self._conserve[0], *self._args2d())
+            self._len[self._cur], self._albedo[self._cur], self._conserve[0], *self._args2d())
         return self._record("conserve", ev)
 
     def conserve_gain(self) -> cl.Event:
@@ -381,9 +389,9 @@ class Svgf:
 
     def modulate(self, aovs: cl.Buffer) -> cl.Event:
         """Pass 6 (cl/denoise/modulate.cl): the filtered illumination (times the conserve gains) times the
-        albedo, plus the clamp's deficit and the emission history, into ``output``."""
+        footprint albedo of :meth:`reproject`, plus the clamp's deficit and the emission history, into ``output``."""
         src = self._src if self._src is not None else self._ping[0]
-        ev = self._kernels["modulate"](self.device.queue, self.global_size, self.local, src, aovs,
+        ev = self._kernels["modulate"](self.device.queue, self.global_size, self.local, src, self._albedo[self._cur],
                                        self._emis[self._cur], self._tiles[1], self._conserve[1], self._geo[self._cur],
                                        self._len[self._cur], self.output, *self._args2d(), np.int32(1),
                                        np.int32(1 if self._settings.give_back else 0),
