@@ -456,3 +456,22 @@ def test_the_edge_pick_follows_the_angles_and_skips_the_occluders_side():
     lit = one & (first_mesh[np.arange(n), passing] == names.index("light"))
     assert lit.sum() > 100 and np.all(out.radiance[lit, passing[lit]].sum(axis=1) > 0)
     assert np.all(out.radiance[~one] == 0)
+
+
+def test_outlines_through_mirrors_are_said_to_be_left_out(caplog):
+    """Where things move in a scene with a mirror (a smooth conductor), the gradient passes say that the outlines
+    seen through it are not in the boundary terms; a reflectance's gradient says nothing."""
+    scene = _bounce_scene()
+    wall = next(m for m in scene.meshes if m.name == "wall")
+    scene.materials[wall.material] = pyclpt.load_dict({"type": "scene", "m": {
+        "type": "rectangle", "bsdf": {"type": "conductor"}}}).materials[0]
+    t = np.zeros((4, 4))
+    t[0, 3] = 1.0
+    with caplog.at_level("WARNING", logger="pyclpt"):
+        pyclpt.render_forward(scene, "occluder.to_world", t, spp=1, max_depth=3, boundary=False)
+    assert any("mirror or smooth glass" in r.getMessage() and "wall" in r.getMessage() for r in caplog.records)
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="pyclpt"):
+        pyclpt.render_backward(scene, np.ones((16, 16, 3), np.float32), spp=1, max_depth=3,
+                               params=["floor.bsdf.reflectance.value"])
+    assert not any("mirror" in r.getMessage() for r in caplog.records)

@@ -58,7 +58,7 @@ from pyclpt.gradients.shadows import (
     soft_shadow_boundary,
     soft_shadow_boundary_forward,
 )
-from pyclpt.scene.model import Instance, Mesh, PointLight, Scene, SpotLight
+from pyclpt.scene.model import Conductor, Dielectric, Instance, Mesh, PointLight, Scene, SpotLight, ThinDielectric
 
 log = logging.getLogger("pyclpt")
 
@@ -124,6 +124,7 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     shift = int(np.ceil(np.log2(peak))) if peak > 1.0 else 0
     if shift:
         grad = np.ldexp(grad, -shift).astype(np.float32)
+    _warn_delta_outlines(scene, chosen)
     buffers = replay.backward(grad, spp, seed, _kinds(chosen), _moving_vertices(scene, chosen))
     if replay.dropped:
         log.warning("%s: render_backward dropped %d paths with NaN/inf radiance", scene.name, replay.dropped)
@@ -234,6 +235,29 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
     return image
 
 
+def _delta_surfaces(scene: Scene) -> list[str]:
+    """The names of the meshes whose material reflects or refracts like a mirror or smooth glass (a delta BSDF,
+    perhaps inside a mask, a bump map or a two-sided material)."""
+    def delta(m: object) -> bool:
+        if isinstance(m, ThinDielectric):
+            return True
+        if isinstance(m, (Conductor, Dielectric)):
+            return m.alpha == 0
+        return any(delta(getattr(m, a)) for a in ("material", "front", "back") if getattr(m, a, None) is not None)
+    return [mesh.name for mesh in scene.meshes if delta(scene.materials[mesh.material])]
+
+
+def _warn_delta_outlines(scene: Scene, chosen: Sequence[Parameter]) -> None:
+    """Where things move in a scene with mirrors or smooth glass: the outlines seen through them are not in the
+    boundary terms (docs/differentiable.md, "What is not differentiated yet"); say so."""
+    if any(p.kind in ("geometry", "camera") for p in chosen):
+        mirrors = _delta_surfaces(scene)
+        if mirrors:
+            log.warning("%s: the outlines seen through mirror or smooth glass surfaces (%s) are not in the boundary "
+                        "terms: those gradients leave them out", scene.name, ", ".join(mirrors[:4])
+                        + (" ..." if len(mirrors) > 4 else ""))
+
+
 def _kinds(chosen: Sequence[Parameter]) -> set[str]:
     """The kernels' specialisation for the parameters ``chosen``: their kinds, ``rigid`` where geometry is
     differentiated but no mesh's vertex_positions (then a face's vertex normals equal to its own stay so), and
@@ -342,6 +366,7 @@ def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Ite
     else:
         parameter_slots(scene, replay.scene.arrays, p).scatter(tangent, d)
     geometry = p.kind in ("geometry", "camera")
+    _warn_delta_outlines(scene, [p])
     image = replay.forward({b: tangent[b] for b in BUFFERS}, spp, seed, kinds=_kinds([p]))
     if replay.dropped:
         log.warning("%s: render_forward dropped %d NaN/inf samples", scene.name, replay.dropped)
