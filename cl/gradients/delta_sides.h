@@ -1,24 +1,27 @@
-/* delta_sides.h: the outline a point or spot light's hard shadow draws on a surface, seen from a vertex of a
- * camera path, and what reaches the vertex either side of it: the boundary term of hard shadows after the
- * first bounce (delta_shadow_sides.cl; pyclpt/gradients/shadows.py, delta_sample_chunks; docs/differentiable.md).
+/* delta_sides.h: the outline a point, spot or directional light's hard shadow draws on a surface, seen from a
+ * vertex of a camera path, and what reaches the vertex either side of it: the boundary term of hard shadows after
+ * the first bounce (delta_shadow_sides.cl; pyclpt/gradients/shadows.py, delta_sample_chunks;
+ * docs/differentiable.md).
  *
  * An occluder's edge that the light sees as a silhouette casts the outline: the light's ray through the edge's
  * point q goes on to the first surface behind it, at r. From a vertex y that sees r, the outline is a curve on
  * y's sphere of directions through w = (r - y) / |r - y|; as q slides along the edge (q = a + t (b - a)), r
- * slides along the receiver's plane, dr/dt = sigma P (b - a) (sigma = |r - l| / |q - l|, P projecting along the
- * light's ray onto the plane of normal n_r: P v = v - d (n_r . v) / (n_r . d)), and w by
- * dw/dt = (dr/dt - w (w . dr/dt)) / |r - y|. The curve's measure per unit t is |w x dw/dt| and its unit normal
- * n = w x dw/dt / |w x dw/dt|. Either side, w -+ eps n, the vertex's BSDF and cosine times the light's direct
- * contribution at the surface that side's ray meets (its BSDF, cosine, the light's intensity over the squared
- * distance, and its visibility): one side lit, the other in the shadow. */
+ * slides along the receiver's plane, dr/dt = sigma P (b - a) (sigma = |r - l| / |q - l|, 1 for a directional
+ * light's parallel rays; P projecting along the light's ray onto the plane of normal n_r:
+ * P v = v - d (n_r . v) / (n_r . d)), and w by dw/dt = (dr/dt - w (w . dr/dt)) / |r - y|. The curve's measure
+ * per unit t is |w x dw/dt| and its unit normal n = w x dw/dt / |w x dw/dt|. Either side, w -+ eps n, the
+ * vertex's BSDF and cosine times the light's direct contribution at the surface that side's ray meets (its BSDF,
+ * cosine, the light's intensity over the squared distance or a directional light's irradiance, and its
+ * visibility): one side lit, the other in the shadow. */
 #ifndef PYCLPT_GRADIENT_DELTA_SIDES_H
 #define PYCLPT_GRADIENT_DELTA_SIDES_H
 
 #include "integrators/path.h"
 
-/* The candidate edges: DELTA_EDGE_STRIDE floats each, its end points a and b and the record index of the light
- * that sees it as a silhouette (int bits) (pyclpt/gradients/shadows.py, DELTA_EDGE_STRIDE). */
-#define DELTA_EDGE_STRIDE 7
+/* The candidate edges: DELTA_EDGE_STRIDE floats each, its end points a and b, the record index of the light
+ * that sees it as a silhouette (int bits) and, for a directional light, how far behind an edge point its ray may
+ * start, outside the scene (pyclpt/gradients/shadows.py, DELTA_EDGE_STRIDE). */
+#define DELTA_EDGE_STRIDE 8
 /* The relative offsets of the rays: the lit test stops this far short of the edge point, the receiver ray starts
  * this far beyond it (shadows.RAY_EPS), the vertex's view of the receiver point may end this far short. */
 #define DELTA_RAY_EPS 1e-4f
@@ -60,6 +63,8 @@ static inline bool delta_sides(const Scene* sc, RngKey key, const Surface* s, co
     vec3 q = v3_add(a, v3_scale(ab, t));
     LightSample ls;
     if (!light_sample_id(sc, light, q, v2(0.0f, 0.0f), &ls) || !(ls.dist > 0.0f)) return false;
+    bool parallel = m_isinf(ls.dist); /* a directional light: its rays from a point behind q, outside the scene */
+    if (parallel) ls.dist = edge[7];
     vec3 d = v3_neg(ls.wi), l = v3_add(q, v3_scale(ls.wi, ls.dist));
     /* lit through the edge: nothing between the light and the edge point */
     if (scene_occluded(sc, key, bounce, l, d, ls.dist * (1.0f - DELTA_RAY_EPS))) return false;
@@ -77,7 +82,7 @@ static inline bool delta_sides(const Scene* sc, RngKey key, const Surface* s, co
     vec3 o = spawn_origin(s, w);
     float tmax = *dist * (1.0f - DELTA_VIEW_EPS) - m_length(v3_sub(o, s->p));
     if (!(tmax > 0.0f) || scene_occluded(sc, key, bounce, o, w, tmax)) return false;
-    float sigma = m_length(v3_sub(r, l)) / ls.dist;
+    float sigma = parallel ? 1.0f : m_length(v3_sub(r, l)) / ls.dist;
     vec3 dr_dt = v3_scale(v3_sub(ab, v3_scale(d, m_dot(sr.ng, ab) / dn)), sigma);
     vec3 dw_dt = v3_divs(v3_sub(dr_dt, v3_scale(w, m_dot(w, dr_dt))), *dist);
     vec3 c = m_cross(w, dw_dt);

@@ -58,7 +58,17 @@ from pyclpt.gradients.shadows import (
     soft_shadow_boundary,
     soft_shadow_boundary_forward,
 )
-from pyclpt.scene.model import Conductor, Dielectric, Instance, Mesh, PointLight, Scene, SpotLight, ThinDielectric
+from pyclpt.scene.model import (
+    Conductor,
+    Dielectric,
+    DirectionalLight,
+    Instance,
+    Mesh,
+    PointLight,
+    Scene,
+    SpotLight,
+    ThinDielectric,
+)
 
 log = logging.getLogger("pyclpt")
 
@@ -178,9 +188,10 @@ def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str]
                       ) -> dict[str, np.ndarray]:
     """The boundary terms of visibility for ``names`` (meshes' ``vertex_positions`` and ``to_world``, point lights'
     ``position``, the sensor's ``to_world`` and ``x_fov``): camera silhouettes, outlines in the light the first
-    surfaces receive (soft shadows, at max_depth 2 or more) and point and spot lights' hard shadows; see the
-    module. An instanced scene's are its flattened scene's (:mod:`pyclpt.gradients.flatten`: instances' meshes in
-    world space; an instance's to_world the sum of its meshes' poses')."""
+    surfaces receive (soft shadows, at max_depth 2 or more) and point, spot and directional lights' hard shadows (at
+    the first surface seen and after a bounce); see the module. An instanced scene's are its flattened scene's
+    (:mod:`pyclpt.gradients.flatten`: instances' meshes in world space; an instance's to_world the sum of its meshes'
+    poses')."""
     if scene.instances:
         flat = flattened(scene)
         terms = boundary_backward(flat.scene, image_grad, flat.names(names), flat.parameters(parameters), seed=seed,
@@ -190,7 +201,7 @@ def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str]
     cameras = [n for n in names if n in sensor_names(scene)]
     lights = moving_light_names(scene)
     meshes = [n for n in names if n.endswith((".vertex_positions", ".to_world")) and n not in cameras + list(lights)]
-    delta = any(isinstance(light, (PointLight, SpotLight)) for light in scene.lights)
+    delta = any(isinstance(light, (PointLight, SpotLight, DirectionalLight)) for light in scene.lights)
     bounce = max_depth < 0 or max_depth >= 2
     out: dict[str, np.ndarray] = {}
 
@@ -228,7 +239,7 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
         image += primary_boundary_forward(scene, name, tangent, samples=samples, **common)
     if (mesh or camera) and bounce:
         image += soft_shadow_boundary_forward(scene, name, tangent, spp=spp, **common)
-    if bounce and any(isinstance(light, (PointLight, SpotLight)) for light in scene.lights):
+    if bounce and any(isinstance(light, (PointLight, SpotLight, DirectionalLight)) for light in scene.lights):
         image += shadow_boundary_forward(scene, name, tangent, samples=samples, **common)
         if max_depth < 0 or max_depth > 2:  # seen after a bounce
             image += delta_shadow_boundary_forward(scene, name, tangent, spp=spp, **common)

@@ -149,15 +149,18 @@ def edge_copies(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return pairs, face, new
 
 
-def mesh_edges(mesh: Mesh, camera_origin: np.ndarray, creases: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def mesh_edges(mesh: Mesh, camera_origin: np.ndarray | None, creases: bool = False,
+               direction: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The vertex pairs (K, 2) of ``mesh``'s edges that can bound what a camera at ``camera_origin``
-    sees: boundary edges, silhouettes (their two triangles facing the camera on different sides) and
-    edges of more than two triangles; with ``creases``, also the edges between two triangles of different
-    normals (a flat-shaded mesh's shading jumps there); and how many triangles share each (K,)."""
+    sees (or, with ``direction`` instead, a distant light's parallel rays travelling along it): boundary edges,
+    silhouettes (their two triangles facing the camera on different sides) and edges of more than two triangles;
+    with ``creases``, also the edges between two triangles of different normals (a flat-shaded mesh's shading
+    jumps there); and how many triangles share each (K,)."""
     p = mesh.positions.astype(np.float64)
     f = mesh.indices.astype(np.int64)
     n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
-    facing = np.sign(np.einsum("ij,ij->i", n, camera_origin - p[f[:, 0]]))
+    towards = (-np.asarray(direction, np.float64))[None] if direction is not None else camera_origin - p[f[:, 0]]
+    facing = np.sign(np.einsum("ij,ij->i", n, np.broadcast_to(towards, n.shape)))
     pairs, face, new = edge_copies(mesh)
     group = np.cumsum(new) - 1
     count = np.bincount(group)

@@ -99,12 +99,21 @@ def flat_shaded(mesh: Mesh, tolerance: float = 1e-4) -> bool:
     return bool(np.all(np.abs(vn - n[:, None, :]) <= tolerance))
 
 
+def _camera_boundary_reason(scene: Scene) -> str:
+    """Why nothing that moves is differentiated under a camera other than a pinhole: the boundary terms (camera
+    silhouettes, the shadows' outlines mapped to the image) are written for perspective cameras."""
+    return (f"a {scene.camera.kind} camera: the boundary terms of moving geometry (silhouettes, shadows' outlines) "
+            f"are implemented for perspective (pinhole) cameras; update() moves it")
+
+
 def moving_mesh_reason(scene: Scene, mesh: Mesh) -> str:
     """Why the gradient of where ``mesh`` is (its vertex_positions, its to_world) is not computed, or "" when it is:
     the interior term (cl/gradients/geometry.h) holds for untextured meshes, flat or smooth-shaded (through the
     vertex normals update() writes: pyclpt/gradients/normals.py), in scenes with or without instances (the boundary
     terms see instances' triangles: pyclpt/gradients/flatten.py)."""
     mat = scene.materials[mesh.material]
+    if scene.camera.kind != "perspective":
+        return _camera_boundary_reason(scene)
     if _textured(mat) or mesh.emission_texture is not None:
         return ("a textured mesh: the texture's motion under the pixels is not differentiated (the interior term of "
                 "moving geometry is implemented for untextured meshes); update() moves it")
@@ -335,10 +344,11 @@ class _Walker:
                          "spot" if isinstance(light, SpotLight) else "point")
             if isinstance(light, SpotLight):
                 reason = "spot_texture" if light.texture is not None else ""
+                reason = _camera_boundary_reason(sc) if sc.camera.kind != "perspective" else reason
                 self.add(f"{name}.to_world", "" if reason else "geometry", placement.spot_accessors(light), light,
                          reason, "geometry")
             elif isinstance(light, PointLight):
-                reason = ""
+                reason = _camera_boundary_reason(sc) if sc.camera.kind != "perspective" else ""
                 self.add(f"{name}.position", "" if reason else "geometry", placement.point_accessors(light), light,
                          reason, "geometry")
         for name, inst in zip(instance_names(sc), sc.instances):

@@ -1,6 +1,6 @@
 """The boundary term of hard shadows, by edge sampling from the lights (Li, Aittala, Durand and Lehtinen 2018).
 
-A point or spot light's shadow has a sharp outline on the surfaces it falls on: the receiver points whose
+A point, spot or directional light's shadow has a sharp outline on the surfaces it falls on: the receiver points whose
 segment to the light grazes a silhouette edge of an occluder as the light sees it. Moving the occluder (or
 the light) moves that outline over the receiver, and moving the camera moves it over the image: a jump of
 the image's integrand along a curve, whose derivative is the same Reynolds term as the silhouettes'
@@ -57,7 +57,7 @@ from pyclpt.gradients.edges import (
 from pyclpt.gradients.parameters import SceneParameters, traverse
 from pyclpt.gradients.replay import SIDE_OCCLUDER
 from pyclpt.gradients.session import replay_for
-from pyclpt.scene.model import Camera, PointLight, Scene, SpotLight
+from pyclpt.scene.model import Camera, DirectionalLight, PointLight, Scene, SpotLight
 
 #: Relative offsets of the host's shadow-outline rays: the lit test stops this far short of the edge point, the
 #: receiver ray starts this far beyond it, and the camera's view of the receiver point may end this far short.
@@ -86,10 +86,46 @@ class ShadowSamples:
     receiver_velocity: np.ndarray  # (N, 3) n . d(film position)/d(the receiver's material point under the outline)
 
 
-def delta_lights(scene: Scene) -> list[tuple[int, np.ndarray]]:
-    """(index in scene.lights, position) of the point and spot lights."""
-    return [(k, np.asarray(light.position, np.float64)) for k, light in enumerate(scene.lights)
-            if isinstance(light, (PointLight, SpotLight))]
+@dataclass
+class HardLight:
+    """A light whose shadows have sharp outlines: a point or spot light (``position``) or a directional one
+    (``direction``, the way its parallel rays travel)."""
+
+    index: int  # in scene.lights
+    position: np.ndarray | None
+    direction: np.ndarray | None
+
+    def silhouettes(self, mesh) -> np.ndarray:
+        """The vertex pairs (K, 2) of ``mesh``'s edges that this light sees as silhouettes."""
+        pairs, _ = mesh_edges(mesh, self.position, direction=self.direction)
+        return pairs
+
+    def origins(self, q: np.ndarray, sphere: tuple[np.ndarray, float]) -> np.ndarray:
+        """(N, 3) where the light's rays to the points q (N, 3) start: its position; for a directional light a
+        point behind each q along its rays, outside the scene's bounding ``sphere`` (centre, radius)."""
+        if self.position is not None:
+            return np.broadcast_to(self.position, q.shape)
+        c, r = sphere
+        back = 2.0 * (np.linalg.norm(q - c, axis=1) + r) + 1.0
+        return q - back[:, None] * self.direction[None]
+
+
+def hard_lights(scene: Scene) -> list[HardLight]:
+    """The scene's point, spot and directional lights."""
+    out = []
+    for k, light in enumerate(scene.lights):
+        if isinstance(light, (PointLight, SpotLight)):
+            out.append(HardLight(k, np.asarray(light.position, np.float64), None))
+        elif isinstance(light, DirectionalLight):
+            out.append(HardLight(k, None, np.asarray(light.direction, np.float64)))
+    return out
+
+
+def scene_sphere(scene: Scene) -> tuple[np.ndarray, float]:
+    """The centre and radius of a sphere around every mesh's vertices."""
+    p = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    return 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
 
 
 class _HostTracer:
@@ -144,13 +180,16 @@ def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v / np.maximum(n, 1e-300)[..., None], n
 
 
-def receiver_motion(p: np.ndarray, q: np.ndarray, light: np.ndarray, n_r: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def receiver_motion(p: np.ndarray, q: np.ndarray, light: np.ndarray, n_r: np.ndarray,
+                    parallel: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """How the receiver point p = l + sigma (q - l) (on a plane of normal n_r) moves with the edge point q and the
     light l: dp = P ((1 - sigma) dl + sigma dq), P = I - d n_r^T / (d . n_r) projecting along the ray d onto the
-    plane. Returns sigma (N,) and P (N, 3, 3)."""
+    plane; where ``parallel`` (N,) (a directional light's rays, from a point l behind q along them) sigma is 1.
+    Returns sigma (N,) and P (N, 3, 3)."""
     d, dist = _unit(q - light)
     sigma = np.linalg.norm(p - light, axis=1) / np.maximum(dist, 1e-300)
+    if parallel is not None:
+        sigma = np.where(parallel, 1.0, sigma)
     dn = np.einsum("nc,nc->n", d, n_r)
     return sigma, np.eye(3)[None] - d[:, :, None] * n_r[:, None, :] / dn[:, None, None]
 
@@ -158,15 +197,15 @@ def receiver_motion(p: np.ndarray, q: np.ndarray, light: np.ndarray, n_r: np.nda
 def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, samples: int, seed: int,
                         max_depth: int | None = None, device: Device | str | None = None,
                         stratified: bool = True, receivers: Sequence[int] | None = None) -> ShadowSamples:
-    """``samples`` points on the edges of ``scene.meshes[i]`` (i in ``meshes``) that the scene's point and spot
-    lights see as silhouettes, stratified along their total length in the world, mapped to the shadow outline
-    they cast in the image (the points that cast none are dropped, and with ``receivers`` those whose outline
+    """``samples`` points on the edges of ``scene.meshes[i]`` (i in ``meshes``) that the scene's point, spot and
+    directional lights see as silhouettes, stratified along their total length in the world, mapped to the shadow
+    outline they cast in the image (the points that cast none are dropped, and with ``receivers`` those whose outline
     falls on another mesh), with the radiance on both sides there."""
     cols: dict[str, list[np.ndarray]] = {k: [] for k in ("light", "mesh", "v0", "v1")}
-    lights = dict(delta_lights(scene))
-    for k, pos in lights.items():
+    lights = {h.index: h for h in hard_lights(scene)}
+    for k, light in lights.items():
         for i in meshes:
-            pairs, _ = mesh_edges(scene.meshes[i], pos)
+            pairs = light.silhouettes(scene.meshes[i])
             for key, v in (("light", np.full(len(pairs), k)), ("mesh", np.full(len(pairs), i)),
                            ("v0", pairs[:, 0]), ("v1", pairs[:, 1])):
                 cols[key].append(v)
@@ -191,7 +230,12 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
     e = np.minimum(np.searchsorted(cdf, u, side="right"), len(lengths) - 1)
     t = np.clip((u - (cdf[e] - lengths[e])) / np.maximum(lengths[e], 1e-300), 0.0, 1.0)
     point_on_edge = a[e] + t[:, None] * (b[e] - a[e])
-    light_pos = np.stack([lights[k] for k in edges["light"][e]]) if len(e) else np.zeros((0, 3))
+    sphere = scene_sphere(scene)
+    light_pos = np.zeros((len(e), 3))
+    for k, light in lights.items():
+        m = edges["light"][e] == k
+        light_pos[m] = light.origins(point_on_edge[m], sphere)
+    parallel = np.array([lights[k].direction is not None for k in edges["light"][e]], bool)
     d, dist = _unit(point_on_edge - light_pos)
     tracer = _HostTracer(scene)
     # lit through the edge: nothing between the light and the edge point
@@ -219,7 +263,7 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
     e, t, d, dn, n_r, x = e[idx], t[idx], d[idx], dn[idx], n_r[idx], x[idx]
     r_mesh, r_tri, r_bary = r_mesh[idx], r_tri[idx], r_bary[idx]
     p, q, lp = receiver[idx], point_on_edge[idx], light_pos[idx]
-    sigma, proj_along = receiver_motion(p, q, lp, n_r)
+    sigma, proj_along = receiver_motion(p, q, lp, n_r, parallel[idx])
     jac = np.stack([proj.normal_velocity(p, np.tile([1.0, 0.0], (len(p), 1))),
                     proj.normal_velocity(p, np.tile([0.0, 1.0], (len(p), 1)))], axis=1)  # (N, 2, 3) d film / dp
     edge_vec = b[e] - a[e]
@@ -736,14 +780,15 @@ def shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wid
 
 
 #: Floats a candidate edge of the later hard shadows (cl/gradients/delta_sides.h): its end points, the record
-#: index of the light that sees it as a silhouette (int bits).
-DELTA_EDGE_STRIDE = 7
+#: index of the light that sees it as a silhouette (int bits), and for a directional light how far behind the
+#: edge point its ray may start (0: a point or spot light).
+DELTA_EDGE_STRIDE = 8
 
 
 @dataclass
 class DeltaSamples:
-    """Points of point and spot lights' shadow outlines seen from the vertices of camera paths (after the first
-    bounce), and what each contributes (:func:`delta_sample_chunks`)."""
+    """Points of point, spot and directional lights' shadow outlines seen from the vertices of camera paths (after
+    the first bounce), and what each contributes (:func:`delta_sample_chunks`)."""
 
     pixels: np.ndarray  # (N, 1) the pixel the vertex's camera path goes through
     weights: np.ndarray  # (N, 1) 1
@@ -761,29 +806,36 @@ class DeltaSamples:
 
 
 def _delta_edge_table(scene: Scene, replay) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The candidate edges of the later hard shadows: every mesh's edges that a point or spot light sees as
-    silhouettes (mesh_edges from its position), as (E, DELTA_EDGE_STRIDE) records, with their scene light (E,),
-    mesh (E,) and vertex pairs (E, 2)."""
+    """The candidate edges of the later hard shadows: every mesh's edges that a point, spot or directional light
+    sees as silhouettes (:meth:`HardLight.silhouettes`), as (E, DELTA_EDGE_STRIDE) records, with their scene light
+    (E,), mesh (E,) and vertex pairs (E, 2). A directional light's records hold how far behind an edge point its
+    rays may start, outside the scene (its light has no position)."""
     packed = replay.scene.arrays.lights
     types = packed.lights[:, 7].astype(np.int64)  # LIGHT_TYPE
-    prims = packed.lights[:, 0].view(np.int32)  # LIGHT_PRIM: the offset of its position in light_data
+    prims = packed.lights[:, 0].view(np.int32)  # LIGHT_PRIM: the offset of its position (direction) in light_data
+    c, radius = scene_sphere(scene)
     rows, lights, meshes, pairs = [], [], [], []
-    for k, pos in delta_lights(scene):
-        kind = 5 if isinstance(scene.lights[k], SpotLight) else 1  # LIGHT_SPOT, LIGHT_POINT
+    for light in hard_lights(scene):
+        kind = (4 if light.direction is not None else 5 if isinstance(scene.lights[light.index], SpotLight)
+                else 1)  # LIGHT_DIRECTIONAL, LIGHT_SPOT, LIGHT_POINT
+        where = light.position if light.direction is None else light.direction
         record = [r for r in np.flatnonzero(types == kind)
-                  if np.allclose(packed.light_data[prims[r]:prims[r] + 3], pos, rtol=1e-6, atol=1e-6)]
+                  if np.allclose(packed.light_data[prims[r]:prims[r] + 3], where, rtol=1e-6, atol=1e-6)]
         if not record:  # no power: no record, no shadow
             continue
         for i, mesh in enumerate(scene.meshes):
-            vp, _ = mesh_edges(mesh, pos)
+            vp = light.silhouettes(mesh)
             if not len(vp):
                 continue
             p = mesh.positions.astype(np.float64)
             rec = np.zeros((len(vp), DELTA_EDGE_STRIDE), np.float32)
             rec[:, 0:3], rec[:, 3:6] = p[vp[:, 0]], p[vp[:, 1]]
             rec[:, 6] = np.int32(record[0]).view(np.float32)
+            if light.direction is not None:
+                rec[:, 7] = 2.0 * (np.linalg.norm(np.maximum(np.abs(p[vp[:, 0]] - c), np.abs(p[vp[:, 1]] - c)),
+                                                  axis=1) + radius) + 1.0
             rows.append(rec)
-            lights.append(np.full(len(vp), k))
+            lights.append(np.full(len(vp), light.index))
             meshes.append(np.full(len(vp), i))
             pairs.append(vp)
     if not rows:
@@ -794,10 +846,10 @@ def _delta_edge_table(scene: Scene, replay) -> tuple[np.ndarray, np.ndarray, np.
 
 def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed: int, max_depth: int | None = None,
                         device: Device | str | None = None) -> Iterator[DeltaSamples]:
-    """Point and spot lights' hard shadows seen after the first bounce: at ``spp`` shading points a pixel and one
-    later vertex of a camera path through each (:func:`shading_points`, as the soft term's), one point on an edge
-    that a delta light sees as a silhouette (every mesh's, chosen in proportion to its length), the outline it
-    casts on the first surface behind it, and, where the vertex sees that point, the vertex's BSDF and cosine
+    """Point, spot and directional lights' hard shadows seen after the first bounce: at ``spp`` shading points a
+    pixel and one later vertex of a camera path through each (:func:`shading_points`, as the soft term's), one point
+    on an edge that a delta light sees as a silhouette (every mesh's, chosen in proportion to its length), the
+    outline it casts on the first surface behind it, and, where the vertex sees that point, the vertex's BSDF and cosine
     times the light's direct contribution either side of the outline (the delta_shadow_sides kernel,
     cl/gradients/delta_sides.h). The outline lies on the receiver's surface, at the next vertex of a path through
     the shading point, which the interior term holds attached to its surface (the material form): it moves
@@ -818,7 +870,7 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
     first = np.cumsum([0] + [m.triangle_count for m in scene.meshes])
     order = replay.scene.arrays.bvh.tri_order
     positions = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
-    light_pos = {k: pos for k, pos in delta_lights(scene)}
+    by_index = {h.index: h for h in hard_lights(scene)}
 
     def band(p0: int, p1: int) -> DeltaSamples:
         rng = np.random.default_rng([seed, 0x64656C7461, p0])  # "delta"
@@ -839,14 +891,23 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
              + bary[:, 1:] * corners[:, 2])
         a, b = table_e[e, 0:3].astype(np.float64), table_e[e, 3:6].astype(np.float64)
         q = a + t[:, None] * (b - a)
-        lp = np.stack([light_pos[k] for k in light_e[e]]) if len(e) else np.zeros((0, 3))
+        # where the light's rays start (a directional light's: behind q, table_e's distance), parallel or not
+        lp = np.zeros_like(q)
+        parallel = np.zeros(len(e), bool)
+        for k, light in by_index.items():
+            m = light_e[e] == k
+            if light.position is not None:
+                lp[m] = light.position
+            else:
+                lp[m] = q[m] - table_e[e[m], 7, None].astype(np.float64) * light.direction[None]
+                parallel[m] = True
         d, qdist = _unit(q - lp)
         rprim = out.receiver_prim[nz]
         rc = positions[replay.scene.arrays.tri_vidx[rprim]]
         rb = out.receiver_hit[nz, 1:].astype(np.float64)
         r = (1 - rb[:, 0] - rb[:, 1])[:, None] * rc[:, 0] + rb[:, :1] * rc[:, 1] + rb[:, 1:] * rc[:, 2]
         n_r, _ = _unit(np.cross(rc[:, 1] - rc[:, 0], rc[:, 2] - rc[:, 0]))
-        sigma, proj = receiver_motion(r, q, lp, n_r)
+        sigma, proj = receiver_motion(r, q, lp, n_r, parallel)
         w, dist = _unit(r - y)
         dr_dt = np.einsum("nij,nj->ni", proj, b - a) * sigma[:, None]
         dw_dt = (dr_dt - w * np.einsum("nc,nc->n", w, dr_dt)[:, None]) / dist[:, None]
@@ -871,7 +932,8 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
 def delta_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
                           seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
                           device: Device | str | None = None) -> dict[str, np.ndarray]:
-    """Reverse mode: the boundary term of point and spot lights' hard shadows seen after the first bounce
+    """Reverse mode: the boundary term of point, spot and directional lights' hard shadows seen after the first
+    bounce
     (:func:`delta_sample_chunks`) for ``names`` (meshes' ``vertex_positions`` and ``to_world``, as occluders and
     as receivers; point lights' ``position``, spot lights' ``to_world``), given dLoss/dImage ``image_grad``
     (H, W, 3). The sensor's parameters get none: a shading point's motion moves the outline and the receiver's
