@@ -119,7 +119,6 @@ def test_hard_shadow_of_a_directional_light():
     them, sigma = 1; HardLight.origins starts the rays outside the scene): the image weighted by a ramp across it,
     d/d(occluder x) by shadow_boundary_forward (4 x 16,384 edge samples) -46.6 against central differences of
     1,024-spp renders (h = 0.01, two seeds) -45.5 and -46.3, within 4 %."""
-    from pyclpt.gradients.parameters import traverse
     from pyclpt.scene.model import DirectionalLight
 
     def scene() -> pyclpt.Scene:
@@ -133,19 +132,10 @@ def test_hard_shadow_of_a_directional_light():
     ramp = np.tile(np.linspace(0, 1, W)[None, :, None], (H, 1, 3))
     term = np.mean([(shadows.shadow_boundary_forward(scene(), name, t, samples=16384, seed=s, max_depth=2)
                      * ramp).sum() for s in range(4)])
-    base = np.asarray(traverse(scene())[name], np.float64)
-
-    def moved(k: float) -> pyclpt.Scene:
-        sc = scene()
-        params = traverse(sc)
-        params[name] = base + k * t
-        params.update()
-        return sc
-
     h = 0.01
-    fd = np.mean([((pyclpt.render(moved(h), spp=1024, max_depth=2, seed=seed).astype(np.float64)
-                    - pyclpt.render(moved(-h), spp=1024, max_depth=2, seed=seed)) * ramp).sum() / (2 * h)
-                  for seed in (1, 2)])
+    fd = np.mean([((pyclpt.render(_moved(scene, name, h * t), spp=1024, max_depth=2, seed=seed).astype(np.float64)
+                    - pyclpt.render(_moved(scene, name, -h * t), spp=1024, max_depth=2, seed=seed)) * ramp).sum()
+                   / (2 * h) for seed in (1, 2)])
     assert term == pytest.approx(fd, rel=0.04), (term, fd)
 
 
@@ -272,6 +262,17 @@ def test_a_mesh_shadowing_itself_has_the_outlines_of_two_meshes():
     assert float((image * grad).sum()) == pytest.approx(want, rel=1e-4, abs=1e-4)
 
 
+def _moved(make, name: str, step: np.ndarray) -> pyclpt.Scene:
+    """A new scene from ``make()`` with parameter ``name`` moved by ``step`` (its value's shape)."""
+    from pyclpt.gradients.parameters import traverse
+
+    scene = make()
+    params = traverse(scene)
+    params[name] = np.asarray(params[name], np.float64) + step
+    params.update()
+    return scene
+
+
 def _bounce_scene(dx: float = 0.0, light: str = "point", size: int = 16) -> pyclpt.Scene:
     """A wall seen by the camera (nothing else in view), lit by a point, spot or directional light and by the floor,
     on which a black square casts a hard shadow out of view: the wall's light after a bounce has the shadow's
@@ -333,7 +334,6 @@ def test_the_floor_rising_under_a_hard_shadow_seen_after_a_bounce():
     cl/gradients/edge_pick.h) give -0.50 (8 seeds of 64 shading points a pixel) against central differences of
     -0.52 (8,192 spp, h = 0.05, two common seeds), within 12 %; without the soft term's still edges (0 then) the
     sum is 40 % off, without the later hard-shadow term it has the other sign."""
-    from pyclpt.gradients.parameters import traverse
 
     scene, name = _bounce_scene(), "floor.to_world"
     t = np.zeros((4, 4))
@@ -342,19 +342,11 @@ def test_the_floor_rising_under_a_hard_shadow_seen_after_a_bounce():
     interior = np.mean([pyclpt.render_forward(scene, name, t, seed=s, boundary=False, **kw).sum() for s in range(8)])
     delta = np.mean([shadows.delta_shadow_boundary_forward(scene, name, t, seed=s, **kw).sum() for s in range(8)])
     soft = np.mean([shadows.soft_shadow_boundary_forward(scene, name, t, seed=s, **kw).sum() for s in range(8)])
-    base = np.asarray(traverse(scene)[name], np.float64)
-
-    def moved(k: float) -> pyclpt.Scene:
-        other = _bounce_scene()
-        params = traverse(other)
-        params[name] = base + k * t
-        params.update()
-        return other
-
     h = 0.05
-    fd = np.mean([(pyclpt.render(moved(h), spp=8192, max_depth=3, seed=seed).astype(np.float64).sum()
-                   - pyclpt.render(moved(-h), spp=8192, max_depth=3, seed=seed).astype(np.float64).sum()) / (2 * h)
-                  for seed in (1, 2)])
+    fd = np.mean([(pyclpt.render(_moved(_bounce_scene, name, h * t), spp=8192, max_depth=3, seed=seed)
+                   .astype(np.float64).sum()
+                   - pyclpt.render(_moved(_bounce_scene, name, -h * t), spp=8192, max_depth=3, seed=seed)
+                   .astype(np.float64).sum()) / (2 * h) for seed in (1, 2)])
     total = interior + delta + soft
     assert total == pytest.approx(fd, rel=0.12), (interior, delta, soft, fd)
     assert abs(total - soft - fd) > 0.25 * abs(fd) and soft < 0

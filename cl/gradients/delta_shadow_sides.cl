@@ -20,6 +20,7 @@
  *           barycentrics; outline[5 i ..] the curve's measure per unit t, the distance from the vertex to the
  *           outline's point and n (3). */
 #include "gradients/delta_sides.h"
+#include "gradients/vertex.h"
 
 __kernel SCALAR_KERNEL void delta_shadow_sides(SCENE_PARAMS, __global const int* prims, __global const float* samples,
                                                __global const int* depths, __global const int* edge_ids,
@@ -32,12 +33,7 @@ __kernel SCALAR_KERNEL void delta_shadow_sides(SCENE_PARAMS, __global const int*
     Scene sc = SCENE_INIT;
     RngKey key = rng_key(seed, (uint)i, 0u);
     __global const float* q = samples + 6 * i;
-    vec3 back = v3(q[2], q[3], q[4]);
-    if (depths[i] == 0) { /* the camera ray through film position (q[2], q[3]) (perspective: no random numbers) */
-        PathState cam;
-        camera_ray(&sc, key, q[2], q[3], &cam);
-        back = v3_neg(cam.dir);
-    }
+    vec3 back = vertex_back(&sc, key, q, depths[i]);
     vec3 side[2] = {v3_splat(0.0f), v3_splat(0.0f)};
     Hit rh;
     rh.prim = -1;

@@ -27,6 +27,7 @@
  *           barycentrics there: what lies behind the outline on the side that passes it (cl/gradients/incident.h,
  *           incident_sides). */
 #include "gradients/incident.h"
+#include "gradients/vertex.h"
 
 __kernel SCALAR_KERNEL void vertex_radiance(SCENE_PARAMS, __global const int* prims, __global const float* samples,
                                             __global const int* depths, __global const int* moves,
@@ -42,12 +43,7 @@ __kernel SCALAR_KERNEL void vertex_radiance(SCENE_PARAMS, __global const int* pr
     Scene sc = SCENE_INIT;
     RngKey key = rng_key(seed, (uint)i, 0u);
     __global const float* q = samples + 8 * i;
-    vec3 back = v3(q[2], q[3], q[4]);
-    if (depths[i] == 0) { /* the camera ray through film position (q[2], q[3]) (perspective: no random numbers) */
-        PathState cam;
-        camera_ray(&sc, key, q[2], q[3], &cam);
-        back = v3_neg(cam.dir);
-    }
+    vec3 back = vertex_back(&sc, key, q, depths[i]);
     Surface s = surface_hit(&sc, prims[i], q[0], q[1], v3_neg(back));
     Bsdf b = bsdf_at(&sc, &s);
     vec3 wi = to_local(s.sh, back);

@@ -716,16 +716,22 @@ def _shading_camera_velocity(scene: Scene, width: int, height: int, ss: SoftSamp
     return out.reshape(len(ss.point), *((4, 4) if name.endswith(".to_world") else (1,)))
 
 
+def _forward_start(scene: Scene, tangent: np.ndarray, width: int | None, height: int | None,
+                   parameters: SceneParameters | None) -> tuple[int, int, SceneParameters, np.ndarray, np.ndarray]:
+    """A forward-mode term's size (the film's by default), parameters (a new traverse by default), tangent in
+    float64 and a zero image (H, W, 3) to add its chunks into."""
+    width, height = width or scene.film.width, height or scene.film.height
+    params = parameters if parameters is not None else traverse(scene)
+    return width, height, params, np.asarray(tangent, np.float64), np.zeros((height, width, 3))
+
+
 def soft_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
                                  height: int | None = None, spp: int = 4, seed: int = 0,
                                  max_depth: int | None = None, parameters: SceneParameters | None = None,
                                  device: Device | str | None = None) -> np.ndarray:
     """Forward mode of :func:`soft_shadow_boundary`: d image (H, W, 3) along ``tangent`` (shaped as ``name``'s
     value), from the same samples for the same seed and size."""
-    width, height = width or scene.film.width, height or scene.film.height
-    params = parameters if parameters is not None else traverse(scene)
-    tan = np.asarray(tangent, np.float64)
-    image = np.zeros((height, width, 3))
+    width, height, params, tan, image = _forward_start(scene, tangent, width, height, parameters)
     if name in sensor_names(scene):
         for ss in soft_sample_chunks(scene, [], width, height, spp=spp, seed=seed, max_depth=max_depth,
                                      device=device, camera=True):
@@ -980,10 +986,7 @@ def delta_shadow_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, 
                                   device: Device | str | None = None) -> np.ndarray:
     """Forward mode of :func:`delta_shadow_boundary`: d image (H, W, 3) along ``tangent`` (shaped as ``name``'s
     value), from the same samples for the same seed and size."""
-    width, height = width or scene.film.width, height or scene.film.height
-    params = parameters if parameters is not None else traverse(scene)
-    tan = np.asarray(tangent, np.float64)
-    image = np.zeros((height, width, 3))
+    width, height, params, tan, image = _forward_start(scene, tangent, width, height, parameters)
     lights = moving_light_names(scene)
     if name in sensor_names(scene):
         return image.astype(np.float32)
