@@ -302,7 +302,7 @@ def test_bad_arguments_name_what_is_wrong(box):
         pyclpt.render_backward(box, np.full((8, 8, 3), np.nan), spp=1, width=8, height=8)
     checkered = pyclpt.load_dict({"type": "scene", "floor": {"type": "rectangle", "bsdf": {
         "type": "diffuse", "reflectance": {"type": "checkerboard"}}}})
-    with pytest.raises(ValueError, match="not differentiable: floor.vertex_positions \\(a textured mesh"):
+    with pytest.raises(ValueError, match="not differentiable: floor.vertex_positions \\(a checkerboard"):
         pyclpt.render_backward(checkered, np.zeros((8, 8, 3)), spp=1, width=8, height=8,
                                params=["floor.vertex_positions"])
     with pytest.raises(KeyError, match="no parameter"):

@@ -241,7 +241,7 @@ __kernel void reproject(__global float* sample, __global const float* emission,
             int q = row_at(y, dy, width, height) + tx;
             any_emitting |= w > 0.0f && emitting(planar3(emission, n, q));
             if (dx == 0 && dy == 0) continue;
-            around += w * sample[3 * n + q];
+            around += w * sample[3 * n + (w > 0.0f ? q : p)]; /* outside the image: no read of another's sample */
             count += w;
             vec3 eq = planar3(emission, n, q);
             e_lo = w > 0.0f ? v3(m_min(e_lo.x, eq.x), m_min(e_lo.y, eq.y), m_min(e_lo.z, eq.z)) : e_lo;

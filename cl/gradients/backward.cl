@@ -130,7 +130,7 @@ static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, co
     vec3 C = n->sr.contrib;
     float a = m_dot(dL, C);
     vec3 g_wi, g_wo;
-    geo_bsdf_adjoint(b, s->sh, v3_neg(dir_in), n->ls.wi, n->f, C, dL, gc, &g_wi, &g_wo);
+    geo_bsdf_adjoint(sc, s, b, v3_neg(dir_in), n->ls.wi, n->f, C, dL, gc, &g_wi, &g_wo);
     if (gc->kind == GEO_ATTACHED && r_bc > 0.0f) geo_segment_adjoint(gc, gb, v3_neg(dir_in), r_bc, g_wi, 0.0f);
     else if (gc->camera) gc->gwi = v3_add(gc->gwi, g_wi); /* the camera ray turns */
     GeoVertex gy;
@@ -276,7 +276,7 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
                 float pdf;
                 vec3 f = bsdf_eval(&b, wi, to_local(s.sh, ps.dir), &pdf);
                 vec3 g_wi;
-                geo_bsdf_adjoint(&b, s.sh, v3_neg(dir_in), ps.dir, f, through, dL, &gc, &g_wi, &seg_gw);
+                geo_bsdf_adjoint(sc, &s, &b, v3_neg(dir_in), ps.dir, f, through, dL, &gc, &g_wi, &seg_gw);
                 if (gc.kind == GEO_ATTACHED && r_bc > 0.0f) geo_segment_adjoint(&gc, &gb, v3_neg(dir_in), r_bc, g_wi, 0.0f);
                 else if (gc.camera) gc.gwi = v3_add(gc.gwi, g_wi);
                 seg_a = m_dot(dL, through);

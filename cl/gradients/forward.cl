@@ -39,6 +39,7 @@ static inline vec3 geo_nee_tangent(const Scene* sc, const Grads* tg, RngKey key,
     }
     vec3 df = geo_bsdf_tangent(b, to_local(s->sh, wi_w), n->wo, geo_local_tangent(s->sh, wi_w, dwi, gc->ds),
                                geo_local_tangent(s->sh, n->ls.wi, dwo, gc->ds));
+    df = v3_add(df, geo_bsdf_bary_tangent(sc, s, gc, to_local(s->sh, wi_w), n->wo)); /* its textures sliding */
     return v3_add(safe_div3(df, n->f), v3_splat(scalar));
 }
 #endif
@@ -148,6 +149,7 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
                 vec3 f = bsdf_eval(&b, wi, wo, &pdf);
                 vec3 df = geo_bsdf_tangent(&b, wi, wo, geo_local_tangent(s.sh, wi_w, dwi, gc.ds),
                                            geo_local_tangent(s.sh, ps.dir, v3_splat(0.0f), gc.ds));
+                df = v3_add(df, geo_bsdf_bary_tangent(&sc, &s, &gc, wi, wo)); /* its textures sliding */
                 dbeta = v3_add(dbeta, v3_mul(ps.beta, safe_div3(df, f)));
                 geo_bsdf_wo_jacobian(&b, wi, wo, f, seg_jac);
                 seg_frame = s.sh;

@@ -32,7 +32,9 @@
  * name; the host chains them to the positions through the normals update() computes) and, for a sliding point,
  * with its barycentrics: the point moves over its triangle by D = dx - sum b_j dv_j (in the plane), so
  * db1 = D . (e2 x n) / |e1 x e2| and db2 = D . (n x e1) / |e1 x e2|. The area-form cosines keep the triangle's
- * normal. The host refuses bump maps and anisotropic frames on a moving mesh (pyclpt/gradients/). */
+ * normal. A sliding point's texture coordinates move with its barycentrics too (geo_bsdf_bary: bilinear
+ * bitmaps; the host refuses textures whose value jumps). The host refuses bump maps and anisotropic frames on a
+ * moving mesh (pyclpt/gradients/). */
 #ifndef PYCLPT_GRADIENT_GEOMETRY_H
 #define PYCLPT_GRADIENT_GEOMETRY_H
 
@@ -73,6 +75,8 @@ typedef struct {
     float gj;   /*               and of the log of the area Jacobian */
     vec3 dx, dn, ds; /* forward mode: their tangents */
     float dj;
+    float gb1, gb2; /* reverse mode: the adjoints of a sliding point's barycentrics through its textures */
+    float db1, db2; /* forward mode: a sliding point's barycentrics' tangents (geo_shading_motion) */
     int camera;   /* -DGRAD_CAMERA: the camera ray's hit, t from the camera at film coordinates (sx, sy) */
     float t, sx, sy;
     vec3 gwi, dd; /* the adjoint (reverse) or tangent (forward, dd = -d wi) of the camera ray's direction */
@@ -83,6 +87,7 @@ static inline GeoVertex geo_fixed(vec3 p) {
     v.p = p;
     v.n = v.d = v.gx = v.gn = v.gs = v.dx = v.dn = v.ds = v.gwi = v.dd = v3_splat(0.0f);
     v.b1 = v.b2 = v.gj = v.dj = v.t = v.sx = v.sy = 0.0f;
+    v.gb1 = v.gb2 = v.db1 = v.db2 = 0.0f;
     v.kind = GEO_FIXED;
     v.id = v.rec = -1;
     v.camera = 0;
@@ -414,18 +419,20 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
     float b0 = 1.0f - v->b1 - v->b2;
     vec3 gx = v->gx, gn = v->gn, g_slide = v3_splat(0.0f);
     vec3 n0, n1, n2, m;
+    float g1 = v->gb1, g2 = v->gb2; /* the adjoints of a sliding point's barycentrics: its textures', its normal's */
     if (geo_vertex_normals(sc, v, &n0, &n1, &n2, &m)) { /* the shading normal m / |m| */
         float lm = m_length(m);
         vec3 ns = v3_divs(m, lm);
         vec3 gm = v3_divs(v3_sub(v->gs, v3_scale(ns, m_dot(ns, v->gs))), lm);
         geo_put_vnormals(sc, gr, v, v3_scale(gm, b0), v3_scale(gm, v->b1), v3_scale(gm, v->b2));
-        if (v->kind == GEO_SLIDING) { /* its barycentrics, through its motion over the triangle D = dx - dp */
-            float g1 = m_dot(gm, v3_sub(n1, n0)), g2 = m_dot(gm, v3_sub(n2, n0));
-            g_slide = v3_divs(v3_add(v3_scale(m_cross(e2, n), g1), v3_scale(m_cross(n, e1), g2)), len);
-            gx = v3_add(gx, g_slide);
-        }
+        g1 += m_dot(gm, v3_sub(n1, n0));
+        g2 += m_dot(gm, v3_sub(n2, n0));
     } else {
         gn = v3_add(gn, v3_scale(v->gs, geo_flip(sc, v))); /* flat: the shading normal is the triangle's */
+    }
+    if (v->kind == GEO_SLIDING) { /* its barycentrics, through its motion over the triangle D = dx - dp */
+        g_slide = v3_divs(v3_add(v3_scale(m_cross(e2, n), g1), v3_scale(m_cross(n, e1), g2)), len);
+        gx = v3_add(gx, g_slide);
     }
 #ifdef GRAD_CAMERA
     if (v->camera) geo_camera_scatter(sc, gr, v, gx);
@@ -495,15 +502,55 @@ static inline void geo_bsdf_gradient(const Bsdf* b, vec3 wi, vec3 wo, vec3 s, ve
     *g_wo = v3(g[3], g[4], g[5]);
 }
 
-/* Reverse mode, a BSDF factor f(wi, wo) |cos| at vertex v (frame fr, f its value) through which the radiance C
- * flows, weighted by dL: its adjoints to v's normal and to the two world directions (returned in *g_wi, *g_wo). */
-static inline void geo_bsdf_adjoint(const Bsdf* b, Frame fr, vec3 wi_w, vec3 wo_w, vec3 f, vec3 C, vec3 dL,
-                                    GeoVertex* v, vec3* g_wi, vec3* g_wo) {
+/* A sliding point's textures (-DSCENE_HAS_TEXTURES): as it slides over its triangle its texture coordinates move
+ * with its barycentrics (an attached point keeps them: the material form), and so does every textured quantity
+ * of its BSDF. d f(wi, wo) / d b_k (k = 1, 2) by central differences of the BSDF built at the texture coordinates
+ * of barycentrics b_k +- GEO_UV_STEP (the shading frame kept), local directions; 0 at any other point. */
+#define GEO_UV_STEP 1e-3f
+
+static inline vec3 geo_bsdf_bary(const Scene* sc, const Surface* s, const GeoVertex* v, int k, vec3 wi, vec3 wo) {
+#ifdef SCENE_HAS_TEXTURES
+    if (v->kind != GEO_SLIDING) return v3_splat(0.0f);
+    int info = sc->tri_info[2 * v->id];
+    vec3 f[2];
+    for (int j = 0; j < 2; ++j) {
+        float h = j == 0 ? GEO_UV_STEP : -GEO_UV_STEP;
+        Surface t = *s;
+        t.uv = tri_uv(sc->tri_vidx, sc->vuvs, v->id, info, v->b1 + (k == 1 ? h : 0.0f), v->b2 + (k == 2 ? h : 0.0f));
+        Bsdf b = bsdf_at(sc, &t);
+        float pdf;
+        f[j] = bsdf_eval(&b, wi, wo, &pdf);
+    }
+    return v3_scale(v3_sub(f[0], f[1]), 0.5f / GEO_UV_STEP);
+#else
+    (void)sc; (void)s; (void)v; (void)k; (void)wi; (void)wo;
+    return v3_splat(0.0f);
+#endif
+}
+
+/* Forward mode: the tangent of a sliding point's textured BSDF value f(wi, wo) (local directions) as its
+ * barycentrics move (db1, db2: geo_shading_motion). */
+static inline vec3 geo_bsdf_bary_tangent(const Scene* sc, const Surface* s, const GeoVertex* v, vec3 wi, vec3 wo) {
+    if (v->kind != GEO_SLIDING || (v->db1 == 0.0f && v->db2 == 0.0f)) return v3_splat(0.0f);
+    return v3_add(v3_scale(geo_bsdf_bary(sc, s, v, 1, wi, wo), v->db1),
+                  v3_scale(geo_bsdf_bary(sc, s, v, 2, wi, wo), v->db2));
+}
+
+/* Reverse mode, a BSDF factor f(wi, wo) |cos| at vertex v (surface srf, f its value) through which the radiance C
+ * flows, weighted by dL: its adjoints to v's normal and to the two world directions (returned in *g_wi, *g_wo), and
+ * a sliding point's to its barycentrics through its textures (geo_bsdf_bary). */
+static inline void geo_bsdf_adjoint(const Scene* sc, const Surface* srf, const Bsdf* b, vec3 wi_w, vec3 wo_w,
+                                    vec3 f, vec3 C, vec3 dL, GeoVertex* v, vec3* g_wi, vec3* g_wo) {
+    Frame fr = srf->sh;
     vec3 s = safe_div3(v3_mul(dL, C), f);
-    vec3 gli, glo;
-    geo_bsdf_gradient(b, to_local(fr, wi_w), to_local(fr, wo_w), s, &gli, &glo);
+    vec3 gli, glo, wi = to_local(fr, wi_w), wo = to_local(fr, wo_w);
+    geo_bsdf_gradient(b, wi, wo, s, &gli, &glo);
     *g_wi = geo_local_adjoint(fr, wi_w, gli, &v->gs);
     *g_wo = geo_local_adjoint(fr, wo_w, glo, &v->gs);
+    if (v->kind == GEO_SLIDING) {
+        v->gb1 += m_dot(s, geo_bsdf_bary(sc, srf, v, 1, wi, wo));
+        v->gb2 += m_dot(s, geo_bsdf_bary(sc, srf, v, 2, wi, wo));
+    }
 }
 
 /* Reverse mode, the area-form factors of segment a -> b (direction w, length r) other than a's BSDF: b's cosine,
@@ -553,14 +600,10 @@ static inline void geo_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
  * its barycentrics'. */
 static inline void geo_shading_motion(const Scene* sc, const Grads* tg, GeoVertex* v) {
     v->ds = v3_scale(v->dn, geo_flip(sc, v));
-    vec3 n0, n1, n2, m;
-    if ((v->kind != GEO_ATTACHED && v->kind != GEO_SLIDING) || !geo_vertex_normals(sc, v, &n0, &n1, &n2, &m)) return;
+    if (v->kind != GEO_ATTACHED && v->kind != GEO_SLIDING) return;
     __global const int* vi = sc->tri_vidx + 3 * v->id;
     float b0 = 1.0f - v->b1 - v->b2;
-    vec3 dm = v3_add(v3_add(v3_scale(geo_vnormal_tangent(sc, tg, v, vi[0]), b0),
-                            v3_scale(geo_vnormal_tangent(sc, tg, v, vi[1]), v->b1)),
-                     v3_scale(geo_vnormal_tangent(sc, tg, v, vi[2]), v->b2));
-    if (v->kind == GEO_SLIDING) {
+    if (v->kind == GEO_SLIDING) { /* its barycentrics move as it slides over the triangle, D = dx - dp */
         vec3 e1, e2;
         geo_edges(sc, v, &e1, &e2);
         vec3 c = m_cross(e1, e2);
@@ -571,10 +614,16 @@ static inline void geo_shading_motion(const Scene* sc, const Grads* tg, GeoVerte
                                     v3_scale(geo_vertex_tangent(sc, tg, v, 1, vi[1]), v->b1)),
                              v3_scale(geo_vertex_tangent(sc, tg, v, 2, vi[2]), v->b2));
             vec3 slide = v3_sub(v->dx, dp);
-            float db1 = m_dot(slide, m_cross(e2, n)) / len, db2 = m_dot(slide, m_cross(n, e1)) / len;
-            dm = v3_add(dm, v3_add(v3_scale(v3_sub(n1, n0), db1), v3_scale(v3_sub(n2, n0), db2)));
+            v->db1 = m_dot(slide, m_cross(e2, n)) / len;
+            v->db2 = m_dot(slide, m_cross(n, e1)) / len;
         }
     }
+    vec3 n0, n1, n2, m;
+    if (!geo_vertex_normals(sc, v, &n0, &n1, &n2, &m)) return;
+    vec3 dm = v3_add(v3_add(v3_scale(geo_vnormal_tangent(sc, tg, v, vi[0]), b0),
+                            v3_scale(geo_vnormal_tangent(sc, tg, v, vi[1]), v->b1)),
+                     v3_scale(geo_vnormal_tangent(sc, tg, v, vi[2]), v->b2));
+    dm = v3_add(dm, v3_add(v3_scale(v3_sub(n1, n0), v->db1), v3_scale(v3_sub(n2, n0), v->db2)));
     float lm = m_length(m);
     vec3 ns = v3_divs(m, lm);
     v->ds = v3_divs(v3_sub(dm, v3_scale(ns, m_dot(ns, dm))), lm);

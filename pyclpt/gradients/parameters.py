@@ -76,12 +76,16 @@ NOT_DIFFERENTIABLE = {
 }
 
 
-def _textured(obj: object) -> bool:
-    """Whether a material (or what it wraps) has a texture in any field."""
-    if isinstance(obj, (Bitmap, Checkerboard)):
+def _jumping_texture(obj: object) -> bool:
+    """Whether a material (or what it wraps) has a texture whose value jumps across the surface: a checkerboard,
+    a bitmap filtered by nearest texel. (A bilinear bitmap is continuous: a point sliding over it changes its value
+    smoothly, which the interior term has; a jump would be an outline of its own.)"""
+    if isinstance(obj, Checkerboard):
         return True
+    if isinstance(obj, Bitmap):
+        return obj.filter != "bilinear"
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return any(_textured(getattr(obj, f.name)) for f in dataclasses.fields(obj))
+        return any(_jumping_texture(getattr(obj, f.name)) for f in dataclasses.fields(obj))
     return False
 
 
@@ -108,15 +112,16 @@ def _camera_boundary_reason(scene: Scene) -> str:
 
 def moving_mesh_reason(scene: Scene, mesh: Mesh) -> str:
     """Why the gradient of where ``mesh`` is (its vertex_positions, its to_world) is not computed, or "" when it is:
-    the interior term (cl/gradients/geometry.h) holds for untextured meshes, flat or smooth-shaded (through the
-    vertex normals update() writes: pyclpt/gradients/normals.py), in scenes with or without instances (the boundary
-    terms see instances' triangles: pyclpt/gradients/flatten.py)."""
+    the interior term (cl/gradients/geometry.h) holds for meshes untextured or with bilinear bitmaps, flat or
+    smooth-shaded (through the vertex normals update() writes: pyclpt/gradients/normals.py), in scenes with or
+    without instances (the boundary terms see instances' triangles: pyclpt/gradients/flatten.py)."""
     mat = scene.materials[mesh.material]
     if scene.camera.kind != "perspective":
         return _camera_boundary_reason(scene)
-    if _textured(mat) or mesh.emission_texture is not None:
-        return ("a textured mesh: the texture's motion under the pixels is not differentiated (the interior term of "
-                "moving geometry is implemented for untextured meshes); update() moves it")
+    if _jumping_texture(mat) or mesh.emission_texture is not None:
+        return ("a checkerboard, a nearest-filtered bitmap or an emission texture: the outlines of a texture's jumps "
+                "and a textured emitter's motion under the pixels are not differentiated (bilinear bitmaps are: "
+                "cl/gradients/geometry.h, geo_bsdf_bary); update() moves it")
     if isinstance(mat, (BumpMap, Mask)) or getattr(mat, "anisotropic", False):
         return ("a bump-mapped, masked or anisotropic material: its shading frame's or opacity's motion is not "
                 "differentiated; update() moves it")
@@ -137,15 +142,17 @@ def moving_instance_reason(scene: Scene, inst: Instance) -> str:
 
 def moving_camera_reason(scene: Scene) -> str:
     """Why the gradient of where the sensor is (its to_world, its x_fov) is not computed, or "" when it is: the
-    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole in a scene without textures
-    or an environment map (instances or not)."""
+    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole in a scene without an environment
+    map, emission textures or textures whose value jumps (instances or not); bilinear bitmaps slide under the
+    pixels as the camera's hits slide over them (geo_bsdf_bary)."""
     if scene.camera.kind != "perspective":
         return (f"a {scene.camera.kind} camera: the gradients of where the sensor is are implemented for perspective "
                 f"(pinhole) cameras; update() moves it")
-    if isinstance(scene.environment, Envmap) or any(_textured(m) for m in scene.materials) or any(
+    if isinstance(scene.environment, Envmap) or any(_jumping_texture(m) for m in scene.materials) or any(
             m.emission_texture is not None for m in scene.meshes):
-        return ("textures or an environment map in view: what slides under the pixels as the camera moves (a "
-                "texture's, the map's gradient across the image) is not differentiated; update() moves it")
+        return ("an environment map, an emission texture, a checkerboard or a nearest-filtered bitmap in view: what "
+                "slides under the pixels as the camera moves (the map's, a jump's outline) is not differentiated; "
+                "update() moves it")
     return ""
 
 
