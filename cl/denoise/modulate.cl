@@ -57,7 +57,7 @@ __kernel void modulate(__global const float* src, __global const float* albedo, 
         int ntx = deficit_tiles(width), nty = deficit_tiles(height), count = ntx * nty;
         float gc[3], lc[3];
         for (int c = 0; c < 3; ++c) {
-            gc[c] = m_min(tile_bilinear(gains + c * count, ntx, nty, DEFICIT_TILE, x, y), DEFICIT_MAX);
+            gc[c] = m_min(tile_bilinear(gains + c * count, ntx, nty, DEFICIT_TILE, x, y), DEFICIT_MAX_LONG);
             lc[c] = tile_bilinear(gains + (3 + c) * count, ntx, nty, DEFICIT_TILE, x, y);
         }
         g = v3(gc[0], gc[1], gc[2]);

@@ -175,10 +175,11 @@ static inline float normal_agreement(vec3 a, vec3 b) {
 
 /* The clamp's deficit (cl/denoise/deficit.cl, deficit_gain.cl, modulate.cl): the image is cut into
  * DEFICIT_TILE x DEFICIT_TILE tiles (pyclpt/denoise/svgf.py, DEFICIT_TILE), each with the share of
- * its light that the firefly clamp took, per channel; a tile's own share is at most DEFICIT_MAX, and
- * what modulate gives back at most DEFICIT_MAX too. 0.2 when the share given back was the robust
- * mean of the 3x3 tiles' (0.25 raised the living room's relMSE at frame 8 from 0.344 to 0.353 x the
- * plain average's, 0.1 lowered it to 0.332 and gave back a third less); 0.25 since it is the tile's
+ * its light that the firefly clamp took, per channel; a tile's own share is at most DEFICIT_MAX (on a
+ * short history; deficit_cap below), and what modulate gives back at most DEFICIT_MAX_LONG.
+ * DEFICIT_MAX was 0.2 when the share given back was the robust mean of the 3x3 tiles' (0.25 raised
+ * the living room's relMSE at frame 8 from 0.344 to 0.353 x the plain average's, 0.1 lowered it to
+ * 0.332 and gave back a third less); 0.25 since it is the tile's
  * own share up to DEFICIT_OUTLIER x that mean (deficit_gain.cl): the room's relMSE 0.338 (0.331 at
  * 0.2, 0.350 at 0.3), the cornell-bunny's 32-frame means 0.9958 / 0.9942 / 0.9933 of the plain
  * average's (0.9949 / 0.9932 / 0.9926 at 0.2; its ceiling beside the light has tiles whose share is
@@ -187,10 +188,27 @@ static inline float normal_agreement(vec3 a, vec3 b) {
  * exactly 0 where nothing was clamped. */
 #define DEFICIT_TILE 16
 #define DEFICIT_MAX 0.25f
+/* The cap of a tile's share grows with its pixels' mean history length N, from DEFICIT_MAX at
+ * DEFICIT_LONG_FROM frames to DEFICIT_MAX_LONG at DEFICIT_LONG_FULL (linear between): the cap keeps a
+ * young tile's noisy share of a sparse light from coming back as the tile's level (the room's relMSE
+ * at frame 8), but on a history of 16 to 32 frames the share is measured over as many frames, and
+ * a cap of 0.25 kept the cornell-bunny's ceiling tiles (shares 0.4 to 0.9) from most of their
+ * deficit: its 32-frame blue mean 0.9941 of the plain average's, 0.9976 with the ramp
+ * (docs/denoising.md, "The deficit's cap on a long history"). Frame 8 and a light change 16 frames in are as
+ * before (N <= 17 there). modulate caps what it gives back at DEFICIT_MAX_LONG. */
+#define DEFICIT_MAX_LONG 0.75f
+#define DEFICIT_LONG_FROM 16.0f
+#define DEFICIT_LONG_FULL 32.0f
 #define DEFICIT_OUTLIER 5.0f /* deficit_gain.cl */
 #define DEFICIT_EPS 1e-4f
 
 static inline int deficit_tiles(int size) { return (size + DEFICIT_TILE - 1) / DEFICIT_TILE; }
+
+/* The most of its light a tile's share may be, for its pixels' mean history length n (above). */
+static inline float deficit_cap(float n) {
+    float r = m_clamp((n - DEFICIT_LONG_FROM) / (DEFICIT_LONG_FULL - DEFICIT_LONG_FROM), 0.0f, 1.0f);
+    return DEFICIT_MAX + (DEFICIT_MAX_LONG - DEFICIT_MAX) * r;
+}
 
 /* Tile p's value of a per-tile plane (tiles of `tile` pixels, ntx x nty of them), bilinear between
  * the tiles' centres (clamped at the image's border): the deficit's shares and levels, the conserve

@@ -327,7 +327,7 @@ class Svgf:
         firefly clamp took (the clamp's deficit history over the long one), which modulate gives back."""
         ev = self._kernels["deficit"](
             self.device.queue, (self._tiles_x, self._tiles_y), None, self._accum, self._deficit[self._cur],
-            self._albedo[self._cur], self._tiles[0], *self._args2d())
+            self._albedo[self._cur], self._len[self._cur], self._tiles[0], *self._args2d())
         return self._record("deficit", ev)
 
     def deficit_gain(self) -> cl.Event:
