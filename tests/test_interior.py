@@ -470,10 +470,11 @@ def test_receiver_moving_under_a_hard_shadow():
 
 
 def test_a_moving_camera_over_textures_is_refused():
-    """What slides under the pixels as the camera moves is not differentiated: a textured floor or an environment map
-    lists the sensor's parameters with the reason."""
+    """What slides under the pixels as the camera moves is not differentiated where it jumps or is a map of the sky:
+    a checkerboard floor or an environment map lists the sensor's parameters with the reason (a bilinear bitmap
+    does not: tests/test_shadows.py::test_the_camera_moving_over_a_textured_floor)."""
     textured = _floor_scene(bsdf={"type": "diffuse", "reflectance": {"type": "checkerboard"}})
-    assert "textures" in pyclpt.traverse(textured).unsupported()["sensor.to_world"]
+    assert "checkerboard" in pyclpt.traverse(textured).unsupported()["sensor.to_world"]
     sky = _floor_scene()
     sky.environment = pyclpt.Envmap(np.ones((4, 8, 3), np.float32))
     assert "environment map" in pyclpt.traverse(sky).unsupported()["sensor.x_fov"]
