@@ -27,7 +27,7 @@ from each pixel's shading points with the ``vertex_radiance`` kernel.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -458,6 +458,19 @@ class SoftSamples:
         return -self.velocity * (self.edge_dist / self.back_dist)[:, None]
 
 
+def _at_bary(corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """(N, 3): the points at barycentrics ``bary`` (N, 2) of triangles with ``corners`` (N, 3, 3)."""
+    return ((1.0 - bary[:, 0] - bary[:, 1])[:, None] * corners[:, 0] + bary[:, :1] * corners[:, 1]
+            + bary[:, 1:] * corners[:, 2])
+
+
+def _bands(pixels: int, spp: int, band: Callable[[int, int], object]) -> Iterator:
+    """``band(p0, p1)`` over the pixels in runs of SOFT_CHUNK // spp (the soft and later hard-shadow terms)."""
+    step = max(1, SOFT_CHUNK // spp)
+    for p0 in range(0, pixels, step):
+        yield band(p0, min(p0 + step, pixels))
+
+
 def shading_points(replay, rfilter, width: int, p0: int, p1: int, spp: int, rng: np.random.Generator,
                    later: bool) -> tuple[np.ndarray, ...]:
     """The shading points of pixels p0 .. p1 - 1 (flat indices, rows of ``width``), ``spp`` film positions each
@@ -589,8 +602,7 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
         # the shading points (their barycentric points), their triangles' unit normals, the rays that reach them
         bary = table[sel, :2].astype(np.float64)
         corners = positions[replay.scene.arrays.tri_vidx[prim[sel]]]  # (n, 3, 3), leaf order
-        x = ((1.0 - bary[:, 0] - bary[:, 1])[:, None] * corners[:, 0] + bary[:, :1] * corners[:, 1]
-             + bary[:, 1:] * corners[:, 2])
+        x = _at_bary(corners, bary)
         ng, _ = _unit(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
         ray = -table[sel, 2:5].astype(np.float64)
         at_camera = np.flatnonzero(~attached[sel])
@@ -603,9 +615,7 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
             hits[rows, side, 1:].astype(np.float64),
             np.where(back >= 0, hits[rows, side, 0].astype(np.float64), np.inf), dist)
 
-    step = max(1, SOFT_CHUNK // spp)
-    for p0 in range(0, width * height, step):
-        yield band(p0, min(p0 + step, width * height))
+    yield from _bands(width * height, spp, band)
 
 
 def sample_soft_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
@@ -681,8 +691,7 @@ def _point_motion(scene: Scene, i: int, tri: np.ndarray, bary: np.ndarray, dp: n
     """(N, 3): the motion of the points at barycentrics ``bary`` of mesh i's triangles ``tri``, for vertex
     velocities dp (V, 3)."""
     corners = scene.meshes[i].indices.astype(np.int64)[tri]
-    return ((1 - bary[:, 0] - bary[:, 1])[:, None] * dp[corners[:, 0]] + bary[:, :1] * dp[corners[:, 1]]
-            + bary[:, 1:] * dp[corners[:, 2]])
+    return _at_bary(dp[corners], bary)
 
 
 def _shading_camera_velocity(scene: Scene, width: int, height: int, ss: SoftSamples, name: str) -> np.ndarray:
@@ -893,8 +902,7 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
         # in float64: the shading point y, the edge point q, the light l, the receiver point r and its normal
         corners = positions[replay.scene.arrays.tri_vidx[prim[sel]]]
         bary = table[sel, :2].astype(np.float64)
-        y = ((1 - bary[:, 0] - bary[:, 1])[:, None] * corners[:, 0] + bary[:, :1] * corners[:, 1]
-             + bary[:, 1:] * corners[:, 2])
+        y = _at_bary(corners, bary)
         a, b = table_e[e, 0:3].astype(np.float64), table_e[e, 3:6].astype(np.float64)
         q = a + t[:, None] * (b - a)
         # where the light's rays start (a directional light's: behind q, table_e's distance), parallel or not
@@ -907,11 +915,11 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
             else:
                 lp[m] = q[m] - table_e[e[m], 7, None].astype(np.float64) * light.direction[None]
                 parallel[m] = True
-        d, qdist = _unit(q - lp)
+        _, qdist = _unit(q - lp)
         rprim = out.receiver_prim[nz]
         rc = positions[replay.scene.arrays.tri_vidx[rprim]]
         rb = out.receiver_hit[nz, 1:].astype(np.float64)
-        r = (1 - rb[:, 0] - rb[:, 1])[:, None] * rc[:, 0] + rb[:, :1] * rc[:, 1] + rb[:, 1:] * rc[:, 2]
+        r = _at_bary(rc, rb)
         n_r, _ = _unit(np.cross(rc[:, 1] - rc[:, 0], rc[:, 2] - rc[:, 0]))
         sigma, proj = receiver_motion(r, q, lp, n_r, parallel)
         w, dist = _unit(r - y)
@@ -930,9 +938,7 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
                             np.einsum("nc,ncj->nj", normal[k], proj[k]) / dist[k, None], rmesh,
                             order[rprim[k]] - first[rmesh], rb[k])
 
-    step = max(1, SOFT_CHUNK // spp)
-    for p0 in range(0, width * height, step):
-        yield band(p0, min(p0 + step, width * height))
+    yield from _bands(width * height, spp, band)
 
 
 def delta_shadow_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, spp: int = 4,
