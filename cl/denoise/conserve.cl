@@ -19,20 +19,27 @@
  * without a gain (0.0616, 0.0615 and 0.0565 on the cornell-box). conserve_gain limits it against the
  * tiles around (a lone firefly's tile gets none), and modulate scales the filtered illumination by
  * it, bilinear between the tiles' centres: the filter keeps its shape and each tile the light it was
- * given. Tiles of 8 pixels, not the deficit's 16: the loss sits at the edges of the light, and the
+ * given. But a tile's sum of H is noisy (64 pixels of an 8-frame history at 1 sample a frame: its
+ * relative spread was 8 % on the cornell-box at 256x256, frame 8), and the filter's loss in a tile is
+ * mostly that noise crossing its border: a full gain put the tile's noise back as 8-pixel blotches. So
+ * only the part of e = sum d H - sum d F that stands out of that noise is kept: e^2 / (e^2 + sigma^2
+ * v) of it, v = sum d^2 var_H (var_H: the history's luminance variance, as variance.cl estimates it
+ * from the moments, divided by min(N, n_eff_max), per channel in proportion to the channel's level),
+ * sigma = DenoiserSettings.conserve_sigma (docs/denoising.md, "The filter's balance without the
+ * tiles' noise"). Tiles of 8 pixels, not the deficit's 16: the loss sits at the edges of the light, and the
  * smaller tile puts it back there (measured before conserve_gain's limit: the living room's relMSE
  * at frame 8 0.337 x the plain average's with 8, 0.348 with 16, 0.360 with 32; the cornell-box's
  * FLIP 1.070, 1.105 and 1.137 x OIDN's).
  *
  * Consumes: accum[c * pixels + p] (c < 3: the long history, the filter's input), src[c * pixels + p]
- *           (c < 3: the last a-trous iteration's output), geo (GEO_DEPTH), len (N), all padded
- *           (svgf.h, PAD); albedo (reproject: the footprint albedo A, padded).
+ *           (c < 3: the last a-trous iteration's output), geo (GEO_DEPTH), len (N), moments (2: the
+ *           luminance moments), all padded (svgf.h, PAD); albedo (reproject: the footprint albedo A, padded).
  * Produces: gains[c * tile_count + ty * tiles_x + tx], c < 3: the tile's gain G. */
 #include "denoise/svgf.h"
 
 __kernel void conserve(__global const float* accum, __global const float* src, __global const float* geo,
-                       __global const float* len, __global const float* albedo, __global float* gains, int width,
-                       int height) {
+                       __global const float* len, __global const float* albedo, __global const float* moments,
+                       __global float* gains, int width, int height, float n_eff_max, float sigma) {
     int tx = get_global_id(0), ty = get_global_id(1);
     int ntx = conserve_tiles(width), nty = conserve_tiles(height);
     if (tx >= ntx || ty >= nty) return;
@@ -42,8 +49,10 @@ __kernel void conserve(__global const float* accum, __global const float* src, _
     geo += PAD;
     len += PAD;
     albedo += PAD;
-    /* per channel: the sums of the unfiltered and the filtered light */
-    float sh[3] = {0.0f, 0.0f, 0.0f}, sf[3] = {0.0f, 0.0f, 0.0f}, ramp = 0.0f, surface = 0.0f;
+    moments += PAD;
+    /* per channel: the sums of the unfiltered and the filtered light, and the variance of the first */
+    float sh[3] = {0.0f, 0.0f, 0.0f}, sf[3] = {0.0f, 0.0f, 0.0f}, sv[3] = {0.0f, 0.0f, 0.0f};
+    float ramp = 0.0f, surface = 0.0f;
     int x1 = min((tx + 1) * CONSERVE_TILE, width), y1 = min((ty + 1) * CONSERVE_TILE, height);
     for (int y = ty * CONSERVE_TILE; y < y1; ++y) {
         for (int x = tx * CONSERVE_TILE; x < x1; ++x) {
@@ -54,13 +63,25 @@ __kernel void conserve(__global const float* accum, __global const float* src, _
             vec3 d = v3_scale(planar3(albedo, n, p), w);
             vec3 h = planar3(accum, n, p), f = planar3(src, n, p);
             float dc[3] = {d.x, d.y, d.z}, hc[3] = {h.x, h.y, h.z}, fc[3] = {f.x, f.y, f.z};
+            /* the variance of the history's luminance (variance.cl's temporal estimate), per channel in
+             * proportion to the channel's level */
+            float N = len[p], m1 = moments[p], m2 = moments[n + p], l = luminance(h);
+            float var = N > 1.5f ? m_max(m2 - m1 * m1, 0.0f) * N / ((N - 1.0f) * m_min(N, n_eff_max)) : m2;
+            float inv_l2 = l > 0.0f ? var / (l * l) : 0.0f;
             for (int c = 0; c < 3; ++c) {
                 sh[c] += dc[c] * m_max(hc[c], 0.0f);
                 sf[c] += dc[c] * m_max(fc[c], 0.0f);
+                sv[c] += dc[c] * dc[c] * (l > 0.0f ? hc[c] * hc[c] * inv_l2 : var);
             }
         }
     }
     int t = ty * ntx + tx, count = ntx * nty;
     float share = surface > 0.0f ? ramp / surface : 0.0f;
-    for (int c = 0; c < 3; ++c) gains[c * count + t] = lerpf(1.0f, conserve_ratio(sh[c], sf[c]), share);
+    for (int c = 0; c < 3; ++c) {
+        /* the filter's loss e kept as far as it stands out of the noise of the tile's unfiltered
+         * light: e^2 / (e^2 + sigma^2 var) of it (a Wiener gain) */
+        float e = sh[c] - sf[c], e2 = e * e;
+        float keep = e2 > 0.0f ? e2 / (e2 + sigma * sigma * sv[c]) : 0.0f;
+        gains[c * count + t] = lerpf(1.0f, conserve_ratio(sf[c] + keep * e, sf[c]), share);
+    }
 }

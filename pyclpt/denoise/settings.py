@@ -103,6 +103,12 @@ class DenoiserSettings:
     #: 1.066 x OIDN's on the box (1.145), 1.201 on the bunny (1.258), 1.165 in the living room (1.197),
     #: relMSE 0.105, 0.033 and 0.337 x the plain average's (0.111, 0.033, 0.345).
     conserve: bool = True
+    #: The filter's energy balance keeps of a tile's loss e the part that stands out of the noise of the
+    #: tile's unfiltered light, e^2 / (e^2 + conserve_sigma^2 v) of it, v the variance of that light's sum
+    #: (cl/denoise/conserve.cl): most of a tile's loss is its noise crossing its border, which the full gain
+    #: put back as 8-pixel blotches. 0: the full gain. On the cornell-box at 256x256, frame 8, FLIP 1.26 x
+    #: OIDN's with 1, 1.32 with 0 (docs/denoising.md, "The filter's balance without the tiles' noise").
+    conserve_sigma: float = 1.0
     #: The firefly clamp's temporal term: mean + firefly_sigma x sigma of the pixel's luminance moments
     #: (before the sqrt(N) relaxation). On the cornell-box at 64x64, 1, 2 and 3 give the same relMSE
     #: within 2 % at 8 and 32 frames; 6 with firefly_ratio 8 (see there). Half of it also scales the
@@ -167,6 +173,7 @@ class DenoiserSettings:
         self.antilag = check_float(self.antilag, f"{name}.antilag", lo=0.0)
         self.firefly_ratio = check_float(self.firefly_ratio, f"{name}.firefly_ratio", lo=0.0)
         self.firefly_sigma = check_float(self.firefly_sigma, f"{name}.firefly_sigma", lo=0.0)
+        self.conserve_sigma = check_float(self.conserve_sigma, f"{name}.conserve_sigma", lo=0.0)
         if 0.0 < self.firefly_ratio < 1.0:
             raise ValueError(f"{name}.firefly_ratio must be 0 (off) or >= 1 (a clamp below the neighbours' "
                              f"mean would darken every pixel), got {self.firefly_ratio}")

@@ -375,7 +375,8 @@ class Svgf:
         src = self._src if self._src is not None else self._ping[0]
         ev = self._kernels["conserve"](
             self.device.queue, (self._ctiles_x, self._ctiles_y), None, self._accum, src, self._geo[self._cur],
-            self._len[self._cur], self._albedo[self._cur], self._conserve[0], *self._args2d())
+            self._len[self._cur], self._albedo[self._cur], self._moments[self._cur], self._conserve[0],
+            *self._args2d(), np.float32(self._settings.n_eff_max), np.float32(self._settings.conserve_sigma))
         return self._record("conserve", ev)
 
     def conserve_gain(self) -> cl.Event:
