@@ -489,17 +489,32 @@ def test_the_edge_pick_follows_the_angles_and_skips_the_occluders_side():
 
 
 def test_outlines_through_mirrors_are_said_to_be_left_out(caplog):
-    """Where things move in a scene with a mirror (a smooth conductor), the gradient passes say that the outlines
-    seen through it are not in the boundary terms; a reflectance's gradient says nothing."""
+    """Where things move in a scene with a planar mirror (a smooth conductor rectangle), the gradient passes say that
+    the camera's outlines seen in it are in the boundary terms, and which outlines are not: after two or more mirror
+    bounces, seen in mirrors by other surfaces; through a curved mirror (a sphere), named; the planar mirror's own
+    motion, when it moves. A reflectance's gradient says nothing."""
     scene = _bounce_scene()
     wall = next(m for m in scene.meshes if m.name == "wall")
     scene.materials[wall.material] = pyclpt.load_dict({"type": "scene", "m": {
         "type": "rectangle", "bsdf": {"type": "conductor"}}}).materials[0]
     t = np.zeros((4, 4))
     t[0, 3] = 1.0
-    with caplog.at_level("WARNING", logger="pyclpt"):
-        pyclpt.render_forward(scene, "occluder.to_world", t, spp=1, max_depth=3, boundary=False)
-    assert any("mirror or smooth glass" in r.getMessage() and "wall" in r.getMessage() for r in caplog.records)
+
+    def warned(name: str) -> str:
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="pyclpt"):
+            pyclpt.render_forward(scene, name, t, spp=1, max_depth=3, boundary=False)
+        (message,) = [r.getMessage() for r in caplog.records if "outlines" in r.getMessage()]
+        return message
+
+    message = warned("occluder.to_world")
+    assert "camera's outlines seen in one planar mirror (wall)" in message
+    assert "two or more mirror bounces" in message and "other surfaces than the camera" in message
+    assert "curved" not in message and "moves" not in message
+    assert "planar mirror that moves (wall)" in warned("wall.to_world")
+    ball = pyclpt.load_dict({"type": "scene", "ball": {"type": "sphere", "bsdf": {"type": "conductor"}}}).meshes[0]
+    scene.meshes.append(dataclasses.replace(ball, material=wall.material, positions=ball.positions * 0.2))
+    assert "curved mirrors or refracting glass (ball)" in warned("occluder.to_world")
     caplog.clear()
     with caplog.at_level("WARNING", logger="pyclpt"):
         pyclpt.render_backward(scene, np.ones((16, 16, 3), np.float32), spp=1, max_depth=3,

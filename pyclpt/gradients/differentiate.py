@@ -12,11 +12,12 @@ The scene's device copy, its compiled kernels and buffers are kept between calls
 Geometry (``SHAPE.vertex_positions``, ``SHAPE.to_world``, ``INSTANCE.to_world``, a point light's ``position``, a
 spot light's ``to_world``) is differentiated when named, in scenes with or without instances: the interior term
 by the replay (``cl/gradients/geometry.h``: the material form, shading that follows the moving surfaces) plus the
-boundary terms of camera silhouettes (:func:`pyclpt.gradients.edges.primary_boundary`),
-of what the first surface seen receives (:func:`pyclpt.gradients.shadows.soft_shadow_boundary`) and of point
-and spot lights' hard shadows, at the first surface seen (:func:`pyclpt.gradients.shadows.shadow_boundary`) and
-after a bounce (:func:`pyclpt.gradients.shadows.delta_shadow_boundary`); an instanced scene's boundary terms are
-its flattened scene's (:mod:`pyclpt.gradients.flatten`).
+boundary terms of camera silhouettes, seen directly and in planar mirrors
+(:func:`pyclpt.gradients.edges.primary_boundary`), of what the first surface seen receives
+(:func:`pyclpt.gradients.shadows.soft_shadow_boundary`) and of point and spot lights' hard shadows, at the first
+surface seen (:func:`pyclpt.gradients.shadows.shadow_boundary`) and after a bounce
+(:func:`pyclpt.gradients.shadows.delta_shadow_boundary`); an instanced scene's boundary terms are its flattened
+scene's (:mod:`pyclpt.gradients.flatten`).
 """
 from __future__ import annotations
 
@@ -46,6 +47,7 @@ from pyclpt.gradients.layout import (
     spot_tangent,
     vertex_offset,
 )
+from pyclpt.gradients.mirrors import delta_lobes, mirror_planes
 from pyclpt.gradients.normals import normals_backward, normals_forward
 from pyclpt.gradients.parameters import Parameter, SceneParameters
 from pyclpt.gradients.session import clear_cache, replay_for  # noqa: F401 (clear_cache: the public name)
@@ -58,17 +60,7 @@ from pyclpt.gradients.shadows import (
     soft_shadow_boundary,
     soft_shadow_boundary_forward,
 )
-from pyclpt.scene.model import (
-    Conductor,
-    Dielectric,
-    DirectionalLight,
-    Instance,
-    Mesh,
-    PointLight,
-    Scene,
-    SpotLight,
-    ThinDielectric,
-)
+from pyclpt.scene.model import DirectionalLight, Instance, Mesh, PointLight, Scene, SpotLight
 
 log = logging.getLogger("pyclpt")
 
@@ -90,7 +82,7 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     ``params``): the interior term by the replay plus, with ``boundary``, the boundary terms of visibility (see the
     module): ``edge_samples`` points on camera silhouettes and on hard-shadow outlines, ``edge_spp`` shading points
     a pixel for the outlines in the light the first surfaces receive; outlines seen after the first bounce are
-    left out (docs/differentiable.md).
+    left out, but for those the camera sees in a planar mirror (docs/differentiable.md).
     ``seed`` must differ from the seed of the image the loss was computed on (``loss_seed``, when
     given, is checked): the same random numbers in both make the gradient biased (the error of the
     image and the paths that carry its gradient would be correlated).
@@ -246,27 +238,33 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
     return image
 
 
-def _delta_surfaces(scene: Scene) -> list[str]:
-    """The names of the meshes whose material reflects or refracts like a mirror or smooth glass (a delta BSDF,
-    perhaps inside a mask, a bump map or a two-sided material)."""
-    def delta(m: object) -> bool:
-        if isinstance(m, ThinDielectric):
-            return True
-        if isinstance(m, (Conductor, Dielectric)):
-            return m.alpha == 0
-        return any(delta(getattr(m, a)) for a in ("material", "front", "back") if getattr(m, a, None) is not None)
-    return [mesh.name for mesh in scene.meshes if delta(scene.materials[mesh.material])]
-
-
 def _warn_delta_outlines(scene: Scene, chosen: Sequence[Parameter]) -> None:
-    """Where things move in a scene with mirrors or smooth glass: the outlines seen through them are not in the
-    boundary terms (docs/differentiable.md, "What is not differentiated yet"); say so."""
-    if any(p.kind in ("geometry", "camera") for p in chosen):
-        mirrors = _delta_surfaces(scene)
-        if mirrors:
-            log.warning("%s: the outlines seen through mirror or smooth glass surfaces (%s) are not in the boundary "
-                        "terms: those gradients leave them out", scene.name, ", ".join(mirrors[:4])
-                        + (" ..." if len(mirrors) > 4 else ""))
+    """Where things move in a scene with mirrors or smooth glass, say which outlines seen through them the boundary
+    terms leave out (docs/differentiable.md, "What is not differentiated yet"): those seen through curved mirrors
+    and refracting glass; after two or more mirror bounces; in mirrors by other surfaces than the camera; and
+    in a planar mirror that is differentiated, as far as its own motion moves them. The camera's outlines seen in
+    one planar mirror are in (:func:`pyclpt.gradients.edges.silhouette_edges`)."""
+    if not any(p.kind in ("geometry", "camera") for p in chosen):
+        return
+    lobes = [delta_lobes(scene.materials[mesh.material]) for mesh in scene.meshes]
+    if not any(lobes):
+        return
+    flat = sorted({plane.mesh for plane in mirror_planes(scene)})
+    bent = [mesh.name for i, (mesh, kind) in enumerate(zip(scene.meshes, lobes))
+            if "refract" in kind or ("reflect" in kind and i not in flat)]
+    planar = [scene.meshes[i].name for i in flat]
+    moved = [scene.meshes[i].name for i in flat if any(p.target is scene.meshes[i] for p in chosen)]
+
+    def names(items: Sequence[str]) -> str:
+        return ", ".join(items[:4]) + (" ..." if len(items) > 4 else "")
+
+    parts = [f"through curved mirrors or refracting glass ({names(bent)})"] if bent else []
+    parts += ["after two or more mirror bounces", "in mirrors by other surfaces than the camera (the soft and "
+              "indirect terms)"]
+    if moved:
+        parts.append(f"in a planar mirror that moves ({names(moved)}) as far as the mirror's own motion moves them")
+    have = f"; they have the camera's outlines seen in one planar mirror ({names(planar)})" if planar else ""
+    log.warning("%s: the boundary terms leave out the outlines seen %s%s", scene.name, "; ".join(parts), have)
 
 
 def _kinds(chosen: Sequence[Parameter]) -> set[str]:

@@ -13,19 +13,24 @@ them, :mod:`pyclpt.gradients.placement`):
 1. :func:`silhouette_edges`: the edges that can bound what the camera sees, in film coordinates: a
    mesh's boundary edges (one triangle), and edges whose two triangles face the camera on different
    sides (silhouettes) or that have more than two, and on a flat-shaded mesh the creases between two
-   triangles of different normals (its shading jumps there); clipped to the image.
+   triangles of different normals (its shading jumps there); clipped to the image. Then the same edges seen in
+   each planar mirror (:func:`pyclpt.gradients.mirrors.mirror_planes`: point c, unit normal m, R = I - 2 m m^T):
+   the silhouettes from the camera's origin reflected across the plane, the edges' points p reflected,
+   p' = R (p - c) + c, and projected, clipped to the mirror's box on the film and to the part of the edge on the
+   camera's side of the plane.
 2. :func:`primary_boundary`: points sampled on those edges, stratified, with density proportional to
    their length in pixels; the radiance on both sides of each point from the ``edge_radiance`` kernel
    (``cl/gradients/edge_radiance.cl``: the full path estimator, both sides with the same random
-   numbers); the difference weighted by the image gradient through the film's reconstruction filter and
-   scattered to the edge's two vertices through the perspective projection's Jacobian.
+   numbers; seen in a mirror, the rays reflect in it, and the jump has its reflectance); the difference weighted
+   by the image gradient through the film's reconstruction filter and scattered to the edge's two vertices
+   through the perspective projection's Jacobian (seen in a mirror, at p' and times R: the film position is
+   film(p'); the camera's motion acts at p', the mirror being still).
 
-It is one term of the derivative: the boundary term of hard shadows is :mod:`pyclpt.gradients.shadows`'s; the
-interior term of moving geometry (shading that changes with the surface's position and normal) and the
-boundary terms of soft shadows and indirect bounces are not computed yet, so ``render_backward`` still lists
-geometry as not differentiable. Exact where the radiance on each side is constant across a parameter change
-(tests/test_edges.py: a square emitter moving over a constant background, a sphere's silhouette against its
-radius).
+It is one term of the derivative: the interior term is the replay's (:mod:`pyclpt.gradients.differentiate`), the
+boundary terms of shadows :mod:`pyclpt.gradients.shadows`'s. Outlines seen through curved mirrors or refracting
+glass, after two or more mirror bounces, and how a moving mirror moves the outlines it shows are left out. Exact
+where the radiance on each side is constant across a parameter change (tests/test_edges.py: a square emitter
+moving over a constant background, directly and in a mirror, a sphere's silhouette against its radius).
 """
 from __future__ import annotations
 
@@ -38,6 +43,7 @@ import numpy as np
 
 from pyclpt.buffers.rfilter import filter_eval
 from pyclpt.device.context import Device
+from pyclpt.gradients.mirrors import MirrorPlane, mirror_planes
 from pyclpt.gradients.parameters import SceneParameters, flat_shaded, traverse
 from pyclpt.gradients.session import replay_for
 from pyclpt.scene.model import Mesh, ReconstructionFilter, Scene
@@ -57,8 +63,10 @@ class ScreenEdges:
     v1: np.ndarray  # (E,) and second
     s0: np.ndarray  # (E,) the clipped start and end as parameters of the whole projected edge
     s1: np.ndarray
-    z0: np.ndarray  # (E,) depth along the view direction of v0 and v1
+    z0: np.ndarray  # (E,) depth along the view direction of v0 and v1 (of their reflections, seen in a mirror)
     z1: np.ndarray
+    mirror: np.ndarray  # (E,) the index in ``planes`` of the mirror the edge is seen in, -1 seen directly
+    planes: list[MirrorPlane] = dataclasses.field(default_factory=list)  # the scene's mirror planes
 
     @property
     def lengths(self) -> np.ndarray:
@@ -114,13 +122,13 @@ class Projection:
         return n[:, :1] * (0.5 * self.width) * dsx - n[:, 1:] * (0.5 * self.height) * dsy
 
 
-def _clip(a: np.ndarray, b: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """Liang-Barsky: the parameters [s0, s1] of segments a -> b inside [0, width] x [0, height] (s0 > s1:
-    outside)."""
+def _clip(a: np.ndarray, b: np.ndarray, lo: tuple[float, float], hi: tuple[float, float]
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """Liang-Barsky: the parameters [s0, s1] of segments a -> b inside the box [lo, hi] (s0 > s1: outside)."""
     s0, s1 = np.zeros(len(a)), np.ones(len(a))
     d = b - a
-    for k, hi in ((0, width), (1, height)):
-        for p, q in ((-d[:, k], a[:, k]), (d[:, k], hi - a[:, k])):
+    for k in (0, 1):
+        for p, q in ((-d[:, k], a[:, k] - lo[k]), (d[:, k], hi[k] - a[:, k])):
             with np.errstate(divide="ignore", invalid="ignore"):
                 r = q / p
             parallel = p == 0
@@ -182,28 +190,77 @@ def mesh_edges(mesh: Mesh, camera_origin: np.ndarray | None, creases: bool = Fal
 
 def silhouette_edges(scene: Scene, meshes: Sequence[int], width: int, height: int) -> ScreenEdges:
     """The silhouette edges of ``scene.meshes[i]`` for i in ``meshes`` seen by the scene's camera on a
-    width x height image (see the module); edges with an end at or behind the camera's plane are left out."""
+    width x height image (see the module): first those seen directly, then, for each planar mirror
+    (:func:`pyclpt.gradients.mirrors.mirror_planes`), those seen in it, but the mirror's own mesh's (see
+    :func:`_view_edges`). Edges with an end at or behind the camera's plane are left out."""
     proj = Projection.of(scene, width, height)
-    cols: dict[str, list[np.ndarray]] = {k: [] for k in ("a", "b", "mesh", "v0", "v1", "s0", "s1", "z0", "z1")}
-    for i in meshes:
-        mesh = scene.meshes[i]
-        pairs, _ = mesh_edges(mesh, proj.origin, creases=flat_shaded(mesh))  # flat shading jumps at creases
-        p = mesh.positions.astype(np.float64)
-        z0, z1 = proj.depth(p[pairs[:, 0]]), proj.depth(p[pairs[:, 1]])
-        scale = max(float(np.abs(p - proj.origin).max()), 1e-30)
-        front = (z0 > 1e-6 * scale) & (z1 > 1e-6 * scale)
-        pairs, z0, z1 = pairs[front], z0[front], z1[front]
-        a, b = proj.film(p[pairs[:, 0]]), proj.film(p[pairs[:, 1]])
-        s0, s1 = _clip(a, b, width, height)
-        inside = (s1 > s0) & np.all(np.isfinite(a) & np.isfinite(b), axis=1)
-        for k, v in (("a", a + s0[:, None] * (b - a)), ("b", a + s1[:, None] * (b - a)),
-                     ("mesh", np.full(len(a), i)), ("v0", pairs[:, 0]), ("v1", pairs[:, 1]), ("s0", s0), ("s1", s1),
-                     ("z0", z0), ("z1", z1)):
-            cols[k].append(v[inside])
-    if not cols["a"]:
+    parts = [_view_edges(scene, proj, i) for i in meshes]
+    planes = mirror_planes(scene)
+    for k, plane in enumerate(planes):
+        box = _footprint(scene, proj, plane)
+        if box is not None:
+            parts += [_view_edges(scene, proj, i, plane, k, box) for i in meshes if i != plane.mesh]
+    cols = {key: [part[key] for part in parts] for key in ("a", "b", "mesh", "v0", "v1", "s0", "s1", "z0", "z1",
+                                                           "mirror")}
+    if not parts:
         empty = np.zeros((0, 2))
-        return ScreenEdges(empty, empty, *(np.zeros(0, int) for _ in range(3)), *(np.zeros(0) for _ in range(4)))
-    return ScreenEdges(**{k: np.concatenate(v) for k, v in cols.items()})
+        return ScreenEdges(empty, empty, *(np.zeros(0, int) for _ in range(3)), *(np.zeros(0) for _ in range(4)),
+                           np.zeros(0, int), planes)
+    return ScreenEdges(**{k: np.concatenate(v) for k, v in cols.items()}, planes=planes)
+
+
+#: A box on the film: its lowest (x, y) and its highest.
+Box = tuple[tuple[float, float], tuple[float, float]]
+
+
+def _footprint(scene: Scene, proj: Projection, plane: MirrorPlane) -> Box | None:
+    """The film box (lo, hi) that the mirror ``plane``'s triangles cover, within the image (the whole image when one
+    of their corners is at or behind the camera's plane); None when it covers none of the image, or the camera is in
+    the plane (it sees no reflection there)."""
+    p = scene.meshes[plane.mesh].positions.astype(np.float64)
+    corners = p[np.asarray(scene.meshes[plane.mesh].indices, np.int64)[plane.faces].reshape(-1)]
+    scale = max(float(np.abs(corners - proj.origin).max()), 1e-30)
+    if abs(float(plane.side(proj.origin))) <= 1e-6 * scale:
+        return None
+    full = (0.0, 0.0), (float(proj.width), float(proj.height))
+    if np.any(proj.depth(corners) <= 1e-6 * scale):
+        return full
+    x = proj.film(corners)
+    lo, hi = np.maximum(x.min(0), full[0]), np.minimum(x.max(0), full[1])
+    if not np.all(hi > lo):
+        return None
+    return (float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1]))
+
+
+def _view_edges(scene: Scene, proj: Projection, i: int, plane: MirrorPlane | None = None, k: int = -1,
+                box: Box | None = None) -> dict[str, np.ndarray]:
+    """The columns of :class:`ScreenEdges` for mesh i: seen directly (``plane`` None), clipped to the image; or
+    seen in the mirror ``plane`` (index k): the silhouettes from the camera's origin reflected across it, the
+    edges' points reflected (R (p - c) + c) and projected, clipped to the mirror's film box ``box`` and to the part
+    on the camera's side of the plane (the mirror is between the camera and the reflected part only)."""
+    mesh = scene.meshes[i]
+    p = mesh.positions.astype(np.float64)
+    eye, seen = (proj.origin, p) if plane is None else (plane.reflect(proj.origin), plane.reflect(p))
+    pairs, _ = mesh_edges(mesh, eye, creases=flat_shaded(mesh))  # flat shading jumps at creases
+    z0, z1 = proj.depth(seen[pairs[:, 0]]), proj.depth(seen[pairs[:, 1]])
+    scale = max(float(np.abs(seen - proj.origin).max()), 1e-30)
+    front = (z0 > 1e-6 * scale) & (z1 > 1e-6 * scale)
+    pairs, z0, z1 = pairs[front], z0[front], z1[front]
+    a, b = proj.film(seen[pairs[:, 0]]), proj.film(seen[pairs[:, 1]])
+    s0, s1 = _clip(a, b, *(box or ((0, 0), (proj.width, proj.height))))
+    if plane is not None:  # the part in front of the mirror, as parameters t of the 3D edge, then s on the film
+        toward = np.sign(plane.side(proj.origin))
+        h0, h1 = toward * plane.side(p[pairs[:, 0]]), toward * plane.side(p[pairs[:, 1]])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cross = h0 / (h0 - h1)
+        t0 = np.where(h0 > 0, 0.0, np.where(h1 > 0, cross, 1.0))
+        t1 = np.where(h1 > 0, 1.0, np.where(h0 > 0, cross, 0.0))
+        s0 = np.maximum(s0, t0 * z1 / ((1 - t0) * z0 + t0 * z1))  # s = t z1 / z(t) (1/z is linear on the film)
+        s1 = np.minimum(s1, t1 * z1 / ((1 - t1) * z0 + t1 * z1))
+    inside = (s1 > s0) & np.all(np.isfinite(a) & np.isfinite(b), axis=1)
+    cols = {"a": a + s0[:, None] * (b - a), "b": a + s1[:, None] * (b - a), "mesh": np.full(len(a), i),
+            "v0": pairs[:, 0], "v1": pairs[:, 1], "s0": s0, "s1": s1, "z0": z0, "z1": z1, "mirror": np.full(len(a), k)}
+    return {key: v[inside] for key, v in cols.items()}
 
 
 def _filter_weights(rfilter: ReconstructionFilter, x: np.ndarray, width: int, height: int
@@ -242,6 +299,7 @@ class EdgeSamples:
     velocity: np.ndarray  # (N, 3) n . d(film position)/dp at the 3D point: how the edge moves with it
     point: np.ndarray  # (N, 3) the 3D point
     normal: np.ndarray  # (N, 2) the edge's unit normal in the film plane (towards the "+" side)
+    seen_at: np.ndarray  # (N, 3) where the camera sees the point: the point, or its reflection in a planar mirror
 
 
 def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, samples: int, seed: int,
@@ -257,7 +315,8 @@ def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *
     if n_pts == 0:
         z = np.zeros(0)
         return EdgeSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), np.zeros((0, 3)), z.astype(int),
-                           z.astype(int), z.astype(int), z, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)))
+                           z.astype(int), z.astype(int), z, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
+                           np.zeros((0, 3)))
     rng = np.random.default_rng([seed, 0x6564676573])  # "edges"
     u = ((np.arange(n_pts) if stratified else 0) + rng.random(n_pts)) / (n_pts if stratified else 1) * total
     cdf = np.cumsum(lengths)
@@ -281,8 +340,16 @@ def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *
         p = scene.meshes[i].positions.astype(np.float64)
         tm = t[m][:, None]
         point[m] = (1 - tm) * p[edges.v0[e][m]] + tm * p[edges.v1[e][m]]
+    # seen in a mirror, the point is seen at p' = R (p - c) + c: n . d film(p')/dp = (n . d film/dp') R
+    seen = point.copy()
+    mirrored = [(edges.mirror[e] == k, plane) for k, plane in enumerate(edges.planes)]
+    for m, plane in mirrored:
+        seen[m] = plane.reflect(point[m])
+    velocity = proj.normal_velocity(seen, n)
+    for m, plane in mirrored:
+        velocity[m] = velocity[m] @ plane.matrix
     return EdgeSamples(pix, w, (radiance[:, 0] - radiance[:, 1]) * total / n_pts, edges.mesh[e], edges.v0[e],
-                       edges.v1[e], t, proj.normal_velocity(point, n), point, n)
+                       edges.v1[e], t, velocity, point, n, seen)
 
 
 def _meshes_of(scene: Scene, names: Sequence[str]) -> dict[int, list[str]]:
@@ -441,12 +508,12 @@ def splat_image(pixels: np.ndarray, weights: np.ndarray, values: np.ndarray, wid
 def primary_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, samples: int = 65536,
                      seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
                      device: Device | str | None = None, stratified: bool = True) -> dict[str, np.ndarray]:
-    """Reverse mode: the boundary term of primary visibility of dLoss/dparameter for ``names``
-    (``SHAPE.vertex_positions``, ``SHAPE.to_world``, ``SENSOR.to_world``; :func:`pyclpt.traverse`), given dLoss/dImage
-    ``image_grad`` (H, W, 3) of an image rendered at that size: ``samples`` edge points, the radiance on
-    both sides of each traced with ``seed`` (:func:`sample_edges`). ``parameters``: the SceneParameters
-    whose poses the ``to_world`` gradients are for (default: a new traverse, where every pose is the
-    identity)."""
+    """Reverse mode: the boundary term of primary visibility (outlines seen directly and in planar mirrors) of
+    dLoss/dparameter for ``names`` (``SHAPE.vertex_positions``, ``SHAPE.to_world``, ``SENSOR.to_world``;
+    :func:`pyclpt.traverse`), given dLoss/dImage ``image_grad`` (H, W, 3) of an image rendered at that size:
+    ``samples`` edge points, the radiance on both sides of each traced with ``seed`` (:func:`sample_edges`).
+    ``parameters``: the SceneParameters whose poses the ``to_world`` gradients are for (default: a new traverse,
+    where every pose is the identity)."""
     g = np.asarray(image_grad, np.float64)
     if g.ndim != 3 or g.shape[2] != 3:
         raise ValueError(f"image_grad must be (H, W, 3), got {g.shape}")
@@ -460,7 +527,7 @@ def primary_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str],
     weight = sample_weights(es.pixels, es.weights, g, es.jump)
     out: dict[str, np.ndarray] = {}
     for name in cameras:
-        velocity = sensor_velocity(scene, width, height, es.point, es.normal, name)
+        velocity = sensor_velocity(scene, width, height, es.seen_at, es.normal, name)  # the mirrors are still
         out[name] = np.tensordot(weight, velocity, axes=1).astype(np.float32)
     for i, mesh_names in wanted.items():
         m = es.mesh == i
@@ -485,7 +552,7 @@ def primary_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wi
     if name in sensor_names(scene):  # every edge moves in the film
         es = sample_edges(scene, range(len(scene.meshes)), width, height, samples=samples, seed=seed,
                           max_depth=max_depth, device=device)
-        velocity = sensor_velocity(scene, width, height, es.point, es.normal, name)
+        velocity = sensor_velocity(scene, width, height, es.seen_at, es.normal, name)
         dx = along(velocity, tan)
     else:
         i, dp = vertex_motion(params, scene, name, tan)
