@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from pyclpt.scene.model import Scene, content_digest, generation
-from pyclpt.scene.transform import apply_normals, apply_points
 
 
 @dataclass
@@ -82,14 +81,7 @@ def flatten(scene: Scene) -> Flat:
             if name in taken:
                 raise ValueError(f"instance {prefix!r}: a mesh is named {name!r} (the flattened instance's name)")
             taken.add(name)
-            normals = None if mesh.normals is None else apply_normals(m, mesh.normals.astype(np.float64))
-            meshes.append(dataclasses.replace(
-                mesh, name=name, positions=np.ascontiguousarray(apply_points(m, mesh.positions.astype(np.float64)),
-                                                                np.float32),
-                normals=None if normals is None else np.ascontiguousarray(normals, np.float32),
-                # a mirroring transform reverses the winding, so that the geometric normal is the transformed one
-                # (as the kernels' instances and Scene.flattened have it)
-                indices=mesh.indices[:, ::-1].copy() if np.linalg.det(m[:3, :3]) < 0 else mesh.indices))
+            meshes.append(mesh.placed(m, name))
             poses[f"{name}.to_world"] = m.copy()
             parts.setdefault(f"{prefix}.to_world", []).append(f"{name}.to_world")
     flat = dataclasses.replace(scene, meshes=meshes, groups={}, instances=[])

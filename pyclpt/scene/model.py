@@ -17,6 +17,7 @@ it runs before a scene is put on a device, so no negative or NaN value reaches t
 from __future__ import annotations
 
 import abc
+import dataclasses
 import hashlib
 import math
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ from typing import Any, get_args
 import numpy as np
 
 from pyclpt.common.checks import check_bool, check_float, check_int
+from pyclpt.scene.transform import apply_normals, apply_points
 
 RGB = tuple[float, float, float]
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -655,6 +657,16 @@ class Mesh(Checked):
         """Triangles of the mesh."""
         return int(self.indices.shape[0])
 
+    def placed(self, to_world: np.ndarray, name: str) -> Mesh:
+        """A copy named ``name`` in the space ``to_world`` (4x4) maps this mesh's into, as the kernels place an
+        instance's meshes: positions by the matrix, normals by its inverse transpose, and the winding reversed
+        under a mirroring transform, so that the geometric normal is the transformed one."""
+        m = np.asarray(to_world, np.float64)
+        normals = None if self.normals is None else apply_normals(m, self.normals.astype(np.float64))
+        indices = self.indices[:, ::-1].copy() if np.linalg.det(m[:3, :3]) < 0 else self.indices
+        return dataclasses.replace(self, name=name, positions=apply_points(m, self.positions.astype(np.float64)),
+                                   normals=normals, indices=indices)
+
     def _check(self) -> None:
         where = f"mesh {self.name!r}"
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
@@ -998,19 +1010,8 @@ class Scene(Checked):
         groups: what instancing saves memory on. Materials, camera and the rest are shared."""
         meshes = list(self.meshes)
         for k, inst in enumerate(self.instances):
-            m = inst.to_world
-            lin = m[:3, :3]
-            flip = np.linalg.det(lin) < 0
-            inv_t = np.linalg.inv(lin).T
-            for mesh in self.groups[inst.group].meshes:
-                pos = (mesh.positions.astype(np.float64) @ lin.T + m[:3, 3]).astype(np.float32)
-                normals = None
-                if mesh.normals is not None:
-                    n = mesh.normals.astype(np.float64) @ inv_t.T
-                    length = np.linalg.norm(n, axis=1, keepdims=True)
-                    normals = (n / np.where(length > 0, length, 1)).astype(np.float32)
-                idx = mesh.indices[:, ::-1].copy() if flip else mesh.indices
-                meshes.append(Mesh(f"{inst.name}/{k}/{mesh.name}", pos, idx, mesh.material, normals, mesh.uvs))
+            group = self.groups[inst.group].meshes
+            meshes += [mesh.placed(inst.to_world, f"{inst.name}/{k}/{mesh.name}") for mesh in group]
         return Scene(meshes, self.materials, self.camera, self.film, self.environment, self.spp, self.max_depth,
                      self.name, self.source, self.lights, dict(self.ids))
 
