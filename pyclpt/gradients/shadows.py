@@ -55,7 +55,7 @@ from pyclpt.gradients.edges import (
     vertex_motion,
 )
 from pyclpt.gradients.parameters import SceneParameters, traverse
-from pyclpt.gradients.replay import SIDE_OCCLUDER
+from pyclpt.gradients.replay import SIDE_OCCLUDER, PathReplay
 from pyclpt.gradients.session import replay_for
 from pyclpt.scene.model import Camera, DirectionalLight, PointLight, Scene, SpotLight
 
@@ -498,6 +498,17 @@ def shading_points(replay, rfilter, width: int, p0: int, p1: int, spp: int, rng:
     return film, pix, prim, depth, table, attached
 
 
+def _triangle_tables(scene: Scene, replay: PathReplay) -> tuple[np.ndarray, np.ndarray]:
+    """Where each mesh's triangles start in the scene's triangle list (M + 1,), and the BVH's leaf order of them
+    (the kernels' primitive ids are leaf-order positions)."""
+    return np.cumsum([0] + [m.triangle_count for m in scene.meshes]), replay.scene.arrays.bvh.tri_order
+
+
+def _mesh_of(first: np.ndarray, order: np.ndarray, prims: np.ndarray) -> np.ndarray:
+    """The mesh (index in scene.meshes) of leaf-order triangles ``prims`` (-1: none) (:func:`_triangle_tables`)."""
+    return np.where(prims >= 0, np.searchsorted(first, order[np.maximum(prims, 0)], side="right") - 1, -1)
+
+
 def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: int, *, spp: int, seed: int,
                        max_depth: int | None = None, device: Device | str | None = None,
                        receivers: Sequence[int] = (), camera: bool = False, later: bool = True
@@ -521,12 +532,10 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
     Projection.of(scene, width, height)  # perspective cameras only (the others are refused by name)
     rfilter = scene.film.rfilter
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
-    first = np.cumsum([0] + [m.triangle_count for m in scene.meshes])
-    order = replay.scene.arrays.bvh.tri_order
+    first, order = _triangle_tables(scene, replay)
 
     def prim_mesh(prims: np.ndarray) -> np.ndarray:
-        """The mesh (index in scene.meshes) of leaf-order triangles (-1: none)."""
-        return np.where(prims >= 0, np.searchsorted(first, order[np.maximum(prims, 0)], side="right") - 1, -1)
+        return _mesh_of(first, order, prims)
 
     # One sample a shading point: an edge that is a silhouette from it, picked in proportion to the angle it
     # subtends, its own mesh's included (a mesh's outlines on itself; not the edges of its own triangle): for a
@@ -882,8 +891,7 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
     if not total > 0:
         return
     cdf = np.cumsum(lengths) / total
-    first = np.cumsum([0] + [m.triangle_count for m in scene.meshes])
-    order = replay.scene.arrays.bvh.tri_order
+    first, order = _triangle_tables(scene, replay)
     positions = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
     by_index = {h.index: h for h in hard_lights(scene)}
 
@@ -932,7 +940,7 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
         measure = speed[k] * total / lengths[e[k]] / spp
         radiance = out.radiance[nz[k]].astype(np.float64)
         jump = (radiance[:, 0] - radiance[:, 1]) * (measure[:, None] * table[sel[k], 5:])
-        rmesh = np.searchsorted(first, order[rprim[k]], side="right") - 1
+        rmesh = _mesh_of(first, order, rprim[k])
         return DeltaSamples(pix[sel[k]][:, None], np.ones((len(k), 1)), jump, light_e[e[k]], mesh_e[e[k]],
                             pairs_e[e[k], 0], pairs_e[e[k], 1], t[k], sigma[k],
                             np.einsum("nc,ncj->nj", normal[k], proj[k]) / dist[k, None], rmesh,
