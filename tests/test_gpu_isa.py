@@ -29,7 +29,8 @@ EXTRA_SCENES = ("delta-emitters", "emitter-textures", "instances", "orthographic
 KERNELS = {"megakernel", "path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution",
            "sample_bsdf", "compact_count", "compact_scatter", "finish_paths", "accumulate_frame", "accumulate_batch",
            "resolve", "aov_accumulate", "count_dropped", "demodulate", "reproject", "clip_history", "antilag",
-           "variance", "atrous", "conserve", "conserve_gain", "modulate", "deficit", "deficit_gain", "blend",
+           "variance", "atrous", "conserve", "conserve_gain", "modulate", "deficit", "deficit_gain", "light_change",
+           "light_age", "blend",
            "backward", "forward", "edge_radiance", "path_vertices", "vertex_radiance", "delta_shadow_sides",
            "splat_axes", "splat_gather"}
 

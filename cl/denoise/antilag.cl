@@ -23,7 +23,13 @@
  * The clamp's deficit history (clip_history) is cut the same way, towards this frame's deficit (the
  * raw sample minus the clamped one).
  *
- * Consumes: temporal[0..2] (reproject: this frame's sample, clamped); sample (demodulate: the raw
+ * While fewer than DenoiserSettings.antilag_frames frames have passed since the lighting changed in view
+ * (light_age: at least LIGHT_CHANGE_MIN pixels saw an emitter change), the threshold is antilag_changed
+ * (if lower): the dim surfaces a changed light reaches show the change to the statistic only over
+ * several frames (docs/denoising.md, "The light change: cutting more readily after it").
+ *
+ * Consumes: light_age[0] (light_age: frames since the lighting changed in view); temporal[0..2] (reproject:
+ *           this frame's sample, clamped); sample (demodulate: the raw
  *           sample); deficit (clip_history: the clamp's deficit history); emission (demodulate: the
  *           frame's emitted part); lag[c * pixels + p] (c < 3, clip_history: t); accum
  *           (clip_history: the long history), fast, moments, len, emis (reproject: the fast
@@ -39,8 +45,8 @@ static inline float recut(float w, float w_cut) { return w < 1.0f ? (w_cut - w) 
 __kernel void antilag(__global const float* temporal, __global const float* emission, __global const float* lag,
                       __global const float* sample, __global float* deficit, __global float* accum,
                       __global float* fast, __global float* moments, __global float* len, __global float* emis,
-                      int width, int height,
-                      float antilag, float alpha_min, float moments_alpha_min, float fast_alpha) {
+                      __global const int* light_age, int width, int height, float antilag, float antilag_changed,
+                      int antilag_frames, float alpha_min, float moments_alpha_min, float fast_alpha) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;
@@ -67,7 +73,9 @@ __kernel void antilag(__global const float* temporal, __global const float* emis
         }
     }
     t /= count;
-    float a = antilag > 0.0f ? m_clamp(4.0f * (t - antilag) / antilag, 0.0f, 1.0f) : 0.0f;
+    /* a few frames after the lighting changed in view (light_age), the lower threshold */
+    float thr = light_age[0] < antilag_frames ? m_min(antilag, antilag_changed) : antilag;
+    float a = thr > 0.0f ? m_clamp(4.0f * (t - thr) / thr, 0.0f, 1.0f) : 0.0f;
     float N = len[p];
     float N_cut = m_floor((N - 1.0f) * (1.0f - a) + 0.5f) + 1.0f;
     if (!(a > 0.0f) || !(N_cut < N)) return; /* a branch: taken where the lighting changed */

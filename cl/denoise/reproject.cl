@@ -70,7 +70,8 @@
  *           (luminance mean and mean of squares), len (N, a float), emis (the emission history),
  *           deficit (the clamp's deficit history reprojected with the same taps, blended by
  *           clip_history), albedo (A); sample[0..2] (p's own, in place: the sample demodulated by A,
- *           before the clamp, as clip_history and antilag read it); all padded. */
+ *           before the clamp, as clip_history and antilag read it); all padded; lit[p] (uchar, not
+ *           padded: 1 where a light changed and the history holds, for light_change). */
 #include "denoise/svgf.h"
 
 /* The firefly clamp's neighbourhood term is mean + POOLED_SIGMA x firefly_sigma x the pooled sigma:
@@ -125,6 +126,25 @@ static inline bool emitter_moved(vec3 lo, vec3 hi, int count, vec3 lo_p, vec3 hi
     return apart(lo.x, hi.x, lo_p.x, hi_p.x) || apart(lo.y, hi.y, lo_p.y, hi_p.y) || apart(lo.z, hi.z, lo_p.z, hi_p.z);
 }
 
+/* Whether the same emitting samples tell that a light itself changed, for the anti-lag (light_change.cl):
+ * both frames' ranges there and apart by more than LIGHT_CHANGE_RATIO in every channel that emits
+ * (a light turned up or down), not a range that only shifted (a jittered edge, a sky that varies across
+ * a window: the static living room's emission flags 0.4 % of its pixels a frame, none of them so). */
+#define LIGHT_CHANGE_RATIO 1.5f
+
+static inline bool light_changed(vec3 lo, vec3 hi, int count, vec3 lo_p, vec3 hi_p, int count_p) {
+    if (count == 0 || count_p == 0) return false;
+    bool down = true, up = true;
+    float l[3] = {lo.x, lo.y, lo.z}, h[3] = {hi.x, hi.y, hi.z}, lp[3] = {lo_p.x, lo_p.y, lo_p.z};
+    float hp[3] = {hi_p.x, hi_p.y, hi_p.z};
+    for (int c = 0; c < 3; ++c) {
+        if (!(h[c] > 0.0f || hp[c] > 0.0f)) continue;
+        down &= LIGHT_CHANGE_RATIO * h[c] < lp[c];
+        up &= l[c] > LIGHT_CHANGE_RATIO * hp[c];
+    }
+    return down || up;
+}
+
 /* The largest difference, per axis in pixels, between the motions of two samples that reproject still
  * takes for the same footprint when their surfaces differ (moves_with). */
 #define MOTION_TOLERANCE 0.25f
@@ -176,7 +196,7 @@ __kernel void reproject(__global float* sample, __global const float* emission,
                         __global const float* deficit_prev, __global const float* albedo_prev,
                         __global float* temporal, __global float* deficit, __global float* albedo,
                         __global float* fast, __global float* moments, __global float* len, __global float* emis,
-                        int width, int height, float depth_threshold, float normal_threshold, float firefly_ratio,
+                        __global uchar* lit, int width, int height, float depth_threshold, float normal_threshold, float firefly_ratio,
                         float firefly_sigma, float max_history, float alpha_min, float moments_alpha_min,
                         float fast_alpha) {
     int x = get_global_id(0), y = get_global_id(1);
@@ -345,7 +365,7 @@ __kernel void reproject(__global float* sample, __global const float* emission,
     /* an emitter changed (emitter_moved): the emitting samples of a material in the previous frame's
      * 3x3 around the previous position and in this frame's 3x3 around p, compared (a branch: taken
      * where an emitter is near) */
-    bool emitter_changed = false;
+    bool emitter_changed = false, light_turned = false;
     if (any_emitting) { /* a branch: taken near an emitter */
         /* the emitting samples of the 3x3 around p (k < 9) and around the previous position: their
          * materials (NOT_EMITTING for the others and outside the image) and emissions */
@@ -379,6 +399,7 @@ __kernel void reproject(__global float* sample, __global const float* emission,
                 count_p += on_p ? 1 : 0;
             }
             emitter_changed |= emitter_moved(lo, hi, count, lo_p, hi_p, count_p);
+            light_turned |= light_changed(lo, hi, count, lo_p, hi_p, count_p);
         }
     }
     float nsigma = m_sqrt(nvar / m_max(nw, 1.0f));
@@ -415,4 +436,5 @@ __kernel void reproject(__global float* sample, __global const float* emission,
     store_planar3(deficit, n, p, v3_scale(h.dfc, inv)); /* clip_history blends it */
     store_planar3(albedo, n, p, A);
     geo[GEO_GRAD * n + p] = grad;
+    lit[p] = light_turned && valid ? 1 : 0; /* a light that changed, not one that came into view */
 }

@@ -236,6 +236,15 @@ static inline float tile_bilinear(__global const float* plane, int ntx, int nty,
 #define CONSERVE_OUTLIER 10.0f
 #define CONSERVE_EPS 1e-4f
 
+/* The lighting changed in view (light_change.cl, light_age.cl): pixels summed by one work-item; the
+ * share of the image's pixels (at least LIGHT_CHANGE_MIN) that must see a light change (reproject's
+ * light_changed: the static living room flags up to 8 of its 14,400 pixels a frame, the cornell-box's
+ * light turned down by 4 flags 134 at 120x120); the age's cap (the age the histories start with). */
+#define LIGHT_CHUNK 1024
+#define LIGHT_CHANGE_SHARE (1.0f / 400.0f)
+#define LIGHT_CHANGE_MIN 16
+#define LIGHT_AGE_MAX (1 << 20)
+
 static inline int conserve_tiles(int size) { return (size + CONSERVE_TILE - 1) / CONSERVE_TILE; }
 
 /* How much of the conserve gain a pixel with a history of N frames takes: 0 up to CONSERVE_FROM,

@@ -66,6 +66,16 @@ class DenoiserSettings:
     #: restarts no history of tests/test_denoise.py's static noisy scene in 16 frames and brings the
     #: cornell-box's error in the frame of a light change from 0.447 to 0.052 (120x120).
     antilag: float = 3.5
+    #: The anti-lag's threshold (if lower than ``antilag``) in the ``antilag_frames`` frames after the lighting
+    #: changed in view (cl/denoise/light_age.cl: at least a few pixels saw an emitter change: emitter_moved in
+    #: reproject). A light turned down changes the light of every surface it reaches in that frame, but the dim,
+    #: noisy ones (a box's face lit only indirectly) show it to the statistic only over several frames; at 3.5
+    #: they kept the old light for tens of frames (the cornell-box's light change: lag "never"; docs/denoising.md,
+    #: "The light change: cutting more readily after it").
+    antilag_changed: float = 1.5
+    #: How many frames after a light changed in view ``antilag_changed`` holds (0: never). On the cornell-box's
+    #: light change at 120x120, 4 frames at 1.5 bring the lag from "never" to 0; 8 frames at 1.0 cut on noise.
+    antilag_frames: int = 4
     #: The firefly clamp (cl/denoise/reproject.cl): the frame's demodulated luminance is clamped to
     #: sqrt(N) x the larger of firefly_ratio x a spatial reference (the largest of its 3x3 neighbours'
     #: mean, centre excluded, their temporal means and the history's luminance) and the pixel's own
@@ -171,6 +181,8 @@ class DenoiserSettings:
         self.clip_gamma = check_float(self.clip_gamma, f"{name}.clip_gamma")
         self.clip_radius = check_int(self.clip_radius, f"{name}.clip_radius", lo=1, hi=2)
         self.antilag = check_float(self.antilag, f"{name}.antilag", lo=0.0)
+        self.antilag_changed = check_float(self.antilag_changed, f"{name}.antilag_changed", lo=0.0)
+        self.antilag_frames = check_int(self.antilag_frames, f"{name}.antilag_frames", lo=0, hi=1 << 16)
         self.firefly_ratio = check_float(self.firefly_ratio, f"{name}.firefly_ratio", lo=0.0)
         self.firefly_sigma = check_float(self.firefly_sigma, f"{name}.firefly_sigma", lo=0.0)
         self.conserve_sigma = check_float(self.conserve_sigma, f"{name}.conserve_sigma", lo=0.0)

@@ -39,10 +39,14 @@ from pyclpt.device.program import build_program
 log = logging.getLogger("pyclpt.denoise")
 
 #: The passes of a frame, in launch order (each a kernel, a .cl file and a method of Svgf).
-PASSES = ("demodulate", "count_dropped", "reproject", "clip_history", "antilag", "deficit", "deficit_gain",
-          "variance", "atrous", "conserve", "conserve_gain", "modulate")
+PASSES = ("demodulate", "count_dropped", "reproject", "light_change", "light_age", "clip_history", "antilag",
+          "deficit", "deficit_gain", "variance", "atrous", "conserve", "conserve_gain", "modulate")
 #: Side of the tiles over which the firefly clamp's deficit is measured (cl/denoise/svgf.h, DEFICIT_TILE).
 DEFICIT_TILE = 16
+#: Pixels summed by one work-item of light_change (cl/denoise/svgf.h, LIGHT_CHUNK), and the light age the
+#: histories start with (LIGHT_AGE_MAX: the lighting changed long ago).
+LIGHT_CHUNK = 1024
+LIGHT_AGE_MAX = 1 << 20
 #: Side of the tiles over which the a-trous filter's energy balance is kept (cl/denoise/svgf.h, CONSERVE_TILE).
 CONSERVE_TILE = 8
 #: Where the anti-lag statistic stays at or under this fraction of ``antilag``, what the history clipping
@@ -141,6 +145,9 @@ class Svgf:
         self.output = alloc(self.device, f * n * 3, f"denoised image {size}")
         self._marks = alloc(self.device, n, f"denoiser non-finite marks {size}")
         self._dropped = alloc(self.device, 4, "denoiser non-finite counter")
+        self._lit = alloc(self.device, n, f"denoiser emitter-change marks {size}")
+        self._light_count = alloc(self.device, 4, "denoiser light-change count")
+        self._light_age = alloc(self.device, 4, "denoiser light-change age")
         self._dropped_total = 0
         self._build()
         log.debug("svgf %s on %s: %s", size, self.device.name, self._settings)
@@ -149,6 +156,7 @@ class Svgf:
         self.frames = 0
         fill_buffer(self.device.queue, self._dropped, np.int32(0), 0, 4)
         fill_buffer(self.device.queue, self._marks, np.uint8(0), 0, n)
+        fill_buffer(self.device.queue, self._lit, np.uint8(0), 0, n)
         for buf, nbytes in self._padded:  # the pads stay 0: finite values for taps outside the image
             fill_buffer(self.device.queue, buf, np.float32(0), 0, nbytes)
         self.reset()
@@ -186,8 +194,8 @@ class Svgf:
         phi = self._settings.phi_normal
         power_of_two = phi >= 1 and phi == 2.0 ** int(math.log2(phi))
         squarings = {"NORMAL_SQUARINGS": int(math.log2(phi))} if power_of_two else {}
-        for name in ("demodulate", "reproject", "antilag", "deficit", "deficit_gain", "variance", "atrous", "conserve",
-                     "conserve_gain", "modulate"):
+        for name in ("demodulate", "reproject", "light_change", "light_age", "antilag", "deficit", "deficit_gain",
+                     "variance", "atrous", "conserve", "conserve_gain", "modulate"):
             defines = squarings if name in ("variance", "atrous") else {}
             kernels[name] = cl.Kernel(build_program(d, [f"denoise/{name}.cl"], defines=defines,
                                                     options=BUILD_OPTIONS), name)
@@ -209,6 +217,8 @@ class Svgf:
                                (self._emission_pair, 3)):
             for buf in bufs:
                 fill_buffer(q, buf, np.float32(0), 4 * PAD, 4 * n * channels)
+        fill_buffer(q, self._light_count, np.int32(0), 0, 4)
+        fill_buffer(q, self._light_age, np.int32(LIGHT_AGE_MAX), 0, 4)  # the lighting changed long ago
         self.frames = 0
 
     @property
@@ -278,7 +288,7 @@ class Svgf:
             self._geo[p], self._hist[p], self._fast[p], self._moments[p], self._len[p], self._emis[p],
             self._deficit[p], self._albedo[p], self._temporal, self._deficit[c], self._albedo[c], self._fast[c],
             self._moments[c], self._len[c],
-            self._emis[c], *self._args2d(),
+            self._emis[c], self._lit, *self._args2d(),
             np.float32(s.depth_threshold), np.float32(s.normal_threshold), np.float32(s.firefly_ratio),
             np.float32(s.firefly_sigma), np.float32(s.max_history), np.float32(s.alpha_min),
             np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
@@ -296,6 +306,19 @@ class Svgf:
         """Where clip_history writes the long history: the colour history itself when the history
         keeps the unfiltered accumulation (feedback_tap -1), else a scratch buffer."""
         return self._hist[self._cur] if self._settings.feedback_tap < 0 else self._ping[1]
+
+    def light_change(self) -> cl.Event:
+        """Pass 2b (cl/denoise/light_change.cl): how many pixels saw a light change this frame (reproject's marks)."""
+        chunks = -(-self.pixels // LIGHT_CHUNK)
+        ev = self._kernels["light_change"](self.device.queue, (chunks,), None, self._lit, np.int32(self.pixels),
+                                           self._light_count)
+        return self._record("light_change", ev)
+
+    def light_age(self) -> cl.Event:
+        """Pass 2c (cl/denoise/light_age.cl): frames since the lighting changed in view, which :meth:`antilag` reads."""
+        ev = self._kernels["light_age"](self.device.queue, (1,), None, self._light_count, self._light_age,
+                                        np.int32(self.pixels))
+        return self._record("light_age", ev)
 
     def clip_history(self) -> cl.Event:
         """Pass 3 (cl/denoise/clip_history.cl): the long history clipped and blended (one work-item per
@@ -317,8 +340,9 @@ class Svgf:
             self.device.queue, self.global_size, self.local, self._temporal, self._emission_pair[c], self._lag,
             self._ping[0],
             self._deficit[c], self._accum, self._fast[c], self._moments[c], self._len[c], self._emis[c],
-            *self._args2d(),
-            np.float32(s.antilag if s.clip_gamma >= 0 else 0.0), np.float32(s.alpha_min),
+            self._light_age, *self._args2d(),
+            np.float32(s.antilag if s.clip_gamma >= 0 else 0.0), np.float32(s.antilag_changed),
+            np.int32(s.antilag_frames), np.float32(s.alpha_min),
             np.float32(s.moments_alpha_min), np.float32(s.fast_alpha))
         return self._record("antilag", ev)
 
@@ -411,6 +435,8 @@ class Svgf:
         self.demodulate(color, aovs)
         self.count_dropped()
         self.reproject(aovs)
+        self.light_change()
+        self.light_age()
         self.clip_history()
         self.antilag()
         if self._settings.give_back:
