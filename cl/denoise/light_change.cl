@@ -11,14 +11,11 @@
  * Consumes: lit[0 .. pixels-1] (uchar, reproject: 1 where a light changed).
  * Produces: changed[0] += their sum; lit zeroed. */
 #include "denoise/svgf.h"
+#include "film/marks.h"
 
 __kernel void light_change(__global uchar* lit, int pixels, volatile __global int* changed) {
     int begin = (int)get_global_id(0) * LIGHT_CHUNK;
     if (begin >= pixels) return;
-    int end = min(begin + LIGHT_CHUNK, pixels);
-    int sum = 0;
-    for (int i = begin; i < end; ++i) sum += lit[i];
-    if (sum == 0) return;
-    for (int i = begin; i < end; ++i) lit[i] = 0;
-    atomic_add(changed, sum);
+    int sum = take_marks(lit, begin, min(begin + LIGHT_CHUNK, pixels));
+    if (sum != 0) atomic_add(changed, sum);
 }

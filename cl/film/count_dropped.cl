@@ -8,6 +8,8 @@
  *           pixels = the batch's frames times the image's pixels).
  * Produces: dropped[0] += their sum; marks zeroed. */
 
+#include "film/marks.h"
+
 #ifndef COUNT_CHUNK /* -DCOUNT_CHUNK from pyclpt/film/film.py, which sizes the launch by it */
 #error "COUNT_CHUNK must be defined (-DCOUNT_CHUNK=...)"
 #endif
@@ -15,10 +17,6 @@
 __kernel void count_dropped(__global uchar* marks, int pixels, volatile __global int* dropped) {
     int begin = (int)get_global_id(0) * COUNT_CHUNK;
     if (begin >= pixels) return;
-    int end = min(begin + COUNT_CHUNK, pixels);
-    int sum = 0;
-    for (int i = begin; i < end; ++i) sum += marks[i];
-    if (sum == 0) return;
-    for (int i = begin; i < end; ++i) marks[i] = 0;
-    atomic_add(dropped, sum);
+    int sum = take_marks(marks, begin, min(begin + COUNT_CHUNK, pixels));
+    if (sum != 0) atomic_add(dropped, sum);
 }
