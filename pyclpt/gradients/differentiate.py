@@ -48,7 +48,7 @@ from pyclpt.gradients.layout import (
     vertex_offset,
 )
 from pyclpt.gradients.mirrors import delta_lobes, mirror_planes
-from pyclpt.gradients.normals import normals_backward, normals_forward
+from pyclpt.gradients.normals import normals_backward, normals_chain, normals_forward
 from pyclpt.gradients.parameters import Parameter, SceneParameters
 from pyclpt.gradients.session import clear_cache, replay_for  # noqa: F401 (clear_cache: the public name)
 from pyclpt.gradients.shadows import (
@@ -241,9 +241,9 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
 def _warn_delta_outlines(scene: Scene, chosen: Sequence[Parameter]) -> None:
     """Where things move in a scene with mirrors or smooth glass, say which outlines seen through them the boundary
     terms leave out (docs/differentiable.md, "What is not differentiated yet"): those seen through curved mirrors
-    and refracting glass; after two or more mirror bounces; in mirrors by other surfaces than the camera; and
-    in a planar mirror that is differentiated, as far as its own motion moves them. The camera's outlines seen in
-    one planar mirror are in (:func:`pyclpt.gradients.edges.silhouette_edges`)."""
+    and refracting glass; after two or more mirror bounces; in mirrors by other surfaces than the camera. The
+    camera's outlines seen in one planar mirror are in (:func:`pyclpt.gradients.edges.silhouette_edges`), as they
+    move with the meshes, the camera and the mirror itself."""
     if not any(p.kind in ("geometry", "camera") for p in chosen):
         return
     lobes = [delta_lobes(scene.materials[mesh.material]) for mesh in scene.meshes]
@@ -253,7 +253,6 @@ def _warn_delta_outlines(scene: Scene, chosen: Sequence[Parameter]) -> None:
     bent = [mesh.name for i, (mesh, kind) in enumerate(zip(scene.meshes, lobes))
             if "refract" in kind or ("reflect" in kind and i not in flat)]
     planar = [scene.meshes[i].name for i in flat]
-    moved = [scene.meshes[i].name for i in flat if any(p.target is scene.meshes[i] for p in chosen)]
 
     def names(items: Sequence[str]) -> str:
         return ", ".join(items[:4]) + (" ..." if len(items) > 4 else "")
@@ -261,8 +260,6 @@ def _warn_delta_outlines(scene: Scene, chosen: Sequence[Parameter]) -> None:
     parts = [f"through curved mirrors or refracting glass ({names(bent)})"] if bent else []
     parts += ["after two or more mirror bounces", "in mirrors by other surfaces than the camera (the soft and "
               "indirect terms)"]
-    if moved:
-        parts.append(f"in a planar mirror that moves ({names(moved)}) as far as the mirror's own motion moves them")
     have = f"; they have the camera's outlines seen in one planar mirror ({names(planar)})" if planar else ""
     log.warning("%s: the boundary terms leave out the outlines seen %s%s", scene.name, "; ".join(parts), have)
 
@@ -289,9 +286,7 @@ def _normals(p: Parameter, table: SceneParameters, value: np.ndarray, chain: Cal
     """``chain`` (normals_backward or normals_forward) for a mesh parameter ``p``, with ``value`` the normals'
     gradient or the parameter's tangent."""
     mesh = p.target
-    kind = p.name.rpartition(".")[2]
-    matrix = np.asarray(table[p.name], np.float64) if kind == "to_world" else np.eye(4)
-    return chain(kind, mesh.positions, mesh.indices, mesh.normals, matrix, np.asarray(value, np.float64))
+    return normals_chain(p.name, mesh.positions, mesh.indices, mesh.normals, value, table[p.name], chain)
 
 
 #: Steps of the central differences of the camera's basis with respect to its matrix (entries) and its fov

@@ -24,19 +24,24 @@ them, :mod:`pyclpt.gradients.placement`):
    numbers; seen in a mirror, the rays reflect in it, and the jump has its reflectance); the difference weighted
    by the image gradient through the film's reconstruction filter and scattered to the edge's two vertices
    through the perspective projection's Jacobian (seen in a mirror, at p' and times R: the film position is
-   film(p'); the camera's motion acts at p', the mirror being still).
+   film(p'); the camera's motion acts at p'). A mirror that moves moves every outline it shows, the reflected
+   points still (:func:`reflection_velocity`): the plane through the point c where the camera's ray meets the
+   mirror's triangle, of normal m (the triangle's, or on a smooth-shaded mirror its interpolated vertex normals,
+   which the renderer reflects about), moves p' by -2 [((p - c) . dm - dc . m) m + ((p - c) . m) dm], scattered
+   to the triangle's corners (and their vertex normals, chained through :mod:`pyclpt.gradients.normals`); a mirror
+   moved by its ``to_world`` or ``vertex_positions`` has the edges of every other mesh seen in it sampled.
 
 It is one term of the derivative: the interior term is the replay's (:mod:`pyclpt.gradients.differentiate`), the
 boundary terms of shadows :mod:`pyclpt.gradients.shadows`'s. Outlines seen through curved mirrors or refracting
-glass, after two or more mirror bounces, and how a moving mirror moves the outlines it shows are left out. Exact
-where the radiance on each side is constant across a parameter change (tests/test_edges.py: a square emitter
-moving over a constant background, directly and in a mirror, a sphere's silhouette against its radius).
+glass and after two or more mirror bounces are left out. Exact where the radiance on each side is constant across
+a parameter change (tests/test_edges.py: a square emitter moving over a constant background, directly and in a
+mirror, a mirror moving before it, a sphere's silhouette against its radius).
 """
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +49,7 @@ import numpy as np
 from pyclpt.buffers.rfilter import filter_eval
 from pyclpt.device.context import Device
 from pyclpt.gradients.mirrors import MirrorPlane, mirror_planes
+from pyclpt.gradients.normals import normals_backward, normals_chain, normals_forward
 from pyclpt.gradients.parameters import SceneParameters, flat_shaded, traverse
 from pyclpt.gradients.session import replay_for
 from pyclpt.scene.model import Mesh, ReconstructionFilter, Scene
@@ -188,18 +194,21 @@ def mesh_edges(mesh: Mesh, camera_origin: np.ndarray | None, creases: bool = Fal
     return pairs[first][keep], count[keep]
 
 
-def silhouette_edges(scene: Scene, meshes: Sequence[int], width: int, height: int) -> ScreenEdges:
+def silhouette_edges(scene: Scene, meshes: Sequence[int], width: int, height: int,
+                     mirrors: Collection[int] = ()) -> ScreenEdges:
     """The silhouette edges of ``scene.meshes[i]`` for i in ``meshes`` seen by the scene's camera on a
     width x height image (see the module): first those seen directly, then, for each planar mirror
     (:func:`pyclpt.gradients.mirrors.mirror_planes`), those seen in it, but the mirror's own mesh's (see
-    :func:`_view_edges`). Edges with an end at or behind the camera's plane are left out."""
+    :func:`_view_edges`); in the mirrors of the meshes in ``mirrors`` (mirrors that move: they move every outline
+    they show) those of every other mesh. Edges with an end at or behind the camera's plane are left out."""
     proj = Projection.of(scene, width, height)
     parts = [_view_edges(scene, proj, i) for i in meshes]
     planes = mirror_planes(scene)
     for k, plane in enumerate(planes):
         box = _footprint(scene, proj, plane)
+        shown = range(len(scene.meshes)) if plane.mesh in mirrors else meshes
         if box is not None:
-            parts += [_view_edges(scene, proj, i, plane, k, box) for i in meshes if i != plane.mesh]
+            parts += [_view_edges(scene, proj, i, plane, k, box) for i in shown if i != plane.mesh]
     cols = {key: [part[key] for part in parts] for key in ("a", "b", "mesh", "v0", "v1", "s0", "s1", "z0", "z1",
                                                            "mirror")}
     if not parts:
@@ -300,15 +309,20 @@ class EdgeSamples:
     point: np.ndarray  # (N, 3) the 3D point
     normal: np.ndarray  # (N, 2) the edge's unit normal in the film plane (towards the "+" side)
     seen_at: np.ndarray  # (N, 3) where the camera sees the point: the point, or its reflection in a planar mirror
+    mirror_mesh: np.ndarray  # (N,) the mesh of the planar mirror the point is seen in (index in scene.meshes), -1
+    mirror_corners: np.ndarray  # (N, 3) the vertices (in that mesh) of the mirror's triangle it is seen through
+    mirror_velocity: np.ndarray  # (N, 3, 3) n . d(film position)/d(each of those corners' positions)
+    mirror_normal_velocity: np.ndarray  # (N, 3, 3) and /d(their vertex normals) (a smooth-shaded mirror's; else 0)
 
 
 def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *, samples: int, seed: int,
                  max_depth: int | None = None, device: Device | str | None = None,
-                 stratified: bool = True) -> EdgeSamples:
-    """``samples`` points on the silhouette edges of ``scene.meshes[i]`` (i in ``meshes``), stratified along
-    their total length in pixels (independent with ``stratified`` False), with the radiance on both sides of
-    each from the ``edge_radiance`` kernel (random numbers keyed by ``seed``)."""
-    edges = silhouette_edges(scene, meshes, width, height)
+                 stratified: bool = True, mirrors: Collection[int] = ()) -> EdgeSamples:
+    """``samples`` points on the silhouette edges of ``scene.meshes[i]`` (i in ``meshes``; in the planar mirrors of
+    the meshes in ``mirrors``, every mesh's: :func:`silhouette_edges`), stratified along their total length in pixels
+    (independent with ``stratified`` False), with the radiance on both sides of each from the ``edge_radiance``
+    kernel (random numbers keyed by ``seed``)."""
+    edges = silhouette_edges(scene, meshes, width, height, mirrors)
     lengths = edges.lengths
     total = float(lengths.sum())
     n_pts = samples if total > 0 else 0
@@ -316,7 +330,8 @@ def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *
         z = np.zeros(0)
         return EdgeSamples(np.zeros((0, 1), np.int64), np.zeros((0, 1)), np.zeros((0, 3)), z.astype(int),
                            z.astype(int), z.astype(int), z, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
-                           np.zeros((0, 3)))
+                           np.zeros((0, 3)), z.astype(int), np.zeros((0, 3), np.int64), np.zeros((0, 3, 3)),
+                           np.zeros((0, 3, 3)))
     rng = np.random.default_rng([seed, 0x6564676573])  # "edges"
     u = ((np.arange(n_pts) if stratified else 0) + rng.random(n_pts)) / (n_pts if stratified else 1) * total
     cdf = np.cumsum(lengths)
@@ -348,8 +363,77 @@ def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *
     velocity = proj.normal_velocity(seen, n)
     for m, plane in mirrored:
         velocity[m] = velocity[m] @ plane.matrix
+    # and it moves with the mirror's triangle it is seen through, the point still
+    mirror_mesh = np.full(n_pts, -1)
+    corners = np.zeros((n_pts, 3), np.int64)
+    by_position, by_normal = np.zeros((n_pts, 3, 3)), np.zeros((n_pts, 3, 3))
+    for m, plane in mirrored:
+        if m.any():
+            mirror = scene.meshes[plane.mesh]
+            mirror_mesh[m] = plane.mesh
+            corners[m], bary = _faces_seen(scene, proj, plane, seen[m])
+            shading = None if mirror.normals is None else mirror.normals.astype(np.float64)[corners[m]]
+            by_position[m], by_normal[m] = reflection_velocity(
+                proj, mirror.positions.astype(np.float64)[corners[m]], bary, point[m], n[m], shading)
     return EdgeSamples(pix, w, (radiance[:, 0] - radiance[:, 1]) * total / n_pts, edges.mesh[e], edges.v0[e],
-                       edges.v1[e], t, velocity, point, n, seen)
+                       edges.v1[e], t, velocity, point, n, seen, mirror_mesh, corners, by_position, by_normal)
+
+
+def _faces_seen(scene: Scene, proj: Projection, plane: MirrorPlane, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The triangle of the mirror ``plane`` through which the camera sees the reflected points ``seen`` (N, 3), the
+    one the ray from the camera's origin to the point crosses the plane in (outside the mirror, where it shows
+    nothing and the jump is 0, the nearest): its corners (N, 3) (vertex indices in the mirror's mesh) and the
+    crossing's barycentric coordinates there (N, 3)."""
+    mesh = scene.meshes[plane.mesh]
+    tri = np.asarray(mesh.indices, np.int64)[plane.faces]
+    d = seen - proj.origin
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = proj.origin + ((plane.point - proj.origin) @ plane.normal / (d @ plane.normal))[:, None] * d
+    best = np.full(len(seen), -np.inf)
+    bary = np.zeros((len(seen), 3))
+    face = np.zeros(len(seen), np.int64)
+    for f, q in enumerate(mesh.positions.astype(np.float64)[tri]):
+        n = np.cross(q[1] - q[0], q[2] - q[0])
+        b = np.stack([np.cross(q[(j + 2) % 3] - q[(j + 1) % 3], x - q[(j + 1) % 3]) @ n for j in range(3)], axis=1)
+        b /= n @ n
+        inside = b.min(1)
+        nearer = inside > best
+        face, bary, best = np.where(nearer, f, face), np.where(nearer[:, None], b, bary), np.maximum(best, inside)
+    return tri[face], bary
+
+
+def reflection_velocity(proj: Projection, q: np.ndarray, bary: np.ndarray, point: np.ndarray, normal: np.ndarray,
+                        shading: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """How points ``point`` (N, 3) seen in a planar mirror move on the film with the mirror, the points still, for
+    film-space normals ``normal`` (N, 2): n . d(film position)/d(corner j's position) and /d(corner j's vertex
+    normal), (N, 3, 3) each, for the mirror's triangle of corners q (N, 3, 3) they are seen through, at barycentrics
+    ``bary`` (N, 3) (where the camera's ray meets it). There the mirror is the plane through c = sum b_j q_j, of
+    unit normal m: the triangle's, (q1 - q0) x (q2 - q0) / |.|, on a flat-shaded mirror (``shading`` None), else
+    the shading normal s / |s|, s = sum b_j n_j, of the corners' vertex normals n_j (``shading``, (N, 3, 3): the
+    renderer reflects about it; on a planar mirror it is +-m). It shows p at p' = p - 2 ((p - c) . m) m, which moves
+    by dp' = -2 [((p - c) . dm - dc . m) m + ((p - c) . m) dm], with dc = sum b_j dq_j and
+    dm = (I - m m^T) ((q_{j+2} - q_{j+1}) x dq_j) / |(q1 - q0) x (q2 - q0)| (flat), or
+    (I - m m^T) sum b_j dn_j / |s| (smooth; p' is the same for -m, its derivative in m then turns sign). Exact for
+    any motion of a flat mirror's vertices; a smooth one's vertex normals are chained by the caller
+    (:mod:`pyclpt.gradients.normals`)."""
+    cross = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+    size = np.linalg.norm(cross, axis=1)[:, None]
+    m = cross / size
+    d = point - np.einsum("nj,njk->nk", bary, q)
+    h = np.einsum("nk,nk->n", d, m)[:, None]
+    v = proj.normal_velocity(point - 2.0 * h * m, normal)  # n . d film/dp' at p'
+    vm = np.einsum("nk,nk->n", v, m)[:, None]
+    by_point = 2.0 * vm * m  # n . d film/dc
+    by_normal = -2.0 * (vm * d + h * v)  # n . d film/dm
+    by_normal -= np.einsum("nk,nk->n", by_normal, m)[:, None] * m  # m stays a unit vector
+    by_position = bary[:, :, None] * by_point[:, None, :]
+    if shading is None:
+        by_position += np.stack([np.cross(by_normal / size, q[:, (j + 2) % 3] - q[:, (j + 1) % 3]) for j in range(3)],
+                                axis=1)
+        return by_position, np.zeros_like(by_position)
+    s = np.einsum("nj,njk->nk", bary, shading)
+    by_normal *= (np.sign(np.einsum("nk,nk->n", s, m)) / np.linalg.norm(s, axis=1))[:, None]
+    return by_position, bary[:, :, None] * by_normal[:, None, :]
 
 
 def _meshes_of(scene: Scene, names: Sequence[str]) -> dict[int, list[str]]:
@@ -428,15 +512,6 @@ def sample_weights(pixels: np.ndarray, weights: np.ndarray, image_grad: np.ndarr
     return sum(np.einsum("nk,nk->n", w, gflat[:, c][at]) * jump[:, c] for c in range(3))
 
 
-def scatter_to_vertices(params: SceneParameters, scene: Scene, i: int, names: Sequence[str], v0: np.ndarray,
-                        v1: np.ndarray, t: np.ndarray, q: np.ndarray, out: dict[str, np.ndarray]) -> None:
-    """Mesh i's gradients for ``names`` (``vertex_positions``, ``to_world``) into ``out``, from per-sample vectors
-    q (N, 3) at the points (1 - t) v0 + t v1 of its edges."""
-    gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
-    add_on_edges(gv, v0, v1, t, q)
-    vertex_gradients(params, scene, i, names, gv, out)
-
-
 def add_at(out: np.ndarray, rows: np.ndarray, q: np.ndarray) -> None:
     """out (V, C) += q (N, C) at rows (N,), as np.add.at, in the same order, a column at a time with np.bincount
     (about ten times faster than np.add.at on rows of vectors)."""
@@ -508,10 +583,11 @@ def splat_image(pixels: np.ndarray, weights: np.ndarray, values: np.ndarray, wid
 def primary_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str], *, samples: int = 65536,
                      seed: int = 0, max_depth: int | None = None, parameters: SceneParameters | None = None,
                      device: Device | str | None = None, stratified: bool = True) -> dict[str, np.ndarray]:
-    """Reverse mode: the boundary term of primary visibility (outlines seen directly and in planar mirrors) of
-    dLoss/dparameter for ``names`` (``SHAPE.vertex_positions``, ``SHAPE.to_world``, ``SENSOR.to_world``;
-    :func:`pyclpt.traverse`), given dLoss/dImage ``image_grad`` (H, W, 3) of an image rendered at that size:
-    ``samples`` edge points, the radiance on both sides of each traced with ``seed`` (:func:`sample_edges`).
+    """Reverse mode: the boundary term of primary visibility (outlines seen directly and in planar mirrors, which
+    move with the mirror too) of dLoss/dparameter for ``names`` (``SHAPE.vertex_positions``, ``SHAPE.to_world``,
+    ``SENSOR.to_world``; :func:`pyclpt.traverse`), given dLoss/dImage ``image_grad`` (H, W, 3) of an image rendered
+    at that size: ``samples`` edge points, the radiance on both sides of each traced with ``seed``
+    (:func:`sample_edges`).
     ``parameters``: the SceneParameters whose poses the ``to_world`` gradients are for (default: a new traverse,
     where every pose is the identity)."""
     g = np.asarray(image_grad, np.float64)
@@ -523,17 +599,35 @@ def primary_boundary(scene: Scene, image_grad: np.ndarray, names: Sequence[str],
     cameras = [n for n in names if n in sensor_names(scene)]
     meshes = range(len(scene.meshes)) if cameras else sorted(wanted)  # the camera moves every edge
     es = sample_edges(scene, meshes, width, height, samples=samples, seed=seed, max_depth=max_depth,
-                      device=device, stratified=stratified)
+                      device=device, stratified=stratified, mirrors=sorted(wanted))  # a mirror moves all it shows
     weight = sample_weights(es.pixels, es.weights, g, es.jump)
     out: dict[str, np.ndarray] = {}
     for name in cameras:
         velocity = sensor_velocity(scene, width, height, es.seen_at, es.normal, name)  # the mirrors are still
         out[name] = np.tensordot(weight, velocity, axes=1).astype(np.float32)
     for i, mesh_names in wanted.items():
-        m = es.mesh == i
-        scatter_to_vertices(params, scene, i, mesh_names, es.v0[m], es.v1[m], es.t[m],
-                            es.velocity[m] * weight[m][:, None], out)
+        gv = np.zeros((scene.meshes[i].positions.shape[0], 3))
+        m = es.mesh == i  # its outlines
+        add_on_edges(gv, es.v0[m], es.v1[m], es.t[m], es.velocity[m] * weight[m][:, None])
+        m = es.mirror_mesh == i  # the outlines seen in it, a mirror
+        gn = np.zeros_like(gv)  # and through its vertex normals, smooth-shaded
+        if m.any():
+            for j in range(3):
+                add_at(gv, es.mirror_corners[m, j], es.mirror_velocity[m, j] * weight[m][:, None])
+                add_at(gn, es.mirror_corners[m, j], es.mirror_normal_velocity[m, j] * weight[m][:, None])
+        vertex_gradients(params, scene, i, mesh_names, gv, out)
+        if gn.any():
+            for name in mesh_names:
+                out[name] = out[name] + _normals_chain(params, scene, i, name, gn, normals_backward).reshape(
+                    out[name].shape).astype(np.float32)
     return out
+
+
+def _normals_chain(params: SceneParameters, scene: Scene, i: int, name: str, value: np.ndarray,
+                   chain: Callable[..., np.ndarray]) -> np.ndarray:
+    """:func:`pyclpt.gradients.normals.normals_chain` for mesh i's parameter ``name``."""
+    mesh = scene.meshes[i]
+    return normals_chain(name, mesh.positions, mesh.indices, mesh.normals, value, params[name], chain)
 
 
 def primary_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, width: int | None = None,
@@ -557,6 +651,15 @@ def primary_boundary_forward(scene: Scene, name: str, tangent: np.ndarray, *, wi
     else:
         i, dp = vertex_motion(params, scene, name, tan)
         es = sample_edges(scene, [i], width, height, samples=samples, seed=seed, max_depth=max_depth,
-                          device=device)
-        dx = edge_point_motion(es.velocity, es.v0, es.v1, es.t, dp)
+                          device=device, mirrors=[i])
+        own = es.mesh == i  # its outlines, then those seen in it, a mirror
+        dx = np.zeros(len(own))
+        dx[own] = edge_point_motion(es.velocity[own], es.v0[own], es.v1[own], es.t[own], dp)
+        m = es.mirror_mesh == i
+        if m.any():
+            corners = es.mirror_corners[m]
+            dx[m] += np.einsum("njc,njc->n", es.mirror_velocity[m], dp[corners])
+            if scene.meshes[i].normals is not None:  # a smooth-shaded mirror turns with its vertex normals
+                dn = _normals_chain(params, scene, i, name, tan, normals_forward).reshape(-1, 3)
+                dx[m] += np.einsum("njc,njc->n", es.mirror_normal_velocity[m], dn[corners])
     return splat_image(es.pixels, es.weights, es.jump * dx[:, None], width, height)

@@ -15,6 +15,8 @@ normal is not defined (all its triangles degenerate) has none.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 # a triangle's corners k, the next and the previous (the corner's two edges)
@@ -176,3 +178,14 @@ def normals_forward(kind: str, positions: np.ndarray, indices: np.ndarray, norma
     if kind == "vertex_positions":
         return angle_weighted_jvp(positions, indices, tangent)
     return transformed_jvp(matrix, pose_rest(matrix, normals), tangent)
+
+
+def normals_chain(name: str, positions: np.ndarray, indices: np.ndarray, normals: np.ndarray, value: np.ndarray,
+                  matrix: np.ndarray, chain: Callable[..., np.ndarray]) -> np.ndarray:
+    """``chain`` (:func:`normals_backward` or :func:`normals_forward`) for a mesh's parameter ``name`` (its
+    ``vertex_positions`` or ``to_world``, whose value ``matrix`` is), with ``value`` its vertex normals' gradient
+    or the parameter's tangent: through the normals ``update()`` writes."""
+    kind = name.rpartition(".")[2]
+    pose = np.asarray(matrix, np.float64) if kind == "to_world" else np.eye(4)
+    return chain(kind, positions, indices, normals, pose, np.asarray(value, np.float64))
+
