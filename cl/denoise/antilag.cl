@@ -24,7 +24,7 @@
  * raw sample minus the clamped one).
  *
  * While fewer than DenoiserSettings.antilag_frames frames have passed since the lighting changed in view
- * (light_age: at least LIGHT_CHANGE_MIN pixels saw an emitter change), the threshold is antilag_changed
+ * (light_age: at least LIGHT_CHANGE_SHARE of the pixels saw a light change), the threshold is antilag_changed
  * (if lower): the dim surfaces a changed light reaches show the change to the statistic only over
  * several frames (docs/denoising.md, "The light change: cutting more readily after it").
  *

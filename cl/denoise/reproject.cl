@@ -196,9 +196,9 @@ __kernel void reproject(__global float* sample, __global const float* emission,
                         __global const float* deficit_prev, __global const float* albedo_prev,
                         __global float* temporal, __global float* deficit, __global float* albedo,
                         __global float* fast, __global float* moments, __global float* len, __global float* emis,
-                        __global uchar* lit, int width, int height, float depth_threshold, float normal_threshold, float firefly_ratio,
-                        float firefly_sigma, float max_history, float alpha_min, float moments_alpha_min,
-                        float fast_alpha) {
+                        __global uchar* lit, int width, int height, float depth_threshold, float normal_threshold,
+                        float firefly_ratio, float firefly_sigma, float max_history, float alpha_min,
+                        float moments_alpha_min, float fast_alpha) {
     int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     int n = width * height, p = y * width + x;

@@ -67,7 +67,7 @@ class DenoiserSettings:
     #: cornell-box's error in the frame of a light change from 0.447 to 0.052 (120x120).
     antilag: float = 3.5
     #: The anti-lag's threshold (if lower than ``antilag``) in the ``antilag_frames`` frames after the lighting
-    #: changed in view (cl/denoise/light_age.cl: at least a few pixels saw an emitter change: emitter_moved in
+    #: changed in view (cl/denoise/light_age.cl: at least 1/400 of the pixels saw a light change: light_changed in
     #: reproject). A light turned down changes the light of every surface it reaches in that frame, but the dim,
     #: noisy ones (a box's face lit only indirectly) show it to the statistic only over several frames; at 3.5
     #: they kept the old light for tens of frames (the cornell-box's light change: lag "never"; docs/denoising.md,
