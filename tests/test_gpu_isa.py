@@ -13,7 +13,7 @@ from pyclpt.common import env
 from pyclpt.device.context import open_device
 from pyclpt.device.program import empty_kernels, record_programs
 from pyclpt.gpu.check import check_programs
-from pyclpt.gpu.collect import collect_programs
+from pyclpt.gpu.collect import collect_programs, merge_specialisations
 from pyclpt.gpu.isa import ToolchainMissing, compile_program, find_toolchain, parse_amdgcn, parse_ptxas
 from pyclpt.gpu.report import budgets, markdown
 from pyclpt.gpu.targets import TARGETS, occupancy, resident_slots
@@ -51,11 +51,15 @@ def toolchain():
 @pytest.fixture(scope="module")
 def report(toolchain):
     """Every variant of the box's programs; the zoo's that hold the most code; the other scenes' megakernel and
-    gradient kernels, whose shading and traversal code is the stages' with the same defines."""
-    programs = collect_programs(["cornell-box", material_zoo(8)], device="pocl", every_variant=False)
+    gradient kernels, whose shading and traversal code is the stages' with the same defines. The zoo's and the
+    other scenes' programs of one kernel are compiled with their specialisations switched on together
+    (merge_specialisations: the kind masks OR-ed, the feature flags' union; the camera kinds apart), so every
+    specialisation is compiled in less than half the programs; the box's keep the feature-free code."""
+    box = collect_programs(["cornell-box"], device="pocl", every_variant=False)
+    zoo = collect_programs([material_zoo(8)], device="pocl", every_variant=False, first_every=False)
     extra = collect_programs([str(DATA / f"{n}.xml") for n in EXTRA_SCENES], device="pocl", every_variant=False,
                              first_every=False, wavefront=False)
-    return check_programs(programs + extra, toolchain=toolchain)
+    return check_programs(box + merge_specialisations(zoo + extra), toolchain=toolchain)
 
 
 def test_every_kernel_compiles_for_every_gpu_target(report):
@@ -171,6 +175,30 @@ def test_a_cpu_only_construct_fails_naming_program_and_target(toolchain, target)
     fixed = BROKEN.replace("__builtin_ia32_rsqrtps((float4)(1.0f)).x", "1.0f")
     costs = compile_program(fixed, ["-cl-std=CL1.2"], target, program="zoo", toolchain=toolchain)
     assert {c.kernel for c in costs} == {"fine", "broken"}
+
+
+def test_merged_specialisations_hold_every_scenes_code():
+    """merge_specialisations: one kernel's programs that differ in kind masks and feature flags become one, with the
+    masks OR-ed and the flags' union, naming every scene; another camera kind or other code stays apart."""
+    from pyclpt.device.program import ProgramSource
+
+    def p(label, *options, text="k"):
+        return ProgramSource(label, text, ("-cl-std=CL1.2", *options))
+
+    merged = merge_specialisations([
+        (p("megakernel", "-DSCENE_HAS_TEXTURES", "-DSCENE_LIGHTS=5", "-DSCENE_MATERIALS=1"), ["a"]),
+        (p("megakernel", "-DSCENE_HAS_INSTANCES", "-DSCENE_LIGHTS=48", "-DSCENE_MATERIALS=4"), ["b", "c"]),
+        (p("megakernel", "-DSCENE_CAMERA=2", "-DSCENE_LIGHTS=1", "-DSCENE_MATERIALS=1"), ["d"]),
+        (p("backward", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=1"), ["a"]),
+        (p("megakernel", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=8", text="other"), ["e"]),
+    ])
+    assert [(q.label, q.options, names) for q, names in merged] == [
+        ("megakernel", ("-cl-std=CL1.2", "-DSCENE_HAS_INSTANCES", "-DSCENE_HAS_TEXTURES", "-DSCENE_LIGHTS=53",
+                        "-DSCENE_MATERIALS=5"), ["a", "b", "c"]),
+        ("megakernel", ("-cl-std=CL1.2", "-DSCENE_CAMERA=2", "-DSCENE_LIGHTS=1", "-DSCENE_MATERIALS=1"), ["d"]),
+        ("backward", ("-cl-std=CL1.2", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=1"), ["a"]),
+        ("megakernel", ("-cl-std=CL1.2", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=8"), ["e"]),
+    ]
 
 
 def test_collection_sees_what_a_render_builds():

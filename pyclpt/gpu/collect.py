@@ -89,3 +89,56 @@ def collect_programs(scenes: Iterable[Scene | str], *, device_class: str | None 
                 entry[1].append(scene.name)
         log.info("%s: %d programs, %d distinct so far", scene.name, len(programs), len(found))
     return list(found.values())
+
+
+#: The defines that say which kinds a scene has, as bit masks (cl/scene/lights.h, cl/scene/bsdf.h): a program
+#: built with the OR of two scenes' masks holds the code of both.
+MASK_DEFINES = ("SCENE_LIGHTS", "SCENE_MATERIALS")
+#: The defines that switch one feature's code on (pyclpt/buffers/scene.py): ``SCENE_HAS_*``.
+FLAG_PREFIX = "SCENE_HAS_"
+
+
+def _define(option: str) -> tuple[str, str | None] | None:
+    if not option.startswith("-D"):
+        return None
+    name, _, value = option[2:].partition("=")
+    return name, value or None
+
+
+def merge_specialisations(programs: Iterable[tuple[ProgramSource, list[str]]]) -> list[tuple[ProgramSource, list[str]]]:
+    """``programs`` (collect_programs' list) with each kernel's scene specialisations switched on together:
+    the programs of the same source whose options differ only in the kind masks (``MASK_DEFINES``: OR-ed) and
+    the ``SCENE_HAS_*`` flags (their union) become one program, which holds the code of every one of them and
+    names all their scenes. Every other option (the camera kind, the G-buffer, the gradients' kinds, the BVH
+    layout) still tells programs apart. What is compiled is a superset of each merged program's code but for
+    code that a define turns *off* (the texture-free or environment-free paths), which a scene without the
+    feature among the unmerged programs keeps compiled (the GPU ISA test: the Cornell box's every variant).
+    The GPU ISA test compiles the scenes beyond the box this way, in about a third of the programs."""
+    programs = list(programs)
+    groups: dict[tuple, tuple[str, str, list[str], dict[str, int], list[str], list[str]]] = {}
+    for p, names in programs:
+        rest: list[str] = []
+        masks: dict[str, int] = {}
+        flags: list[str] = []
+        for o in p.options:
+            d = _define(o)
+            if d and d[0] in MASK_DEFINES and d[1] is not None:
+                masks[d[0]] = masks.get(d[0], 0) | int(d[1], 0)
+            elif d and d[0].startswith(FLAG_PREFIX):
+                flags.append(o)
+            else:
+                rest.append(o)
+        key = (p.label, p.text, tuple(rest), tuple(sorted(masks)))
+        if key not in groups:
+            groups[key] = (p.label, p.text, rest, {}, [], [])
+        g = groups[key]
+        for k, v in masks.items():
+            g[3][k] = g[3].get(k, 0) | v
+        g[4].extend(f for f in flags if f not in g[4])
+        g[5].extend(n for n in names if n not in g[5])
+    out = []
+    for label, text, rest, masks, flags, names in groups.values():
+        options = tuple(rest + sorted(flags) + [f"-D{k}={v}" for k, v in sorted(masks.items())])
+        out.append((ProgramSource(label, text, options), names))
+    log.info("%d programs merged into %d by their scene specialisations", len(programs), len(out))
+    return out
