@@ -113,7 +113,7 @@ def merge_specialisations(programs: Iterable[tuple[ProgramSource, list[str]]]) -
     layout) still tells programs apart. What is compiled is a superset of each merged program's code but for
     code that a define turns *off* (the texture-free or environment-free paths), which a scene without the
     feature among the unmerged programs keeps compiled (the GPU ISA test: the Cornell box's every variant).
-    The GPU ISA test compiles the scenes beyond the box this way, in about a third of the programs."""
+    The GPU ISA test compiles the scenes beyond the box this way, in half the programs."""
     programs = list(programs)
     groups: dict[tuple, tuple[str, str, list[str], dict[str, int], list[str], list[str]]] = {}
     for p, names in programs:
