@@ -115,7 +115,8 @@ def merge_specialisations(programs: Iterable[tuple[ProgramSource, list[str]]]) -
     feature among the unmerged programs keeps compiled (the GPU ISA test: the Cornell box's every variant).
     The GPU ISA test compiles the scenes beyond the box this way, in half the programs."""
     programs = list(programs)
-    groups: dict[tuple, tuple[str, str, list[str], dict[str, int], list[str], list[str]]] = {}
+    # (label, text, the other options, the mask names) -> (the masks OR-ed, the flags, the scenes)
+    groups: dict[tuple, tuple[dict[str, int], list[str], list[str]]] = {}
     for p, names in programs:
         rest: list[str] = []
         masks: dict[str, int] = {}
@@ -123,22 +124,20 @@ def merge_specialisations(programs: Iterable[tuple[ProgramSource, list[str]]]) -
         for o in p.options:
             d = _define(o)
             if d and d[0] in MASK_DEFINES and d[1] is not None:
-                masks[d[0]] = masks.get(d[0], 0) | int(d[1], 0)
+                masks[d[0]] = int(d[1], 0)
             elif d and d[0].startswith(FLAG_PREFIX):
                 flags.append(o)
             else:
                 rest.append(o)
         key = (p.label, p.text, tuple(rest), tuple(sorted(masks)))
-        if key not in groups:
-            groups[key] = (p.label, p.text, rest, {}, [], [])
-        g = groups[key]
+        merged, all_flags, scenes = groups.setdefault(key, ({}, [], []))
         for k, v in masks.items():
-            g[3][k] = g[3].get(k, 0) | v
-        g[4].extend(f for f in flags if f not in g[4])
-        g[5].extend(n for n in names if n not in g[5])
+            merged[k] = merged.get(k, 0) | v
+        all_flags.extend(f for f in flags if f not in all_flags)
+        scenes.extend(n for n in names if n not in scenes)
     out = []
-    for label, text, rest, masks, flags, names in groups.values():
-        options = tuple(rest + sorted(flags) + [f"-D{k}={v}" for k, v in sorted(masks.items())])
+    for (label, text, rest, _), (masks, flags, names) in groups.items():
+        options = (*rest, *sorted(flags), *(f"-D{k}={v}" for k, v in sorted(masks.items())))
         out.append((ProgramSource(label, text, options), names))
     log.info("%d programs merged into %d by their scene specialisations", len(programs), len(out))
     return out
