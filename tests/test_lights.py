@@ -42,7 +42,8 @@ CLASSROOM_SUN = np.array([-0.865804, 0.416766, -0.276929])
 KERNELS = r"""
 #include "scene/lights.h"
 
-/* u: (u_select, u1, u2) per item. out: wi[3] dist radiance[3] pdf delta ok eval_radiance[3] eval_pdf */
+/* u: (u_select, u1, u2) per item. out: wi[3] dist radiance[3] pdf delta ok eval_radiance[3] eval_pdf, _, _,
+ * then the same sample with an environment's radiance deferred (ENV_DEFERRED): wi[3] pdf radiance[3] ok */
 __kernel void light_sample_k(SCENE_PARAMS, __global const float* p, __global const float* u,
                              __global float* out) {
     int i = get_global_id(0);
@@ -53,10 +54,16 @@ __kernel void light_sample_k(SCENE_PARAMS, __global const float* p, __global con
     ls.radiance = v3_splat(0.0f);
     ls.pdf = 0.0f;
     ls.delta = false;
-    bool ok = light_sample(&sc, load3(p, 0), u[3 * i], v2(u[3 * i + 1], u[3 * i + 2]), &ls);
+    bool ok = light_sample(&sc, load3(p, 0), u[3 * i], v2(u[3 * i + 1], u[3 * i + 2]), &ls, true);
     float eval_pdf;
     vec3 le = env_eval(&sc, ls.wi, true, &eval_pdf);
-    __global float* o = out + 16 * i;
+    __global float* o = out + 24 * i;
+    LightSample later = ls;
+    bool later_ok = light_sample(&sc, load3(p, 0), u[3 * i], v2(u[3 * i + 1], u[3 * i + 2]), &later, false);
+    store3(o + 16, 0, later.wi);
+    o[19] = later.pdf;
+    store3(o + 20, 0, later.radiance);
+    o[23] = later_ok ? 1.0f : 0.0f;
     store3(o, 0, ls.wi);
     o[3] = ls.dist;
     store3(o + 4, 0, ls.radiance);
@@ -119,9 +126,11 @@ class LightKit:
 
     def sample(self, u: np.ndarray, p=(0.0, 0.0, 0.0)) -> dict[str, np.ndarray]:
         u = np.ascontiguousarray(u, np.float32).reshape(-1, 3)
-        o = self._run("light_sample_k", len(u), [np.asarray(p, np.float32), u], 16)
+        o = self._run("light_sample_k", len(u), [np.asarray(p, np.float32), u], 24)
         return {"wi": o[:, 0:3], "dist": o[:, 3], "radiance": o[:, 4:7], "pdf": o[:, 7], "delta": o[:, 8] > 0.5,
-                "ok": o[:, 9] > 0.5, "eval_radiance": o[:, 10:13], "eval_pdf": o[:, 13]}
+                "ok": o[:, 9] > 0.5, "eval_radiance": o[:, 10:13], "eval_pdf": o[:, 13],
+                "later_wi": o[:, 16:19], "later_pdf": o[:, 19], "later_radiance": o[:, 20:23],
+                "later_ok": o[:, 23] > 0.5}
 
     def eval(self, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         dirs = np.ascontiguousarray(dirs, np.float32).reshape(-1, 3)
@@ -259,6 +268,53 @@ def test_envmap_sample_agrees_with_eval(env_kit):
     same = np.isclose(s["pdf"][ok], s["eval_pdf"][ok], rtol=1e-4)
     assert same.mean() > 0.999
     np.testing.assert_allclose(np.linalg.norm(s["wi"][ok], axis=1), 1.0, atol=1e-5)
+
+
+def test_envmap_sampling_picks_the_cells_of_a_whole_search(device):
+    """The guide tables (cdf_search_guided, pyclpt/buffers/lights.py cdf_guide) give each u the cell a binary
+    search of the whole float32 CDFs gives: the kernel's pdf is that cell's, computed here in float32, on a map
+    with black runs (flat stretches of the CDFs), a spike and 8 x 32 guide intervals. A guide entry one bin off
+    picks a neighbour, whose pdf differs."""
+    from pyclpt.buffers.lights import ENV_HEADER, cdf_guide, guide_size, pack_envmap
+    from pyclpt.buffers.materials import TextureTable
+
+    rng = np.random.default_rng(11)
+    h, w = 65, 256
+    px = (rng.random((h, w, 3)) ** 3).astype(np.float32)
+    px[20:30] = 0.0
+    px[:, 100:180] *= 1e-4
+    px[40, 7] = 500.0
+    env = Envmap(px, name="guided")
+    block, _ = pack_envmap(env, TextureTable())
+    assert (int(block[13]), int(block[14])) == (guide_size(h - 1), guide_size(w)) == (8, 32)
+    rows = h - 1
+    marginal = block[ENV_HEADER:ENV_HEADER + rows]
+    conditional = block[ENV_HEADER + rows:ENV_HEADER + rows + rows * w].reshape(rows, w)
+    omega = block[ENV_HEADER + rows + rows * w:ENV_HEADER + 2 * rows + rows * w]
+    guides = block[ENV_HEADER + 2 * rows + rows * w + h:].view(np.int32)
+    assert len(guides) == 9 + rows * 33
+    np.testing.assert_array_equal(guides[:9], cdf_guide(marginal, 8))
+    u = rng.random((100_000, 3), dtype=np.float32)
+    u[:64, 1:] = np.arange(64, dtype=np.float32)[:, None] / 64  # the guides' own boundaries
+    s = LightKit(device, small_scene(env)).sample(u)
+    assert s["ok"].all()
+    r = np.minimum(np.searchsorted(marginal, u[:, 1], side="right"), rows - 1)
+    c = np.array([min(np.searchsorted(conditional[i], x, side="right"), w - 1) for i, x in zip(r, u[:, 2])])
+
+    prev_r = np.where(r > 0, marginal[np.maximum(r - 1, 0)], np.float32(0))
+    prev_c = np.where(c > 0, conditional[r, np.maximum(c - 1, 0)], np.float32(0))
+    pdf = (marginal[r] - prev_r) * (conditional[r, c] - prev_c)
+    np.testing.assert_allclose(s["pdf"], pdf / omega[r], rtol=2e-6)
+
+
+def test_deferred_environment_radiance_is_the_same_sample(env_kit):
+    """light_sample with env_radiance false (ENV_DEFERRED: the radiance is looked up once the shadow ray is
+    found unoccluded, path_lit) draws the same direction with the same pdf and leaves the radiance at 1."""
+    s = env_kit.sample(np.random.default_rng(12).random((5000, 3), dtype=np.float32))
+    assert s["ok"].all() and np.array_equal(s["later_ok"], s["ok"])
+    np.testing.assert_array_equal(s["later_wi"], s["wi"])
+    np.testing.assert_array_equal(s["later_pdf"], s["pdf"])
+    np.testing.assert_array_equal(s["later_radiance"], 1.0)
 
 
 @pytest.mark.parametrize("rotation", [np.eye(4), rotate([1.0, -2.0, 0.5], 70.0)])

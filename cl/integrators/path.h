@@ -157,13 +157,14 @@ typedef struct {
 } NeeSample;
 
 /* hit processing, part 2: next-event estimation, with its factors (NeeSample). Writes a shadow ray
- * only for a sample that can contribute (pdf > 0, non-zero value). */
-static inline bool path_nee(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, const PathState* ps,
-                            NeeSample* n) {
+ * only for a sample that can contribute (pdf > 0, non-zero value). With env_radiance false an environment
+ * sample's radiance is left out of ls.radiance and contrib (ENV_DEFERRED: path_lit adds it). */
+static inline bool path_nee_sample(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, const PathState* ps,
+                                   NeeSample* n, bool env_radiance) {
     if (bsdf_is_delta(b)) return false;
     float u_sel = rng_1d(key, ps->depth, DIM_LIGHT_SELECT);
     vec2 u = rng_2d(key, ps->depth, DIM_LIGHT_U);
-    if (!light_sample(sc, s->p, u_sel, u, &n->ls)) return false;
+    if (!light_sample(sc, s->p, u_sel, u, &n->ls, env_radiance)) return false;
     vec3 wi = to_local(s->sh, v3_neg(ps->dir));
     n->wo = to_local(s->sh, n->ls.wi);
     float bsdf_pdf;
@@ -183,13 +184,35 @@ static inline bool path_nee(const Scene* sc, RngKey key, const Surface* s, const
     return sr->tmax > 0.0f;
 }
 
-/* next-event estimation's shadow ray alone (path_nee) */
+/* path_nee_sample with every factor, the light's radiance included (the gradient kernels) */
+static inline bool path_nee(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, const PathState* ps,
+                            NeeSample* n) {
+    return path_nee_sample(sc, key, s, b, ps, n, true);
+}
+
+/* next-event estimation's shadow ray alone (path_nee_sample), an environment sample's radiance deferred where
+ * ENV_DEFERRED: what the ray adds when unoccluded is path_lit's */
 static inline bool path_sample_light(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b,
                                      const PathState* ps, ShadowRay* sr) {
     NeeSample n;
-    if (!path_nee(sc, key, s, b, ps, &n)) return false;
+    if (!path_nee_sample(sc, key, s, b, ps, &n, !ENV_DEFERRED)) return false;
     *sr = n.sr;
     return true;
+}
+
+/* A deferred environment sample's contribution along dir once unoccluded: times the environment's radiance. */
+static inline vec3 path_env_lit(const Scene* sc, vec3 dir, vec3 contrib) {
+    float pdf;
+    return v3_mul(contrib, env_eval(sc, dir, false, &pdf));
+}
+
+/* The radiance an unoccluded shadow ray of path_sample_light adds: its contribution, times the environment's
+ * radiance along it for a deferred environment sample (an infinite tmax: ENV_DEFERRED). */
+static inline vec3 path_lit(const Scene* sc, const ShadowRay* sr) {
+#if ENV_DEFERRED
+    if (m_isinf(sr->tmax)) return path_env_lit(sc, sr->dir, sr->contrib);
+#endif
+    return sr->contrib;
 }
 
 /* BSDF sampling: the next direction, throughput update and Russian roulette.
@@ -297,7 +320,7 @@ static inline void path_continue_from(const Scene* sc, RngKey key, PathState* ps
 #ifdef PATH_TRACE
         bool shadow = path_sample_light(sc, key, &s, &b, ps, &sr);
         bool lit = shadow && !scene_occluded(sc, key, ps->depth, sr.org, sr.dir, sr.tmax);
-        if (lit) ps->L = v3_add(ps->L, sr.contrib);
+        if (lit) ps->L = v3_add(ps->L, path_lit(sc, &sr));
         path_trace_steps(sc, bounce, 3);
         tr |= PATH_TRACE_NEXT | (shadow ? PATH_TRACE_SHADOW : 0) | (lit ? PATH_TRACE_LIT : 0);
         bool more = path_sample_bsdf(key, &s, &b, ps, max_depth);
@@ -305,7 +328,7 @@ static inline void path_continue_from(const Scene* sc, RngKey key, PathState* ps
         if (!more) return;
 #else
         if (path_sample_light(sc, key, &s, &b, ps, &sr) && !scene_occluded(sc, key, ps->depth, sr.org, sr.dir, sr.tmax))
-            ps->L = v3_add(ps->L, sr.contrib);
+            ps->L = v3_add(ps->L, path_lit(sc, &sr));
         if (!path_sample_bsdf(key, &s, &b, ps, max_depth)) return;
 #endif
     }

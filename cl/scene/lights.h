@@ -20,7 +20,8 @@
  *   envmap        ENV_HEADER floats (below), then the sampling tables:
  *                 marginal CDF over cell rows (R = H - 1 floats), conditional
  *                 CDF of each row (R * W), solid angle of one cell of each row (R),
- *                 cos(theta) of each texel row (H).
+ *                 cos(theta) of each texel row (H), then the CDFs' guide tables (ints:
+ *                 the marginal's G_R + 1, each row's G_W + 1; cdf_search_guided).
  *
  * Environment-map convention (Mitsuba 3, src/emitters/envmap.cpp): a direction d
  * in the map's frame (to_world^-1 applied; +y is up) has
@@ -80,12 +81,25 @@
 #define HAS_LIGHT(t) true
 #endif
 
+/* An environment sample's radiance, deferred (light_sample_emitter with env_radiance false): where the scene's only
+ * lights at infinity are its environment (an envmap or constant, no directional light), a shadow ray with an
+ * infinite tmax is an environment sample, so its radiance can wait until the ray is found unoccluded
+ * (path_lit: env_eval along the ray). An envmap's bilinear lookup (and its atan2, acos) is then paid for the
+ * samples that reach the sky alone: 3 % of the living room's (docs/benchmarks.md, "The living room"). */
+#if defined(SCENE_LIGHTS) && !((SCENE_LIGHTS) & (1 << LIGHT_DIRECTIONAL))
+#define ENV_DEFERRED 1
+#else
+#define ENV_DEFERRED 0
+#endif
+
 /* envmap block in light_data */
 #define ENV_TO_WORLD 0 /* 3x3 rotation, row-major, map frame -> world */
 #define ENV_WIDTH 9    /* texels */
 #define ENV_HEIGHT 10
 #define ENV_TEXTURE 11 /* texture id of the texels (float RGBA, row 0 at the top) */
 #define ENV_SCALE 12   /* Mitsuba's `scale` */
+#define ENV_GUIDE_ROWS 13 /* G_R: the marginal CDF's guide intervals (a power of two) */
+#define ENV_GUIDE_COLS 14 /* G_W: each row's */
 #define ENV_HEADER 16
 
 typedef struct {
@@ -99,9 +113,14 @@ typedef struct {
 
 static inline int num_lights(const Scene* sc) { return (int)sc->consts[CONST_NUM_LIGHTS]; }
 
-/* First index i in [0, n) with u < cdf[i] (the last when none): cdf is inclusive and ends at 1. */
-static inline int cdf_search(__global const float* cdf, int n, float u) {
-    int lo = 0, hi = n - 1;
+/* The bin of u in an inclusive CDF that ends at 1: the first index i with u < cdf[i] (the last when none),
+ * found by a binary search between the entries of the CDF's guide table for u's interval
+ * (pyclpt/buffers/lights.py, cdf_guide): guide[k] is the bin of u = k / g, g a power of two, so u * g is
+ * exact and u's bin lies in [guide[k], guide[k + 1]]. The same bin as a search of the whole CDF in a few
+ * steps: a 2048-bin envmap row's whole search touches about 7 cache lines, this one 1-2 and the guide's. */
+static inline int cdf_search_guided(__global const float* cdf, __global const float* guide, int g, float u) {
+    int k = m_imax(m_imin((int)(u * (float)g), g - 1), 0);
+    int lo = as_int(guide[k]), hi = as_int(guide[k + 1]);
     while (lo < hi) {
         int mid = (lo + hi) >> 1;
         if (u < cdf[mid]) hi = mid;
@@ -218,16 +237,18 @@ static inline float cdf_remap(__global const float* cdf, int i, float u) {
 
 /* Sample a world direction from the map: returns it with its radiance and solid-angle pdf. */
 static inline vec3 env_sample(const Scene* sc, __global const float* e, vec2 u, vec3* radiance,
-                                float* pdf) {
+                                float* pdf, bool want_radiance) {
     int w = (int)e[ENV_WIDTH], rows = (int)e[ENV_HEIGHT] - 1;
     __global const float* marginal = e + ENV_HEADER;
     __global const float* conditional = marginal + rows;
     __global const float* cell_omega = conditional + rows * w;
     __global const float* row_cos = cell_omega + rows;
-    int r = cdf_search(marginal, rows, u.x);
+    int g_rows = (int)e[ENV_GUIDE_ROWS], g_cols = (int)e[ENV_GUIDE_COLS];
+    __global const float* guide_rows = row_cos + rows + 1;
+    int r = cdf_search_guided(marginal, guide_rows, g_rows, u.x);
     float ur = cdf_remap(marginal, r, u.x);
     __global const float* cond = conditional + r * w;
-    int c = cdf_search(cond, w, u.y);
+    int c = cdf_search_guided(cond, guide_rows + (g_rows + 1) + r * (g_cols + 1), g_cols, u.y);
     float uc = cdf_remap(cond, c, u.y);
     float cos_t = row_cos[r] + ur * (row_cos[r + 1] - row_cos[r]);
     float sin_t = m_sqrt(m_max(0.0f, 1.0f - cos_t * cos_t));
@@ -236,7 +257,7 @@ static inline vec3 env_sample(const Scene* sc, __global const float* e, vec2 u, 
     vec3 d = v3(sin_phi * sin_t, cos_t, -cos_phi * sin_t);
     float omega = cell_omega[r];
     *pdf = omega > 0.0f ? cdf_pmf(marginal, r) * cdf_pmf(cond, c) / omega : 0.0f;
-    *radiance = env_lookup(sc, e, env_texel_coords(e, d));
+    *radiance = want_radiance ? env_lookup(sc, e, env_texel_coords(e, d)) : v3_splat(1.0f);
     return m_normalize(env_to_world(e, d));
 }
 
@@ -290,8 +311,9 @@ static inline vec3 spot_texture(const Scene* sc, __global const float* l, __glob
 /* ---- sampling any emitter ----------------------------------------------------- */
 
 /* Sample a point on emitter `id` as seen from p (u: a 2D uniform; a delta light needs none); ls->pdf the
- * probability of choosing it times the point's density. False when the sample carries nothing. */
-static inline bool light_sample_id(const Scene* sc, int id, vec3 p, vec2 u, LightSample* ls) {
+ * probability of choosing it times the point's density. False when the sample carries nothing. With
+ * env_radiance false an environment sample's radiance is 1, to be looked up later (ENV_DEFERRED). */
+static inline bool light_sample_emitter(const Scene* sc, int id, vec3 p, vec2 u, LightSample* ls, bool env_radiance) {
     __global const float* l = sc->lights + LIGHT_STRIDE * id;
     int type = (int)l[LIGHT_TYPE];
     ls->delta = false;
@@ -299,13 +321,13 @@ static inline bool light_sample_id(const Scene* sc, int id, vec3 p, vec2 u, Ligh
     if (HAS_LIGHT(LIGHT_CONSTANT) && type == LIGHT_CONSTANT) {
         ls->wi = square_to_uniform_sphere(u);
         ls->dist = INF_F;
-        ls->radiance = rgb_at(l + LIGHT_RADIANCE, sc->unit);
+        ls->radiance = env_radiance ? rgb_at(l + LIGHT_RADIANCE, sc->unit) : v3_splat(1.0f);
         ls->pdf = l[LIGHT_PMF] * UNIFORM_SPHERE_PDF;
         return ls->pdf > 0.0f;
     }
     if (HAS_LIGHT(LIGHT_ENVMAP) && type == LIGHT_ENVMAP) {
         float pdf;
-        ls->wi = env_sample(sc, sc->light_data + as_int(l[LIGHT_PRIM]), u, &ls->radiance, &pdf);
+        ls->wi = env_sample(sc, sc->light_data + as_int(l[LIGHT_PRIM]), u, &ls->radiance, &pdf, env_radiance);
         ls->dist = INF_F;
         ls->pdf = l[LIGHT_PMF] * pdf;
         return ls->pdf > 0.0f;
@@ -369,10 +391,16 @@ static inline bool light_sample_id(const Scene* sc, int id, vec3 p, vec2 u, Ligh
     return ls->pdf > 0.0f;
 }
 
-/* Sample an emitter and a point on it as seen from p; false when the sample carries nothing. */
-static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u, LightSample* ls) {
+/* light_sample_emitter with every radiance looked up. */
+static inline bool light_sample_id(const Scene* sc, int id, vec3 p, vec2 u, LightSample* ls) {
+    return light_sample_emitter(sc, id, p, u, ls, true);
+}
+
+/* Sample an emitter and a point on it as seen from p; false when the sample carries nothing. With env_radiance
+ * false an environment sample's radiance is left for later (ENV_DEFERRED, path_lit). */
+static inline bool light_sample(const Scene* sc, vec3 p, float u_select, vec2 u, LightSample* ls, bool env_radiance) {
     if (num_lights(sc) == 0) return false;
-    return light_sample_id(sc, light_choose(sc, u_select), p, u, ls);
+    return light_sample_emitter(sc, light_choose(sc, u_select), p, u, ls, env_radiance);
 }
 
 /* Radiance an emissive triangle sends along -dir (one-sided: front faces only) from its point at uv. */

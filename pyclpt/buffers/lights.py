@@ -155,6 +155,26 @@ def _cdf(weights: np.ndarray) -> np.ndarray:
     return out
 
 
+def guide_size(n: int) -> int:
+    """The number of intervals of a CDF's guide table (cdf_guide): a power of two near n / 8, 1 to 1024."""
+    return 1 << int(np.clip(np.round(np.log2(max(n, 1) / 8.0)), 0, 10))
+
+
+def cdf_guide(cdf: np.ndarray, g: int) -> np.ndarray:
+    """The guide table (..., g + 1) of inclusive float32 CDFs ``cdf`` (..., n): entry k is the bin that u = k / g
+    falls in (the first i with u < cdf[i], the last bin where none), so a u in [k / g, (k + 1) / g) falls in a bin
+    between entries k and k + 1 (cl/scene/lights.h, cdf_search_guided): the binary search of a 2048-texel row
+    shrinks to its few bins there, with the same result."""
+    c = np.asarray(cdf, np.float32)
+    n = c.shape[-1]
+    u = (np.arange(g + 1, dtype=np.float64) / g).astype(np.float32)  # exact: g is a power of two
+    flat = c.reshape(-1, n)
+    out = np.empty((flat.shape[0], g + 1), np.int32)
+    for r in range(flat.shape[0]):
+        out[r] = np.minimum(np.searchsorted(flat[r], u, side="right"), n - 1)
+    return out.reshape(*c.shape[:-1], g + 1)
+
+
 def pack_envmap(env: Envmap, textures: TextureTable) -> tuple[np.ndarray, float]:
     """The light_data block of an environment map (cl/scene/lights.h) and its estimated mean radiance
     over the sphere (for the light-selection power); the texels go to ``textures``."""
@@ -178,8 +198,13 @@ def pack_envmap(env: Envmap, textures: TextureTable) -> tuple[np.ndarray, float]
                               wrap_mode="repeat"))
     header = np.zeros(ENV_HEADER, np.float64)
     header[0:9] = rot.reshape(-1)
-    header[9], header[10], header[11], header[12] = w, h, tex, scale
-    block = np.concatenate([header, marginal, conditional.reshape(-1), cell_omega, row_cos]).astype(np.float32)
+    g_rows, g_cols = guide_size(h - 1), guide_size(w)
+    header[9], header[10], header[11], header[12], header[13], header[14] = w, h, tex, scale, g_rows, g_cols
+    tables = np.concatenate([header, marginal, conditional.reshape(-1), cell_omega, row_cos]).astype(np.float32)
+    guides = np.concatenate([cdf_guide(tables[ENV_HEADER:ENV_HEADER + h - 1], g_rows),
+                             cdf_guide(tables[ENV_HEADER + h - 1:ENV_HEADER + (h - 1) * (w + 1)].reshape(h - 1, w),
+                                       g_cols).reshape(-1)])
+    block = np.concatenate([tables, guides.view(np.float32)])
     integral = scale * max(float(lum_w.sum()), float(rgb_w.sum()) / 3.0)
     return block, integral / (4.0 * np.pi)
 

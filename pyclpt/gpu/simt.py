@@ -396,7 +396,9 @@ def _expand(names: tuple[str, ...]) -> list[str]:
 #: wavefront.h (path_load_shading, path_store_ray, path_store_hit, path_store_shadow, path_key), without
 #: -DAOVS: (predicate, "r"/"w", fields). Predicates: "all" lanes of the queue, "hit" (intersect's hits),
 #: "next" (the depth limit allows light and BSDF sampling), "shadow", "continued", "ended" (sample_bsdf's
-#: paths that end). One scalar access per component (the accessors are scalar in both layouts).
+#: paths that end). One scalar access per component (the accessors are scalar in both layouts). Not counted:
+#: shadow_test's read and write of shadow_contrib for an unoccluded environment sample (ENV_DEFERRED,
+#: cl/scene/lights.h), which the trace does not tell from other lit samples (the box has no environment).
 STAGE_ACCESS: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
     "path_init": [("all", "w", ("film_slot", "L", "org", "dir", "beta", "eta_scale", "prev_pdf", "flags",
                                 "depth"))],
