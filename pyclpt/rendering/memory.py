@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import fields, is_dataclass
 
+from pyclpt.buffers.lights import guide_size
 from pyclpt.device.context import Device, check_alloc, check_memory
 from pyclpt.film.aovs import AOV_COUNT
 from pyclpt.film.film import frames_per_batch
@@ -64,7 +65,8 @@ def scene_bytes(scene: Scene) -> int:
     env = scene.environment
     if isinstance(env, Envmap):
         h, w = env.pixels.shape[:2]
-        total += 24 * h * w + 16 * (h + 16)  # float RGBA texels, the sampling CDFs and cell solid angles
+        # float RGBA texels, the sampling CDFs and cell solid angles, the CDFs' guide tables (buffers/lights.py)
+        total += 24 * h * w + 16 * (h + 16) + 4 * (h * (guide_size(w) + 1) + guide_size(h - 1) + 1)
     return total
 
 
