@@ -320,6 +320,20 @@ def test_embree_gap_traces_what_embree_traces():
     assert all(v > 0 and math.isfinite(v) for v in r["mrays_per_s"].values())
 
 
+def test_trees_ab_times_two_trees_in_alternation(capsys):
+    """bench/studies/trees_ab.py (docs/benchmarks.md, "The living room's environment"): two processes, each
+    importing the tree it is given, render in alternation; a tree that is not a checkout is refused by name."""
+    ab = pytest.importorskip("bench.studies.trees_ab", reason="a source checkout's bench/studies")
+    root = str(Path(pyclpt.__file__).resolve().parents[1])
+    assert ab.main([root, root, "--scene", "builtin/cornell-box", "--size", "16", "--spp", "1", "--rounds", "2"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert line.startswith("builtin/cornell-box, megakernel, 16x16, 1 spp, depth 8, 2 rounds on ")
+    assert re.search(r"old \d+\.\d+ s, new \d+\.\d+ s, speedup \d+\.\d+x$", line), line
+    with pytest.raises(SystemExit):
+        ab.main([root, str(Path(root) / "docs"), "--rounds", "1"])
+    assert "docs: not a pyclpt checkout" in capsys.readouterr().err
+
+
 def test_isa_section_of_the_report(tmp_path):
     """`pyclpt bench --isa`: the GPU ISA check's table, budgets and plot in the report; without the tools, the
     reason in their place."""

@@ -1,0 +1,124 @@
+"""Two source trees, one scene: how much faster is the new one? Ratios in one run (docs/benchmarks.md, "The living
+room's environment": 1.43x there).
+
+    python -m bench.studies.trees_ab OLD NEW [--scene living-room] [--method megakernel] [--size 128]
+        [--spp 16] [--depth 8] [--rounds 7] [--device intel]
+
+OLD and NEW are checkouts of pyclpt (``git worktree add /tmp/old <rev>``, or the working tree itself). Each side
+runs in a process of its own that imports that tree's pyclpt, builds its renderer and renders one warm-up sample
+(compile and first launches excluded); then the two render ``--spp`` samples in alternation, the order swapped
+every round, so that the load of a shared machine falls on both alike. Printed: each side's median seconds and
+old / new, the speedup, with the machine's CPU model. ``--scene``: a shared scene folder (``living-room``), a
+scene file or a built-in scene (``builtin/cornell-box``, as ``pyclpt bench --versus`` names them); the box
+filter, as that sets it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+METHODS = {"megakernel": ("megakernel", "soa"), "wavefront-soa": ("wavefront", "soa"),
+           "wavefront-aos": ("wavefront", "aos")}
+
+
+def _serve(tree: str, scene_spec: str, method: str, size: int, spp: int, depth: int, device: str | None) -> None:
+    """One side: ``tree``'s pyclpt renders ``spp`` samples for each seed read from stdin, answering the seconds."""
+    sys.path.insert(0, tree)
+    import pyclpt
+    from pyclpt.scene.library import scenes_root
+
+    root = scenes_root()
+    shared = root / scene_spec / "scene.xml" if root is not None else None
+    if scene_spec.startswith("builtin/"):
+        scene = pyclpt.load(scene_spec.removeprefix("builtin/"))  # an unknown name: load's error lists them
+    elif shared is not None and shared.is_file():
+        scene = pyclpt.load(shared)
+    else:
+        scene = pyclpt.load(scene_spec)  # a scene file, or a built-in name no shared folder takes
+    scene.film.rfilter = pyclpt.ReconstructionFilter("box")
+    integrator, layout = METHODS[method]
+    r = pyclpt.Renderer(scene, integrator=integrator, layout=layout, max_depth=depth, width=size, height=size,
+                        device=device)
+    r.render(1, seed=0, progress=False)
+    print(json.dumps({"ready": pyclpt.__file__}), flush=True)
+    for line in sys.stdin:
+        t = time.perf_counter()
+        r.render(spp, seed=int(line), progress=False)
+        r.device.queue.finish()
+        print(json.dumps({"seconds": time.perf_counter() - t}), flush=True)
+
+
+class Side:
+    """A serving process of one tree."""
+
+    def __init__(self, tree: Path, a: argparse.Namespace) -> None:
+        cmd = [sys.executable, __file__, "--serve", str(tree), a.scene, a.method, str(a.size), str(a.spp),
+               str(a.depth), a.device or ""]
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        ready = self._answer()
+        self.module = ready["ready"]
+        if not Path(self.module).resolve().is_relative_to(tree.resolve()):
+            raise SystemExit(f"{tree}: the side imported pyclpt from {self.module}, not from this tree")
+
+    def _answer(self) -> dict:
+        line = self.proc.stdout.readline() if self.proc.stdout else ""
+        if not line:
+            raise SystemExit(f"a side stopped (exit status {self.proc.wait()}); its error is above")
+        return json.loads(line)
+
+    def render(self, seed: int) -> float:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(f"{seed}\n")
+        self.proc.stdin.flush()
+        return float(self._answer()["seconds"])
+
+    def close(self) -> None:
+        if self.proc.stdin:
+            self.proc.stdin.close()
+        self.proc.wait()
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--serve"]:
+        tree, scene, method, size, spp, depth, device = argv[1:8]
+        _serve(tree, scene, method, int(size), int(spp), int(depth), device or None)
+        return 0
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("old", type=Path)
+    ap.add_argument("new", type=Path)
+    ap.add_argument("--scene", default="living-room")
+    ap.add_argument("--method", choices=tuple(METHODS), default="megakernel")
+    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--depth", type=int, default=8)
+    ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--device", default=None)
+    a = ap.parse_args(argv)
+    for tree in (a.old, a.new):
+        if not (tree / "pyclpt" / "__init__.py").is_file():
+            ap.error(f"{tree}: not a pyclpt checkout (no pyclpt/__init__.py)")
+    from bench.report.machine import cpu_model
+
+    sides = {"old": Side(a.old, a), "new": Side(a.new, a)}
+    times: dict[str, list[float]] = {"old": [], "new": []}
+    try:
+        for i in range(a.rounds):
+            for name in ("old", "new") if i % 2 == 0 else ("new", "old"):
+                times[name].append(sides[name].render(1 + i))
+    finally:
+        for side in sides.values():
+            side.close()
+    old, new = statistics.median(times["old"]), statistics.median(times["new"])
+    print(f"{a.scene}, {a.method}, {a.size}x{a.size}, {a.spp} spp, depth {a.depth}, {a.rounds} rounds on "
+          f"{cpu_model()}: old {old:.3f} s, new {new:.3f} s, speedup {old / new:.3f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
