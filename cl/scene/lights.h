@@ -81,12 +81,14 @@
 #define HAS_LIGHT(t) true
 #endif
 
-/* An environment sample's radiance, deferred (light_sample_emitter with env_radiance false): where the scene's only
- * lights at infinity are its environment (an envmap or constant, no directional light), a shadow ray with an
- * infinite tmax is an environment sample, so its radiance can wait until the ray is found unoccluded
+/* An environment sample's radiance, deferred (light_sample_emitter with env_radiance false): where the scene has an
+ * environment (an envmap or constant) and no other light at infinity (no directional light), a shadow ray with
+ * an infinite tmax is an environment sample, so its radiance can wait until the ray is found unoccluded
  * (path_lit: env_eval along the ray). An envmap's bilinear lookup (and its atan2, acos) is then paid for the
- * samples that reach the sky alone: 3 % of the living room's (docs/benchmarks.md, "The living room"). */
-#if defined(SCENE_LIGHTS) && !((SCENE_LIGHTS) & (1 << LIGHT_DIRECTIONAL))
+ * samples that reach the sky alone: 3 % of the living room's (docs/benchmarks.md, "The living room's
+ * environment"). Scenes without an environment compile as before. */
+#if defined(SCENE_LIGHTS) && ((SCENE_LIGHTS) & ((1 << LIGHT_CONSTANT) | (1 << LIGHT_ENVMAP))) && \
+    !((SCENE_LIGHTS) & (1 << LIGHT_DIRECTIONAL))
 #define ENV_DEFERRED 1
 #else
 #define ENV_DEFERRED 0
