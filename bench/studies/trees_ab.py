@@ -26,9 +26,14 @@ METHODS = {"megakernel": ("megakernel", "soa"), "wavefront-soa": ("wavefront", "
            "wavefront-aos": ("wavefront", "aos")}
 
 
-def _serve(tree: str, scene_spec: str, method: str, size: int, spp: int, depth: int, device: str | None) -> None:
-    """One side: ``tree``'s pyclpt renders ``spp`` samples for each seed read from stdin, answering the seconds."""
-    sys.path.insert(0, tree)
+#: A side's program: python -c puts its working folder, the tree, first on the module path, so that
+#: ``import pyclpt`` there is that tree's; it then runs this file's _serve.
+SIDE = "import runpy, sys; runpy.run_path(sys.argv[1], run_name='trees_ab_side')"
+
+
+def _serve(scene_spec: str, method: str, size: int, spp: int, depth: int, device: str | None) -> None:
+    """One side: the working folder's pyclpt renders ``spp`` samples for each seed read from stdin, answering the
+    seconds."""
     import pyclpt
     from pyclpt.scene.library import scenes_root
 
@@ -57,9 +62,10 @@ class Side:
     """A serving process of one tree."""
 
     def __init__(self, tree: Path, a: argparse.Namespace) -> None:
-        cmd = [sys.executable, __file__, "--serve", str(tree), a.scene, a.method, str(a.size), str(a.spp),
+        scene = str(Path(a.scene).resolve()) if Path(a.scene).is_file() else a.scene
+        cmd = [sys.executable, "-c", SIDE, str(Path(__file__).resolve()), scene, a.method, str(a.size), str(a.spp),
                str(a.depth), a.device or ""]
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=tree)
         ready = self._answer()
         self.module = ready["ready"]
         if not Path(self.module).resolve().is_relative_to(tree.resolve()):
@@ -84,11 +90,6 @@ class Side:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if argv[:1] == ["--serve"]:
-        tree, scene, method, size, spp, depth, device = argv[1:8]
-        _serve(tree, scene, method, int(size), int(spp), int(depth), device or None)
-        return 0
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("old", type=Path)
     ap.add_argument("new", type=Path)
@@ -120,5 +121,8 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == "trees_ab_side":
+    _scene, _method, _size, _spp, _depth, _device = sys.argv[2:8]
+    _serve(_scene, _method, int(_size), int(_spp), int(_depth), _device or None)
+elif __name__ == "__main__":
     raise SystemExit(main())
