@@ -6,7 +6,8 @@ With the same seed, the renders on either side of a small step take the same sam
 of the image are the derivative of the estimator itself: a gradient that differs from them by more than the
 step's own error is wrong, pixel by pixel where the integrand is smooth (direct light). Indirect light through a
 moved surface is compared over seeds. Mutants of the method (tests/mutate.py, "geometry-"): the far end's
-cosine, the first hit sliding along its camera ray, the frame turning with the normal and the area Jacobian."""
+cosine, the first hit sliding along its camera ray, the frame turning with the normal and the area Jacobian; a
+moving mirror's reflected ray turning with its normal, its origin, its normal's adjoint and its Fresnel factor."""
 from __future__ import annotations
 
 import dataclasses
@@ -634,3 +635,144 @@ def test_only_the_paths_that_meet_a_moving_mesh_are_replayed(name, monkeypatch):
     np.testing.assert_allclose(some, every, rtol=1e-4, atol=1e-4 * np.abs(every).max())
     monkeypatch.setattr(differentiate, "_moving_vertices", lambda scene, chosen: (0, 0))
     assert np.all(backward() == 0)
+
+
+# ---- a moving planar mirror in the interior term (geometry.h: geo_hit_kind, geo_mirror_ray) --------------------
+
+#: A perfect mirror (``conductor``'s default: reflectance 1 at every angle) at 45 degrees through the origin, normal
+#: (1, 0, 1) / sqrt 2, filling the view of a camera at z = 5 (tests/test_edges.py's 45-degree mirror): the camera
+#: sees, as from (-5, 0, 0), a diffuse wall at x = 6 lit by a point light between the two. No outline in view.
+MIRROR_POSE = tf.rotate([0, 1, 0], 45) @ tf.scale(5.0)
+MIRROR_NORMAL = np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)
+ROT_X = np.array([[0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 0]], np.float64)  # d R_x(a) / da at 0
+MIRROR_DEPTH = 3  # camera -> mirror -> the wall and its light sample
+
+
+def _mirror_room(move: np.ndarray | None = None, camera: np.ndarray | None = None, metal: str = "none"
+                 ) -> pyclpt.Scene:
+    """The mirror posed by ``move`` @ MIRROR_POSE, the camera by ``camera`` @ its look_at, 32 x 32; ``metal``: the
+    mirror's conductor (none: a perfect mirror; "Au": gold, its Fresnel reflectance changing with the angle)."""
+    move = np.eye(4) if move is None else move
+    camera = np.eye(4) if camera is None else camera
+    return pyclpt.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40, "fov_axis": "x",
+                   "to_world": camera @ tf.look_at([0, 0, 5], [0, 0, 0], [0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}}},
+        "mirror": {"type": "rectangle", "to_world": move @ MIRROR_POSE,
+                   "bsdf": {"type": "conductor", "material": metal}},
+        "wall": {"type": "rectangle", "to_world": tf.translate([6, 0, 0]) @ tf.rotate([0, 1, 0], -90) @ tf.scale(30.0),
+                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.6, 0.7]}}},
+        "light": {"type": "point", "position": [3.0, 2.0, 2.0], "intensity": {"type": "rgb", "value": [30.0] * 3}},
+    })
+
+
+def _mirror_tangent(motion: str) -> tuple[str, np.ndarray, float]:
+    """(parameter, tangent, step) of a motion of the mirror room."""
+    t = np.zeros((4, 4))
+    if motion == "translate":  # the mirror along its normal
+        t[:3, 3] = MIRROR_NORMAL
+        return "mirror.to_world", t, 1e-2
+    if motion in ("rotate", "rotate-gold"):  # the mirror about the y axis through its centre (in its plane)
+        return "mirror.to_world", ROT_Y.copy(), 3e-3
+    t = 0.3 * ROT_X  # the camera: a tilt about the origin (its rays turn) and a translation
+    t[:3, 3] = [1.0, 0.5, -0.3]
+    return "sensor.to_world", t, 3e-3
+
+
+@pytest.mark.parametrize("motion", ["translate", "rotate", "camera", "rotate-gold"])
+def test_moving_mirror_interior_term(motion):
+    """What the camera sees in a moving mirror, and through a mirror from a moving camera: the mirror's point slides
+    along the camera ray on its moving plane and reflects it about its normal, and the wall's point slides along the
+    reflected ray, which moves with both; a gold mirror's Fresnel reflectance changes with the angle as it turns.
+    Forward mode equals same-seed central differences pixel by pixel (to 2e-3 of the largest; the image sum to
+    1e-3), reverse mode equals forward mode along the tangent (a random image gradient). With the mirror held still
+    (before), both were 0."""
+    name, tangent, h = _mirror_tangent(motion)
+    metal = "Au" if motion.endswith("gold") else "none"
+    scene = _mirror_room(metal=metal)
+    kw = dict(spp=16, seed=3, max_depth=MIRROR_DEPTH)
+    make = ((lambda m: _mirror_room(camera=m, metal=metal)) if name.startswith("sensor")
+            else (lambda m: _mirror_room(m, metal=metal)))
+    fd = _central(make, tangent, h, 16, 3, MIRROR_DEPTH)
+    if name.startswith("sensor"):  # the sensor's to_world is its matrix (a mesh's, a pose applied on the left)
+        tangent = tangent @ np.asarray(scene.camera.to_world, np.float64)
+    fwd = pyclpt.render_forward(scene, name, tangent, boundary=False, **kw).astype(np.float64)
+    assert np.abs(fd).max() > 0.1
+    assert np.abs(fwd - fd).max() < 2e-3 * np.abs(fd).max(), (np.abs(fwd - fd).max(), np.abs(fd).max())
+    assert fwd.sum() == pytest.approx(fd.sum(), rel=1e-3)
+    grad = np.random.default_rng(1).random((32, 32, 3)).astype(np.float32)
+    back = _backward_along(scene, name, tangent, grad, **kw)
+    assert back == pytest.approx(float((fwd * grad).sum()), rel=1e-4)
+
+
+def test_smooth_shaded_mirror_vertices():
+    """A smooth-shaded mirror, bent (one corner pushed 0.4 along the normal, the vertex normals update() writes:
+    they differ, and the mirror reflects about their interpolation), its four vertices moved along a random tangent:
+    the reflection turns with the vertex normals (their motion and the point's slide over them). Forward mode
+    equals same-seed central differences through params.update() pixel by pixel (to 3e-3 of the largest at the
+    95th percentile; the image sum to 2e-3), reverse mode equals forward mode along the tangent."""
+    from pyclpt.gradients.placement import vertex_normals
+
+    scene = _mirror_room()
+    mesh = scene.meshes[0]
+    p = mesh.positions.astype(np.float64)
+    p[1] += 0.4 * MIRROR_NORMAL
+    p = p.astype(np.float32)
+    scene.meshes[0] = dataclasses.replace(mesh, positions=p, normals=vertex_normals(p, mesh.indices))
+    params = pyclpt.traverse(scene)
+    name = "mirror.vertex_positions"
+    base = np.asarray(params[name], np.float64)
+    tangent = np.random.default_rng(0).normal(size=base.shape) * 0.3
+    kw = dict(spp=16, seed=3, max_depth=MIRROR_DEPTH)
+
+    def render(s: float) -> np.ndarray:
+        params.update({name: (base + s * tangent).astype(np.float32)})
+        return pyclpt.render(scene, **kw).astype(np.float64)
+
+    h = 1e-3
+    fd = (render(h) - render(-h)) / (2 * h)
+    params.update({name: base.astype(np.float32)})
+    fwd = pyclpt.render_forward(scene, name, tangent, boundary=False, **kw).astype(np.float64)
+    err = np.abs(fwd - fd).max(-1)
+    assert np.abs(fd).max() > 0.05
+    assert np.quantile(err, 0.95) < 3e-3 * np.abs(fd).max(), (np.quantile(err, 0.95), np.abs(fd).max())
+    assert fwd.sum() == pytest.approx(fd.sum(), rel=2e-3)
+    grad = np.random.default_rng(1).random((32, 32, 3)).astype(np.float32)
+    back = pyclpt.render_backward(scene, grad, params=[name], boundary=False, **kw)[name]
+    assert float((back.astype(np.float64) * tangent.reshape(back.shape)).sum()) == pytest.approx(
+        float((fwd * grad).sum()), rel=1e-3)
+
+
+def _instanced_mirror_room(move: np.ndarray | None = None) -> pyclpt.Scene:
+    """:func:`_mirror_room` with a gold mirror that is an instance of a shapegroup (posed by ``move`` @ MIRROR_POSE)."""
+    move = np.eye(4) if move is None else move
+    return pyclpt.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40, "fov_axis": "x",
+                   "to_world": tf.look_at([0, 0, 5], [0, 0, 0], [0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}}},
+        "group": {"type": "shapegroup", "id": "group",
+                  "m": {"type": "rectangle", "bsdf": {"type": "conductor", "material": "Au"}}},
+        "mirror": {"type": "instance", "shape": {"type": "ref", "id": "group"}, "to_world": move @ MIRROR_POSE},
+        "wall": {"type": "rectangle", "to_world": tf.translate([6, 0, 0]) @ tf.rotate([0, 1, 0], -90) @ tf.scale(30.0),
+                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.6, 0.7]}}},
+        "light": {"type": "point", "position": [3.0, 2.0, 2.0], "intensity": {"type": "rgb", "value": [30.0] * 3}},
+    })
+
+
+def test_moving_instanced_mirror():
+    """The gold mirror as an instance of a shapegroup, its instance's to_world turned as in
+    test_moving_mirror_interior_term: the mirror's point, normal and Fresnel factor move through the instance's
+    record (their adjoints to its 12 floats); forward mode equals same-seed central differences pixel by pixel (to
+    2e-3 of the largest), forward = backward."""
+    name, tangent, h = _mirror_tangent("rotate")
+    scene = _instanced_mirror_room()
+    kw = dict(spp=16, seed=3, max_depth=MIRROR_DEPTH)
+    fd = _central(_instanced_mirror_room, tangent, h, 16, 3, MIRROR_DEPTH)
+    tangent = tangent @ np.asarray(pyclpt.traverse(scene)[name], np.float64)  # an instance's to_world: its matrix
+    fwd = pyclpt.render_forward(scene, name, tangent, boundary=False, **kw).astype(np.float64)
+    assert np.abs(fwd - fd).max() < 2e-3 * np.abs(fd).max(), (np.abs(fwd - fd).max(), np.abs(fd).max())
+    assert fwd.sum() == pytest.approx(fd.sum(), rel=1e-3)
+    grad = np.random.default_rng(1).random((32, 32, 3)).astype(np.float32)
+    assert _backward_along(scene, name, tangent, grad, **kw) == pytest.approx(float((fwd * grad).sum()), rel=1e-4)

@@ -114,8 +114,11 @@ typedef struct {
 } Deferred;
 
 #ifdef GRAD_GEOMETRY
-/* The path ended at vertex gc: the last three vertices' adjoints to the buffers. */
+/* The path ended at vertex gc: the last three vertices' adjoints to the buffers (one on a moving mirror's ray
+ * first, its ray's to the mirror before it). */
 static inline void geo_end(const Scene* sc, Grads* gr, GeoVertex* ga, GeoVertex* gb, GeoVertex* gc) {
+    geo_flush_ray(sc, gr, gb, gc);
+    geo_flush_ray(sc, gr, ga, gb);
     geo_scatter(sc, gr, ga);
     geo_scatter(sc, gr, gb);
     geo_scatter(sc, gr, gc);
@@ -132,7 +135,7 @@ static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, co
     vec3 g_wi, g_wo;
     geo_bsdf_adjoint(sc, s, b, v3_neg(dir_in), n->ls.wi, n->f, C, dL, gc, &g_wi, &g_wo);
     if (gc->kind == GEO_ATTACHED && r_bc > 0.0f) geo_segment_adjoint(gc, gb, v3_neg(dir_in), r_bc, g_wi, 0.0f);
-    else if (gc->camera) gc->gwi = v3_add(gc->gwi, g_wi); /* the camera ray turns */
+    else if (gc->camera || gc->mray) gc->gwi = v3_add(gc->gwi, g_wi); /* the camera's (a mirror's) ray turns */
     GeoVertex gy;
     if (!geo_light_end(sc, key, depth, n, gc, &gy)) return;
     float r = n->ls.dist;
@@ -176,6 +179,7 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
         if (!walk_closest(sc, key, &ps, replay, hits, &hit)) {
 #ifdef GRAD_GEOMETRY
             if (replay) { /* a direction to the environment: nothing moves it */
+                geo_flush_ray(sc, gr, &ga, &gb);
                 geo_scatter(sc, gr, &ga);
                 geo_scatter(sc, gr, &gb);
             }
@@ -197,13 +201,16 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
         Surface s = surface_hit(sc, hit.prim, hit.u, hit.v, ps.dir);
 #ifdef GRAD_GEOMETRY
         if (!replay && geo_moving_prim(sc, gr, hit.prim)) *touched = true;
-        Bsdf b = bsdf_at(sc, &s); /* here already: a delta-only vertex is held still */
+        Bsdf b = bsdf_at(sc, &s); /* here already: a delta vertex is a moving mirror's or held still */
         if (replay) {
-            int kind = bsdf_is_delta(&b) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
+            int mirror;
+            int kind = geo_hit_kind(&b, seg_area, &gb, &mirror);
             gc = geo_on_triangle(sc, hit.prim, hit.u, hit.v, s.p, kind, ps.dir);
+            gc.mirror = mirror;
 #ifdef GRAD_CAMERA
             if (ps.depth == 0) geo_camera_hit(sc, &gc, camera_film_position(sc, key, pixel), gb.p);
 #endif
+            geo_mirror_ray(&gc, &gb); /* on the ray a moving mirror reflected */
             r_bc = m_length(v3_sub(gc.p, gb.p));
             if (seg_area && r_bc > 0.0f) geo_area_segment(&gb, &gc, ps.dir, r_bc, seg_a, seg_gw);
         }
@@ -278,9 +285,11 @@ static inline vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pix
                 vec3 g_wi;
                 geo_bsdf_adjoint(sc, &s, &b, v3_neg(dir_in), ps.dir, f, through, dL, &gc, &g_wi, &seg_gw);
                 if (gc.kind == GEO_ATTACHED && r_bc > 0.0f) geo_segment_adjoint(&gc, &gb, v3_neg(dir_in), r_bc, g_wi, 0.0f);
-                else if (gc.camera) gc.gwi = v3_add(gc.gwi, g_wi);
+                else if (gc.camera || gc.mray) gc.gwi = v3_add(gc.gwi, g_wi);
                 seg_a = m_dot(dL, through);
             }
+            if (gc.mirror) geo_fresnel_adjoint(sc, &b, dL, v3_sub(L_total, gathered), &gc); /* its Fresnel factor */
+            geo_flush_ray(sc, gr, &ga, &gb); /* complete: its ray's adjoints to the mirror ga before ga's scatter */
             geo_scatter(sc, gr, &ga); /* no later factor needs it */
             ga = gb;
             gb = gc;

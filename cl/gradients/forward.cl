@@ -81,10 +81,12 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
             }
             Surface s = surface_hit(&sc, hit.prim, hit.u, hit.v, ps.dir);
 #ifdef GRAD_GEOMETRY
-            Bsdf b = bsdf_at(&sc, &s); /* here already: a delta-only vertex is held still */
+            Bsdf b = bsdf_at(&sc, &s); /* here already: a delta vertex is a moving mirror's or held still */
             {
-                int kind = bsdf_is_delta(&b) ? GEO_FIXED : seg_area ? GEO_ATTACHED : GEO_SLIDING;
+                int mirror;
+                int kind = geo_hit_kind(&b, seg_area, &gb, &mirror);
                 gc = geo_on_triangle(&sc, hit.prim, hit.u, hit.v, s.p, kind, ps.dir);
+                gc.mirror = mirror;
                 geo_motion(&sc, &tg, &gc);
 #ifdef GRAD_CAMERA
                 if (ps.depth == 0) {
@@ -92,6 +94,8 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
                     geo_camera_motion(&sc, &tg, &gc);
                 }
 #endif
+                geo_mirror_ray(&gc, &gb); /* on the ray a moving mirror reflected: its motion */
+                geo_ray_motion(&sc, &gc, &gb);
                 geo_shading_motion(&sc, &tg, &gc);
                 r_bc = m_length(v3_sub(gc.p, gb.p));
                 if (seg_area && r_bc > 0.0f) { /* the segment's factors, now that its far end is known */
@@ -141,6 +145,7 @@ __kernel SCALAR_KERNEL void forward(SCENE_PARAMS, __global float* frame, __globa
             dbeta = v3_add(v3_mul(dbeta, safe_div3(ps.beta, beta)), v3_mul(ps.beta, df_f));
 #ifdef GRAD_GEOMETRY
             seg_area = !(ps.flags & PATH_PREV_DELTA);
+            if (gc.mirror) dbeta = v3_add(dbeta, v3_mul(ps.beta, geo_fresnel_tangent(&sc, &b, &gc))); /* F turns */
             if (seg_area) { /* the BSDF's derivative through wi and the frame now, through wo when the hit is known */
                 vec3 wi_w = v3_neg(dir_in), wo = to_local(s.sh, ps.dir);
                 vec3 dwi = gc.kind == GEO_ATTACHED && r_bc > 0.0f ? geo_direction_tangent(&gc, &gb, wi_w, r_bc)

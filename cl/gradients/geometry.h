@@ -9,9 +9,12 @@
  * The sampling densities and MIS weights are held fixed (detached), as in prb: their derivatives sum to zero
  * over the strategies when all are expressed in area measure. What is not an area-measure point:
  *   the first hit slides along its camera ray (the pixel integral is over the film), and so does a point
- *   reached by a delta (smooth specular) lobe, along its ray; a vertex of a delta-only material is held still
- *   (a moving mirror's own motion is not differentiated: docs/differentiable.md), and so is a direction to
- *   the environment or a directional light (a point at infinity).
+ *   reached by a delta (smooth specular) lobe, along its ray; a smooth conductor's vertex (a mirror) reached along
+ *   such a ray slides along it too and reflects it, and the next hit slides along the reflected ray, which moves
+ *   with the mirror's point and normal and the incoming ray ("a moving planar (or smooth-shaded) mirror" below:
+ *   one mirror at a time); any other vertex of a delta-only material (glass, a second mirror in a row, a mirror
+ *   reached after a rough bounce) is held still, and so is a direction to the environment or a directional light
+ *   (a point at infinity).
  * A point on triangle T with barycentrics b moves as sum_j b_j dv_j (attached), or along its ray d as
  * d (n . dp) / (n . d) (sliding); the triangle's unit normal and area follow its vertices' motion.
  *
@@ -55,9 +58,9 @@
 
 #define GEO_FD_STEP 1e-3f
 
-#define GEO_FIXED 0    /* does not move (the camera, a delta-only vertex, no vertex) */
+#define GEO_FIXED 0    /* does not move (the camera, a delta-only vertex held still, no vertex) */
 #define GEO_ATTACHED 1 /* attached to its triangle by its barycentrics */
-#define GEO_SLIDING 2  /* on a fixed ray (the camera's, a delta lobe's), where that meets its moving triangle */
+#define GEO_SLIDING 2  /* on a ray (the camera's, a delta lobe's, a moving mirror's), where it meets its triangle */
 #define GEO_POINT 3    /* a point or spot light's position */
 
 /* grad_lightpos / the tangent's lightpos: per light record, its position (3 floats) and a spot light's axis (3) */
@@ -79,7 +82,9 @@ typedef struct {
     float db1, db2; /* forward mode: a sliding point's barycentrics' tangents (geo_shading_motion) */
     int camera;   /* -DGRAD_CAMERA: the camera ray's hit, t from the camera at film coordinates (sx, sy) */
     float t, sx, sy;
-    vec3 gwi, dd; /* the adjoint (reverse) or tangent (forward, dd = -d wi) of the camera ray's direction */
+    vec3 gwi, dd; /* the adjoint (reverse) or tangent (forward, dd = -d wi) of its ray's direction (camera, mray) */
+    int mirror;   /* a moving mirror's vertex: a smooth conductor's, sliding (geo_hit_kind) */
+    int mray;     /* on the ray a moving mirror reflected (origin the mirror's vertex), t from it (geo_mirror_ray) */
 } GeoVertex;
 
 static inline GeoVertex geo_fixed(vec3 p) {
@@ -90,7 +95,7 @@ static inline GeoVertex geo_fixed(vec3 p) {
     v.gb1 = v.gb2 = v.db1 = v.db2 = 0.0f;
     v.kind = GEO_FIXED;
     v.id = v.rec = -1;
-    v.camera = 0;
+    v.camera = v.mirror = v.mray = 0;
     return v;
 }
 
@@ -275,7 +280,7 @@ static inline vec3 geo_camera_v(const Scene* sc, float sx, float sy) {
 
 /* Marks v, the hit of the camera ray from origin through film position film, as the camera's. */
 static inline void geo_camera_hit(const Scene* sc, GeoVertex* v, vec2 film, vec3 origin) {
-    if (v->kind != GEO_SLIDING) return; /* a delta-only vertex is held still */
+    if (v->kind != GEO_SLIDING) return; /* a vertex held still (geo_hit_kind) */
     __global const float* c = sc->consts;
     v->camera = 1;
     v->sx = 2.0f * (film.x / c[CONST_WIDTH]) - 1.0f;
@@ -399,17 +404,103 @@ static inline bool geo_vertex_normals(const Scene* sc, const GeoVertex* v, vec3*
     return len > 0.0f && m_isfinite(len);
 }
 
-/* A vertex's adjoints to its triangle's three vertices and vertex normals (or its point light's position). */
-static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
+/* ---- a moving planar (or smooth-shaded) mirror ---------------------------------------------------------
+ * A vertex m of a smooth conductor (delta reflection only) reached along a sliding ray (the camera's, or a
+ * delta lobe's fixed one) slides along that ray on its moving triangle as any sliding point does (its ray's
+ * motion: the camera's), and reflects it about its shading normal ns (the triangle's, or m / |m| of its vertex
+ * normals with its barycentrics sliding): r = d - 2 (ns . d) ns turns with the incoming direction d and ns,
+ *   dr = dd - 2 [(dns . d + ns . dd) ns + (ns . d) dns].
+ * The next hit x slides along the moving ray (origin m, direction r): dx = P (dm + t dr) + r (n . dp) / (n . r),
+ * its incident direction -r turning with it (the camera hit's rule, the ray's origin and direction the mirror's).
+ * Reverse mode: x's adjoints (q = P^T gx to the origin, t q - gwi to r) go to m's position, its incident
+ * direction (g_d = g_r - 2 ns (ns . g_r)) and its shading normal (-2 [(ns . d) g_r + (ns . g_r) d]), when x is
+ * complete (geo_flush_ray: the window's shift after x's successor, or the path's end), before m's own scatter.
+ * The conductor's Fresnel factor F(c), c = |ns . d|, turns with d and ns too (geo_fresnel_slope: its
+ * log-derivative times dc in forward mode; in reverse mode, weighted by what flows through the mirror, to d and ns).
+ * One mirror at a time: a delta vertex right after a moving mirror, and one reached along an area-form segment
+ * (after a rough bounce), is held still, and the ray after it is fixed. */
+
+/* Whether b reflects like a smooth mirror only (a smooth conductor). */
+static inline bool geo_mirror_material(const Bsdf* b) {
+    return HAS_MATERIAL(MAT_CONDUCTOR) && b->type == MAT_CONDUCTOR;
+}
+
+/* The kind of a hit on material b, reached along an area-form segment (seg_area) or not from vertex prev; *mirror
+ * set for a moving mirror's vertex. */
+static inline int geo_hit_kind(const Bsdf* b, bool seg_area, const GeoVertex* prev, int* mirror) {
+    *mirror = 0;
+    if (!bsdf_is_delta(b)) return seg_area ? GEO_ATTACHED : GEO_SLIDING;
+    if (seg_area || prev->mirror || !geo_mirror_material(b)) return GEO_FIXED; /* held still */
+    *mirror = 1;
+    return GEO_SLIDING;
+}
+
+/* Marks x, the hit of the ray that the moving mirror m reflected, as sliding along that moving ray. */
+static inline void geo_mirror_ray(GeoVertex* x, const GeoVertex* m) {
+    if (!m->mirror || x->kind != GEO_SLIDING) return;
+    x->mray = 1;
+    x->t = m_length(v3_sub(x->p, m->p));
+}
+
+/* The unit shading normal of v as geo_shading_motion's ds moves it: m / |m|, or the triangle's (flipped). */
+static inline vec3 geo_shading_normal(const Scene* sc, const GeoVertex* v) {
+    vec3 n0, n1, n2, m;
+    if (geo_vertex_normals(sc, v, &n0, &n1, &n2, &m)) return m_normalize(m);
+    return v3_scale(v->n, geo_flip(sc, v));
+}
+
+/* A moving mirror m's Fresnel factor F(c) (conductor_sample's, c = |wi . ns| = |d . ns|): its log-derivative
+ * dF/dc / F per channel, by central differences of fresnel_conductor (clamped to [0, 1]); *dc_dd and *dc_dns
+ * the gradients of c with respect to m's incoming direction d and its shading normal ns. */
+static inline vec3 geo_fresnel_slope(const Scene* sc, const Bsdf* b, const GeoVertex* m, vec3* dc_dd, vec3* dc_dns) {
+    vec3 ns = geo_shading_normal(sc, m);
+    float nd = m_dot(ns, m->d), sign = nd < 0.0f ? -1.0f : 1.0f, c = m_abs(nd);
+    *dc_dd = v3_scale(ns, sign);
+    *dc_dns = v3_scale(m->d, sign);
+    float c0 = m_max(c - GEO_FD_STEP, 0.0f), c1 = m_min(c + GEO_FD_STEP, 1.0f);
+    if (!(c1 > c0)) return v3_splat(0.0f);
+    vec3 df = v3_sub(fresnel_conductor(c1, b->eta, b->k), fresnel_conductor(c0, b->eta, b->k));
+    return safe_div3(v3_scale(df, 1.0f / (c1 - c0)), fresnel_conductor(c, b->eta, b->k));
+}
+
+/* Reverse mode: the moving mirror m's Fresnel factor, through which `through` (everything gathered after m) flows,
+ * weighted by dL: its adjoints to m's incident direction (wi = -d) and shading normal. */
+static inline void geo_fresnel_adjoint(const Scene* sc, const Bsdf* b, vec3 dL, vec3 through, GeoVertex* m) {
+    vec3 dc_dd, dc_dns;
+    float g = m_dot(v3_mul(dL, through), geo_fresnel_slope(sc, b, m, &dc_dd, &dc_dns));
+    m->gwi = v3_sub(m->gwi, v3_scale(dc_dd, g));
+    m->gs = v3_add(m->gs, v3_scale(dc_dns, g));
+}
+
+/* Reverse mode: x's ray adjoints (gx its position's, with its slide) to the mirror m it came from. */
+static inline void geo_ray_adjoint(const Scene* sc, const GeoVertex* x, vec3 gx, GeoVertex* m) {
+    float nd = m_dot(x->n, x->d);
+    if (nd == 0.0f) return;
+    vec3 q = v3_sub(gx, v3_scale(x->n, m_dot(x->d, gx) / nd)); /* P^T gx: the ray's origin */
+    vec3 g_r = v3_sub(v3_scale(q, x->t), x->gwi);           /* its direction r */
+    m->gx = v3_add(m->gx, q);
+    vec3 ns = geo_shading_normal(sc, m);
+    float nsd = m_dot(ns, m->d), nsg = m_dot(ns, g_r);
+    vec3 g_d = v3_sub(g_r, v3_scale(ns, 2.0f * nsg));
+    m->gwi = v3_sub(m->gwi, g_d); /* wi = -d */
+    m->gs = v3_sub(m->gs, v3_scale(v3_add(v3_scale(g_r, nsd), v3_scale(m->d, nsg)), 2.0f));
+}
+
+/* A vertex's adjoints to its triangle's three vertices and vertex normals (or its point light's position); one
+ * on a moving mirror's ray (v->mray) its ray's to the mirror mir (0: none). */
+static inline void geo_scatter_ray(const Scene* sc, Grads* gr, const GeoVertex* v, GeoVertex* mir) {
     if (v->kind == GEO_POINT) {
         grad_put3(gr, gr->lightpos + GEO_LIGHT_STRIDE * v->id, v->gx);
         return;
     }
     if (v->kind == GEO_FIXED) return;
     /* a triangle of a mesh that does not move: nothing reads its vertices' adjoints (the host reads the packed
-       vertices [moving_lo, moving_hi), the moving meshes'); a camera hit's adjoints still go to the camera. In
-       the Cornell box with one box moving, most vertices are the walls': this saved 30 % of the backward pass. */
-    if (!v->camera && !geo_moving_prim(sc, gr, v->id)) return;
+       vertices [moving_lo, moving_hi), the moving meshes'); a camera hit's adjoints still go to the camera, a
+       moving mirror's ray's to the mirror. In the Cornell box with one box moving, most vertices are the walls':
+       this saved 30 % of the backward pass. */
+    bool ray = mir != 0 && v->mray;
+    bool put = v->camera || geo_moving_prim(sc, gr, v->id);
+    if (!put && !ray) return;
     vec3 e1, e2;
     geo_edges(sc, v, &e1, &e2);
     vec3 c = m_cross(e1, e2);
@@ -424,7 +515,7 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
         float lm = m_length(m);
         vec3 ns = v3_divs(m, lm);
         vec3 gm = v3_divs(v3_sub(v->gs, v3_scale(ns, m_dot(ns, v->gs))), lm);
-        geo_put_vnormals(sc, gr, v, v3_scale(gm, b0), v3_scale(gm, v->b1), v3_scale(gm, v->b2));
+        if (put) geo_put_vnormals(sc, gr, v, v3_scale(gm, b0), v3_scale(gm, v->b1), v3_scale(gm, v->b2));
         g1 += m_dot(gm, v3_sub(n1, n0));
         g2 += m_dot(gm, v3_sub(n2, n0));
     } else {
@@ -437,6 +528,8 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
 #ifdef GRAD_CAMERA
     if (v->camera) geo_camera_scatter(sc, gr, v, gx);
 #endif
+    if (ray) geo_ray_adjoint(sc, v, gx, mir);
+    if (!put) return;
     vec3 gp = gx; /* the adjoint of the triangle's material point under the vertex */
     if (v->kind == GEO_SLIDING) {
         float nd = m_dot(n, v->d);
@@ -448,6 +541,17 @@ static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) {
     vec3 ge1 = m_cross(e2, gc), ge2 = m_cross(gc, e1);
     geo_put_vertices(sc, gr, v, v3_sub(v3_scale(gp, b0), v3_add(ge1, ge2)), v3_add(v3_scale(gp, v->b1), ge1),
                      v3_add(v3_scale(gp, v->b2), ge2));
+}
+
+static inline void geo_scatter(const Scene* sc, Grads* gr, const GeoVertex* v) { geo_scatter_ray(sc, gr, v, 0); }
+
+/* Reverse mode: x, complete (no later factor needs it), on the ray of the moving mirror m before it: its adjoints
+ * scattered, its ray's to m (which the caller scatters after), and x held still from then on. */
+static inline void geo_flush_ray(const Scene* sc, Grads* gr, GeoVertex* m, GeoVertex* x) {
+    if (!x->mray) return;
+    geo_scatter_ray(sc, gr, x, m);
+    x->kind = GEO_FIXED;
+    x->mray = x->camera = 0;
 }
 
 /* The adjoint g_w of the unit direction w = (b - a) / r and g_r of the distance r, to a's and b's positions. */
@@ -627,6 +731,32 @@ static inline void geo_shading_motion(const Scene* sc, const Grads* tg, GeoVerte
     float lm = m_length(m);
     vec3 ns = v3_divs(m, lm);
     v->ds = v3_divs(v3_sub(dm, v3_scale(ns, m_dot(ns, dm))), lm);
+}
+
+/* Forward mode: the tangent of the direction r = d - 2 (ns . d) ns the moving mirror m reflects its ray into. */
+static inline vec3 geo_reflected_tangent(const Scene* sc, const GeoVertex* m) {
+    vec3 ns = geo_shading_normal(sc, m), d = m->d;
+    vec3 dns = m->ds; /* the mirror's normal turns */
+    float a = m_dot(dns, d) + m_dot(ns, m->dd);
+    return v3_sub(m->dd, v3_scale(v3_add(v3_scale(ns, a), v3_scale(dns, m_dot(ns, d))), 2.0f));
+}
+
+/* Forward mode: the log-tangent of the moving mirror m's Fresnel factor (per channel). */
+static inline vec3 geo_fresnel_tangent(const Scene* sc, const Bsdf* b, const GeoVertex* m) {
+    vec3 dc_dd, dc_dns;
+    vec3 slope = geo_fresnel_slope(sc, b, m, &dc_dd, &dc_dns);
+    return v3_scale(slope, m_dot(dc_dd, m->dd) + m_dot(dc_dns, m->ds));
+}
+
+/* Forward mode: the motion of x's ray (geo_mirror_ray: origin m, direction r) added to x's (dx, after geo_motion;
+ * dd the ray's turn), before geo_shading_motion. */
+static inline void geo_ray_motion(const Scene* sc, GeoVertex* x, const GeoVertex* m) {
+    if (!x->mray) return;
+    float nd = m_dot(x->n, x->d);
+    if (nd == 0.0f) return;
+    x->dd = geo_reflected_tangent(sc, m);
+    vec3 u = v3_add(m->dx, v3_scale(x->dd, x->t));
+    x->dx = v3_add(x->dx, v3_sub(u, v3_scale(x->d, m_dot(x->n, u) / nd)));
 }
 
 /* The tangent of the unit direction from a to b (length r). */
