@@ -10,7 +10,9 @@ import pyclpt
 from pyclpt.gpu.simt import (
     ALIVE,
     COMPONENTS,
+    ENV_LIT,
     HIT,
+    LIT,
     RECORD_WORDS,
     STAGE_ACCESS,
     PathTrace,
@@ -50,6 +52,26 @@ def test_trace_alive_counts_are_the_wavefronts_queues(box, traced):
     for mine, theirs in zip(traced.counts(), stats):
         for key in ("rays", "hits", "misses", "shadow_rays", "unoccluded"):
             assert mine[key] == theirs[key], (mine, theirs)
+
+
+def test_trace_marks_the_deferred_environment_samples(box, traced):
+    """ENV_LIT (the unoccluded shadow rays whose contribution shadow_test multiplies by the environment's radiance:
+    ENV_DEFERRED) marks every lit sample of a scene lit by an environment map alone, none of the box's, and the
+    instrumented render stays the plain one."""
+    assert not (traced.flags & ENV_LIT).any()
+    scene = pyclpt.load_dict({"type": "scene", "sensor": {"type": "perspective", "fov": 40,
+                                                          "film": {"type": "hdrfilm", "width": SIZE, "height": SIZE}},
+                              "ball": {"type": "sphere", "bsdf": {"type": "diffuse"}},
+                              "floor": {"type": "rectangle", "to_world": np.diag([4.0, 4.0, 1.0, 1.0]) @
+                                        np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -1.2], [0, 0, 0, 1.0]])},
+                              "sky": {"type": "envmap", "data": np.linspace(0.2, 3.0, 8 * 16 * 3).reshape(8, 16, 3)
+                                      .astype(np.float32)}})
+    scene.camera.to_world = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 5.0], [0, 0, 0, 1.0]])
+    t = trace_paths(scene, spp=2, max_depth=4, width=SIZE, height=SIZE, seed=3)
+    lit, env = (t.flags & LIT) != 0, (t.flags & ENV_LIT) != 0
+    assert lit.sum() > 100 and np.array_equal(lit, env)
+    plain = pyclpt.Renderer(scene, integrator="megakernel", max_depth=4, width=SIZE, height=SIZE).render(2, seed=3)
+    assert np.array_equal(t.image, plain)
 
 
 def test_trace_is_consistent(traced):

@@ -257,6 +257,7 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
 #define PATH_TRACE_LIT 8       /* ... and it was unoccluded */
 #define PATH_TRACE_CONTINUED 16 /* the BSDF sample made a next ray (the path goes on) */
 #define PATH_TRACE_NEXT 32     /* the depth limit allowed light and BSDF sampling at this hit */
+#define PATH_TRACE_ENV_LIT 64  /* the unoccluded shadow ray was a deferred environment sample (path_lit) */
 #define PATH_TRACE_WORDS 5
 static inline void path_trace_put(const Scene* sc, int bounce, int word, int v) {
     if (sc->trace != 0 && bounce < sc->trace_rows) sc->trace[(word * sc->trace_rows + bounce) * sc->trace_stride] = v;
@@ -322,7 +323,8 @@ static inline void path_continue_from(const Scene* sc, RngKey key, PathState* ps
         bool lit = shadow && !scene_occluded(sc, key, ps->depth, sr.org, sr.dir, sr.tmax);
         if (lit) ps->L = v3_add(ps->L, path_lit(sc, &sr));
         path_trace_steps(sc, bounce, 3);
-        tr |= PATH_TRACE_NEXT | (shadow ? PATH_TRACE_SHADOW : 0) | (lit ? PATH_TRACE_LIT : 0);
+        tr |= PATH_TRACE_NEXT | (shadow ? PATH_TRACE_SHADOW : 0) | (lit ? PATH_TRACE_LIT : 0) |
+              (lit && ENV_DEFERRED && m_isinf(sr.tmax) ? PATH_TRACE_ENV_LIT : 0);
         bool more = path_sample_bsdf(key, &s, &b, ps, max_depth);
         path_trace_put(sc, bounce, 0, tr | (more ? PATH_TRACE_CONTINUED : 0));
         if (!more) return;

@@ -50,7 +50,7 @@ from pyclpt.integrators.path_state import FIELDS
 
 # -- the trace -------------------------------------------------------------------------------------
 # word 0's flags, as PATH_TRACE_* in cl/integrators/path.h
-ALIVE, HIT, SHADOW, LIT, CONTINUED, NEXT = 1, 2, 4, 8, 16, 32
+ALIVE, HIT, SHADOW, LIT, CONTINUED, NEXT, ENV_LIT = 1, 2, 4, 8, 16, 32, 64
 TRACE_WORDS = 5  # flags | material << 8, closest nodes, closest triangles, shadow nodes, shadow triangles
 MAX_TRACE_ROWS = 256  # bounces recorded at most (max_depth -1 renders up to 1024)
 
@@ -60,7 +60,7 @@ class PathTrace:
     """What every path of a render did at every bounce: arrays of shape (bounces, slots), slot f being
     film slot f of the render's batches in order (pixel f % pixels of sample f // pixels)."""
 
-    flags: np.ndarray          # int32: ALIVE | HIT | SHADOW | LIT | CONTINUED | NEXT
+    flags: np.ndarray          # int32: ALIVE | HIT | SHADOW | LIT | CONTINUED | NEXT | ENV_LIT
     material: np.ndarray       # int16: material kind hit (MAT_* of cl/scene/bsdf.h), -1 where none
     closest_nodes: np.ndarray  # int32: BVH nodes the closest-hit ray visited
     closest_prims: np.ndarray  # int32: triangles it tested
@@ -113,7 +113,7 @@ class PathTrace:
             return replace(self, max_depth=depth, image=None)
         f = self.flags[:depth].copy()
         sn, sp = self.shadow_nodes[:depth].copy(), self.shadow_prims[:depth].copy()
-        f[depth - 1] &= ~(SHADOW | LIT | CONTINUED | NEXT)
+        f[depth - 1] &= ~(SHADOW | LIT | CONTINUED | NEXT | ENV_LIT)
         sn[depth - 1] = 0
         sp[depth - 1] = 0
         return replace(self, flags=f, material=self.material[:depth], closest_nodes=self.closest_nodes[:depth],
@@ -396,9 +396,9 @@ def _expand(names: tuple[str, ...]) -> list[str]:
 #: wavefront.h (path_load_shading, path_store_ray, path_store_hit, path_store_shadow, path_key), without
 #: -DAOVS: (predicate, "r"/"w", fields). Predicates: "all" lanes of the queue, "hit" (intersect's hits),
 #: "next" (the depth limit allows light and BSDF sampling), "shadow", "continued", "ended" (sample_bsdf's
-#: paths that end). One scalar access per component (the accessors are scalar in both layouts). Not counted:
-#: shadow_test's read and write of shadow_contrib for an unoccluded environment sample (ENV_DEFERRED,
-#: cl/scene/lights.h), which the trace does not tell from other lit samples (the box has no environment).
+#: paths that end), "env_lit" (shadow_test's unoccluded environment samples, whose contribution it multiplies by
+#: the environment's radiance: ENV_DEFERRED, cl/scene/lights.h). One scalar access per component (the accessors
+#: are scalar in both layouts).
 STAGE_ACCESS: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
     "path_init": [("all", "w", ("film_slot", "L", "org", "dir", "beta", "eta_scale", "prev_pdf", "flags",
                                 "depth"))],
@@ -410,7 +410,8 @@ STAGE_ACCESS: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
                     ("all", "w", ("L",)),
                     ("next", "r", ("film_slot",)),
                     ("shadow", "w", ("shadow_org", "shadow_dir", "shadow_tmax", "shadow_contrib"))],
-    "shadow_test": [("all", "r", ("film_slot", "shadow_org", "shadow_dir", "shadow_tmax"))],
+    "shadow_test": [("all", "r", ("film_slot", "shadow_org", "shadow_dir", "shadow_tmax")),
+                    ("env_lit", "r", ("shadow_contrib",)), ("env_lit", "w", ("shadow_contrib",))],
     "light_contribution": [("all", "r", ("L", "shadow_contrib")), ("all", "w", ("L",))],
     "sample_bsdf": [("all", "r", ("dir", "beta", "eta_scale", "hit_prim", "hit_u", "hit_v", "film_slot")),
                     ("continued", "w", ("org", "dir", "beta", "eta_scale", "prev_pdf", "flags", "depth")),
@@ -498,7 +499,7 @@ def _queue_masks(trace: PathTrace, b: int, idx: np.ndarray, valid: np.ndarray) -
     f = trace.flags[b][idx]
     hit, cont = (f & HIT) != 0, (f & CONTINUED) != 0
     return {"all": valid, "hit": valid & hit, "next": valid & ((f & NEXT) != 0), "shadow": valid & ((f & SHADOW) != 0),
-            "continued": valid & cont, "ended": valid & hit & ~cont}
+            "continued": valid & cont, "ended": valid & hit & ~cont, "env_lit": valid & ((f & ENV_LIT) != 0)}
 
 
 def _stage_terms(stage: str, trace: PathTrace, c: CostModel, b: int, idx: np.ndarray, masks: dict) -> list[tuple]:
