@@ -332,6 +332,12 @@ def test_trees_ab_times_two_trees_in_alternation(capsys):
     with pytest.raises(SystemExit):
         ab.main([root, str(Path(root) / "docs"), "--rounds", "1"])
     assert "docs: not a pyclpt checkout" in capsys.readouterr().err
+    # the sides run in the trees' folders: a shared scene or a file goes to them as an absolute path
+    assert ab.scene_file("builtin/cornell-box") == "cornell-box"
+    box = str(Path(root) / "scenes" / "cornell-box.json")
+    assert ab.scene_file(box) == box
+    with pytest.raises(SystemExit, match="no-such-scene"):
+        ab.scene_file("no-such-scene")
 
 
 def test_isa_section_of_the_report(tmp_path):

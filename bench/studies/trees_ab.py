@@ -35,16 +35,8 @@ def _serve(scene_spec: str, method: str, size: int, spp: int, depth: int, device
     """One side: the working folder's pyclpt renders ``spp`` samples for each seed read from stdin, answering the
     seconds."""
     import pyclpt
-    from pyclpt.scene.library import scenes_root
 
-    root = scenes_root()
-    shared = root / scene_spec / "scene.xml" if root is not None else None
-    if scene_spec.startswith("builtin/"):
-        scene = pyclpt.load(scene_spec.removeprefix("builtin/"))  # an unknown name: load's error lists them
-    elif shared is not None and shared.is_file():
-        scene = pyclpt.load(shared)
-    else:
-        scene = pyclpt.load(scene_spec)  # a scene file, or a built-in name no shared folder takes
+    scene = pyclpt.load(scene_spec)  # a built-in scene's name or a scene file's absolute path (scene_file)
     scene.film.rfilter = pyclpt.ReconstructionFilter("box")
     integrator, layout = METHODS[method]
     r = pyclpt.Renderer(scene, integrator=integrator, layout=layout, max_depth=depth, width=size, height=size,
@@ -58,13 +50,27 @@ def _serve(scene_spec: str, method: str, size: int, spp: int, depth: int, device
         print(json.dumps({"seconds": time.perf_counter() - t}), flush=True)
 
 
+def scene_file(spec: str) -> str:
+    """What a side loads for ``--scene`` (resolved here, as the sides run in the trees' folders): a built-in
+    scene's name, else a scene file's absolute path (a shared scene folder's scene.xml, or the file given)."""
+    from pyclpt.scene.library import scenes_root
+
+    if spec.startswith("builtin/"):
+        return spec.removeprefix("builtin/")  # an unknown name: the side's load lists the built-in ones
+    root = scenes_root()
+    if root is not None and (root / spec / "scene.xml").is_file():
+        return str((root / spec / "scene.xml").resolve())
+    if Path(spec).is_file():
+        return str(Path(spec).resolve())
+    raise SystemExit(f"--scene {spec}: neither builtin/NAME, a shared scene folder nor a scene file")
+
+
 class Side:
     """A serving process of one tree."""
 
     def __init__(self, tree: Path, a: argparse.Namespace) -> None:
-        scene = str(Path(a.scene).resolve()) if Path(a.scene).is_file() else a.scene
-        cmd = [sys.executable, "-c", SIDE, str(Path(__file__).resolve()), scene, a.method, str(a.size), str(a.spp),
-               str(a.depth), a.device or ""]
+        cmd = [sys.executable, "-c", SIDE, str(Path(__file__).resolve()), scene_file(a.scene), a.method, str(a.size),
+               str(a.spp), str(a.depth), a.device or ""]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=tree)
         ready = self._answer()
         self.module = ready["ready"]
