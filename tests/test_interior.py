@@ -648,23 +648,33 @@ ROT_X = np.array([[0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 0]], np.f
 MIRROR_DEPTH = 3  # camera -> mirror -> the wall and its light sample
 
 
-def _mirror_room(move: np.ndarray | None = None, camera: np.ndarray | None = None, metal: str = "none"
-                 ) -> pyclpt.Scene:
+def _mirror_room_dict(move: np.ndarray | None = None, camera: np.ndarray | None = None, metal: str = "none",
+                      instanced: bool = False) -> dict:
     """The mirror posed by ``move`` @ MIRROR_POSE, the camera by ``camera`` @ its look_at, 32 x 32; ``metal``: the
-    mirror's conductor (none: a perfect mirror; "Au": gold, its Fresnel reflectance changing with the angle)."""
+    mirror's conductor (none: a perfect mirror; "Au": gold, its Fresnel reflectance changing with the angle);
+    ``instanced``: the mirror an instance of a shapegroup (its to_world the instance's)."""
     move = np.eye(4) if move is None else move
     camera = np.eye(4) if camera is None else camera
-    return pyclpt.load_dict({
+    mirror = {"type": "rectangle", "bsdf": {"type": "conductor", "material": metal}}
+    shapes = {"group": {"type": "shapegroup", "id": "group", "m": mirror},
+              "mirror": {"type": "instance", "shape": {"type": "ref", "id": "group"}, "to_world": move @ MIRROR_POSE}
+              } if instanced else {"mirror": {**mirror, "to_world": move @ MIRROR_POSE}}
+    return {
         "type": "scene",
         "sensor": {"type": "perspective", "fov": 40, "fov_axis": "x",
                    "to_world": camera @ tf.look_at([0, 0, 5], [0, 0, 0], [0, 1, 0]),
                    "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}}},
-        "mirror": {"type": "rectangle", "to_world": move @ MIRROR_POSE,
-                   "bsdf": {"type": "conductor", "material": metal}},
+        **shapes,
         "wall": {"type": "rectangle", "to_world": tf.translate([6, 0, 0]) @ tf.rotate([0, 1, 0], -90) @ tf.scale(30.0),
                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.6, 0.7]}}},
         "light": {"type": "point", "position": [3.0, 2.0, 2.0], "intensity": {"type": "rgb", "value": [30.0] * 3}},
-    })
+    }
+
+
+def _mirror_room(move: np.ndarray | None = None, camera: np.ndarray | None = None, metal: str = "none"
+                 ) -> pyclpt.Scene:
+    """The scene of :func:`_mirror_room_dict`."""
+    return pyclpt.load_dict(_mirror_room_dict(move, camera, metal))
 
 
 def _mirror_tangent(motion: str) -> tuple[str, np.ndarray, float]:
@@ -746,19 +756,7 @@ def test_smooth_shaded_mirror_vertices():
 
 def _instanced_mirror_room(move: np.ndarray | None = None) -> pyclpt.Scene:
     """:func:`_mirror_room` with a gold mirror that is an instance of a shapegroup (posed by ``move`` @ MIRROR_POSE)."""
-    move = np.eye(4) if move is None else move
-    return pyclpt.load_dict({
-        "type": "scene",
-        "sensor": {"type": "perspective", "fov": 40, "fov_axis": "x",
-                   "to_world": tf.look_at([0, 0, 5], [0, 0, 0], [0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}}},
-        "group": {"type": "shapegroup", "id": "group",
-                  "m": {"type": "rectangle", "bsdf": {"type": "conductor", "material": "Au"}}},
-        "mirror": {"type": "instance", "shape": {"type": "ref", "id": "group"}, "to_world": move @ MIRROR_POSE},
-        "wall": {"type": "rectangle", "to_world": tf.translate([6, 0, 0]) @ tf.rotate([0, 1, 0], -90) @ tf.scale(30.0),
-                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.6, 0.7]}}},
-        "light": {"type": "point", "position": [3.0, 2.0, 2.0], "intensity": {"type": "rgb", "value": [30.0] * 3}},
-    })
+    return pyclpt.load_dict(_mirror_room_dict(move, metal="Au", instanced=True))
 
 
 def test_moving_instanced_mirror():
