@@ -437,3 +437,52 @@ def test_forward_mode_agrees_with_reverse_mode_for_a_moving_mirror(flat):
         fwd = edges.primary_boundary_forward(scene, name, tangent, **kw)
         assert np.abs(fwd).sum() > 0
         assert float((fwd * grad).sum()) == pytest.approx(float((back[name] * tangent).sum()), rel=1e-4), name
+
+
+ORTHO_HALF = 1.5  # the orthographic camera's half-extent (world units) of its 48 x 48 film
+
+
+def _ortho_scene() -> pyclpt.Scene:
+    """_scene's square (half-extents 0.6 x 0.45) seen by an orthographic camera on the +z axis, to_world scaled
+    by ORTHO_HALF: rays along -z from the 3 x 3 film rectangle, 16 pixels a unit."""
+    scene = _scene({"type": "rectangle", "to_world": tf.scale([0.6, 0.45, 1.0])})
+    scene.camera = pyclpt.Camera(tf.look_at([0, 0, DIST], [0, 0, 0], [0, 1, 0]) @ tf.scale([ORTHO_HALF] * 3),
+                                 kind="orthographic")
+    return scene
+
+
+def test_orthographic_camera_moving_over_a_square():
+    """An orthographic camera moving sideways over the square (or the square the other way): the image sum does
+    not change, a weighted one (the red channel times each pixel's column centre) by exactly -(L_square - L_bg) x
+    the square's height in pixels x pixels per unit x (its right edge's column - its left edge's): each edge sweeps
+    its column. Moving along its axis changes nothing (its film positions do not depend on depth: a perspective
+    projection's would). Forward mode equals reverse mode along a tangent that also turns and scales the camera;
+    render_backward (max_depth 1) gives the same (the interior term is 0: constant radiances); at max_depth 2 it
+    refuses by name (the boundary terms of shadows are written for perspective cameras)."""
+    scene = _ortho_scene()
+    ppu = (W / 2) / ORTHO_HALF
+    left, right = W / 2 - 0.6 * ppu, W / 2 + 0.6 * ppu  # 14.4 and 33.6: inside columns 14 and 33
+    weight = np.zeros((H, W, 3), np.float32)
+    weight[..., 0] = np.arange(W) + 0.5
+    kw = dict(samples=1 << 15, seed=1)
+    both = edges.primary_boundary(scene, weight, ["sensor.to_world", "shape.to_world"], **kw)
+    g = both["sensor.to_world"]
+    exact = -(L_SHAPE - L_BG) * (0.9 * ppu) * ppu * (math.floor(right) - math.floor(left))
+    assert g[0, 3] == pytest.approx(exact, rel=2e-3)
+    assert both["shape.to_world"][0, 3] == pytest.approx(-exact, rel=2e-3)  # the square moved the other way
+    assert abs(g[1, 3]) < 1e-3 * abs(exact)  # moving up: the horizontal edges sweep whole rows, each row's sum 0
+    assert abs(g[2, 3]) < 1e-3 * abs(exact)  # along its axis
+    ones = edges.primary_boundary(scene, np.ones((H, W, 3), np.float32), ["sensor.to_world"], **kw)["sensor.to_world"]
+    assert abs(ones[0, 3]) < 1e-3 * abs(exact)
+    tm = np.zeros((4, 4))
+    tm[0, 3], tm[1, 3], tm[2, 3] = 1.0, 0.3, -0.5
+    tm[:3, :3] = 0.4 * np.array([[0, -1, 0], [1, 0, 0], [0, 0, 0]]) + 0.2 * np.eye(3)  # turn about z, grow
+    grad = np.random.default_rng(5).random((H, W, 3)).astype(np.float32)
+    back = edges.primary_boundary(scene, grad, ["sensor.to_world"], **kw)["sensor.to_world"]
+    fwd = edges.primary_boundary_forward(scene, "sensor.to_world", tm, **kw)
+    assert float((fwd * grad).sum()) == pytest.approx(float((back * tm).sum()), rel=1e-4)
+    full = pyclpt.render_backward(scene, weight, spp=4, seed=1, max_depth=1, params=["sensor.to_world"],
+                                  edge_samples=1 << 15)["sensor.to_world"]
+    assert float(full[0, 3]) == pytest.approx(exact, rel=2e-3)  # the interior term: 0 (constant radiances)
+    with pytest.raises(ValueError, match="shadows.*orthographic camera"):  # written for perspective cameras
+        pyclpt.render_backward(scene, weight, spp=1, seed=1, max_depth=2, params=["sensor.to_world"])

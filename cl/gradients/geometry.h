@@ -266,12 +266,15 @@ static inline vec3 geo_vnormal_tangent(const Scene* sc, const Grads* tg, const G
 }
 
 #ifdef GRAD_CAMERA
-/* The moving camera (a pinhole: -DGRAD_CAMERA, the sensor's to_world and fov differentiated): its origin O and
- * the basis F, R, U of camera_ray, whose ray through film coordinates (sx, sy) is d = v / |v|, v = F + sx R + sy U.
- * The camera ray's hit slides along the moving ray, x = O + t d on the moving triangle, so
+/* The moving camera (a pinhole or orthographic: -DGRAD_CAMERA, the sensor's to_world and fov differentiated): its
+ * origin O and the basis F, R, U of camera_ray, whose ray through film coordinates (sx, sy) is d = v / |v|,
+ * v = F + sx R + sy U. The camera ray's hit slides along the moving ray, x = O + t d on the moving triangle, so
  *   dx = P (dO + t dd) + d (n . dp) / (n . d),   P u = u - d (n . u) / (n . d),
  * and its incident direction -d turns with the ray. Their adjoints go to 12 floats (O, F, R, U: grad_camera),
- * which the host chains to to_world and fov (pyclpt/gradients/differentiate.py). */
+ * which the host chains to to_world and fov (pyclpt/gradients/differentiate.py). An orthographic camera
+ * (-DSCENE_CAMERA=CAMERA_ORTHOGRAPHIC, camera_ray's): the ray's origin o = O + sx R + sy U moves over the film
+ * rectangle and its direction is d = F (unit: the host's chain through basis() normalises it), so
+ * dx = P (dO + sx dR + sy dU + t dF) + d (n . dp) / (n . d). */
 static inline vec3 geo_camera_v(const Scene* sc, float sx, float sy) {
     __global const float* c = sc->consts;
     return v3_add(v3_add(rgb_at(c + CONST_CAM_FORWARD, sc->unit), v3_scale(rgb_at(c + CONST_CAM_RIGHT, sc->unit), sx)),
@@ -294,12 +297,20 @@ static inline void geo_camera_scatter(const Scene* sc, Grads* gr, const GeoVerte
     if (nd == 0.0f) return;
     vec3 q = v3_sub(gx, v3_scale(v->n, m_dot(v->d, gx) / nd)); /* P^T gx */
     vec3 g_dd = v3_sub(v3_scale(q, v->t), v->gwi);
+#if SCENE_CAMERA == CAMERA_ORTHOGRAPHIC
+    /* o = O + sx R + sy U, d = F */
+    grad_put3(gr, gr->camera, q);
+    grad_put3(gr, gr->camera + 3, g_dd);
+    grad_put3(gr, gr->camera + 6, v3_scale(q, v->sx));
+    grad_put3(gr, gr->camera + 9, v3_scale(q, v->sy));
+#else
     vec3 w = geo_camera_v(sc, v->sx, v->sy);
     vec3 g_v = v3_divs(v3_sub(g_dd, v3_scale(v->d, m_dot(v->d, g_dd))), m_length(w));
     grad_put3(gr, gr->camera, q);
     grad_put3(gr, gr->camera + 3, g_v);
     grad_put3(gr, gr->camera + 6, v3_scale(g_v, v->sx));
     grad_put3(gr, gr->camera + 9, v3_scale(g_v, v->sy));
+#endif
 }
 
 /* Forward mode: the camera's tangent added to its hit's motion (dx) and to its ray's direction (dd). */
@@ -307,11 +318,18 @@ static inline void geo_camera_motion(const Scene* sc, const Grads* tg, GeoVertex
     if (!v->camera) return;
     float nd = m_dot(v->n, v->d);
     if (nd == 0.0f) return;
+#if SCENE_CAMERA == CAMERA_ORTHOGRAPHIC
+    /* o = O + sx R + sy U, d = F */
+    v->dd = tangent3(tg->camera + 3);
+    vec3 u = v3_add(v3_add(tangent3(tg->camera), v3_scale(tangent3(tg->camera + 6), v->sx)),
+                    v3_add(v3_scale(tangent3(tg->camera + 9), v->sy), v3_scale(v->dd, v->t)));
+#else
     vec3 w = geo_camera_v(sc, v->sx, v->sy);
     vec3 dw = v3_add(v3_add(tangent3(tg->camera + 3), v3_scale(tangent3(tg->camera + 6), v->sx)),
                      v3_scale(tangent3(tg->camera + 9), v->sy));
     v->dd = v3_divs(v3_sub(dw, v3_scale(v->d, m_dot(v->d, dw))), m_length(w));
     vec3 u = v3_add(tangent3(tg->camera), v3_scale(v->dd, v->t));
+#endif
     v->dx = v3_add(v->dx, v3_sub(u, v3_scale(v->d, m_dot(v->n, u) / nd)));
 }
 #endif

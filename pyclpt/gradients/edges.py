@@ -23,9 +23,10 @@ them, :mod:`pyclpt.gradients.placement`):
    (``cl/gradients/edge_radiance.cl``: the full path estimator, both sides with the same random
    numbers; seen in a mirror, the rays reflect in it, and the jump has its reflectance); the difference weighted
    by the image gradient through the film's reconstruction filter and scattered to the edge's two vertices
-   through the perspective projection's Jacobian (seen in a mirror, at p' and times R: the film position is
-   film(p'); the camera's motion acts at p'). A mirror that moves moves every outline it shows, the reflected
-   points still (:func:`reflection_velocity`): the plane through the point c where the camera's ray meets the
+   through the projection's Jacobian (a perspective camera's; an orthographic one's is constant, its silhouettes
+   those of its parallel rays, no mirrors: :class:`Projection`; seen in a mirror, at p' and times R: the film
+   position is film(p'); the camera's motion acts at p'). A mirror that moves moves every outline it shows, the
+   reflected points still (:func:`reflection_velocity`): the plane through the point c where the camera's ray meets the
    mirror's triangle, of normal m (the triangle's, or on a smooth-shaded mirror its interpolated vertex normals,
    which the renderer reflects about), moves p' by -2 [((p - c) . dm - dc . m) m + ((p - c) . m) dm], scattered
    to the triangle's corners (and their vertex normals, chained through :mod:`pyclpt.gradients.normals`); a mirror
@@ -69,7 +70,8 @@ class ScreenEdges:
     v1: np.ndarray  # (E,) and second
     s0: np.ndarray  # (E,) the clipped start and end as parameters of the whole projected edge
     s1: np.ndarray
-    z0: np.ndarray  # (E,) depth along the view direction of v0 and v1 (of their reflections, seen in a mirror)
+    z0: np.ndarray  # (E,) depth along the view direction of v0 and v1 (of their reflections, seen in a mirror);
+    # 1 under an orthographic camera (the film position is affine along the edge)
     z1: np.ndarray
     mirror: np.ndarray  # (E,) the index in ``planes`` of the mirror the edge is seen in, -1 seen directly
     planes: list[MirrorPlane] = dataclasses.field(default_factory=list)  # the scene's mirror planes
@@ -81,7 +83,10 @@ class ScreenEdges:
 
 @dataclass
 class Projection:
-    """A perspective camera's map from world points to film coordinates and its Jacobian."""
+    """A perspective or orthographic camera's map from world points to film coordinates and its Jacobian. An
+    orthographic camera's rays go along forward from the film rectangle origin + sx right + sy up (camera_ray,
+    cl/integrators/path.h): a point's film coordinates are affine in it, (sx, sy, t) = B^-1 (p - origin) with
+    B = [right up forward], t its distance along the ray."""
 
     origin: np.ndarray
     forward: np.ndarray
@@ -89,42 +94,59 @@ class Projection:
     up: np.ndarray
     width: int
     height: int
+    orthographic: bool = False  # then right and up are the image's half-extent in world units
 
     @classmethod
     def of(cls, scene: Scene, width: int, height: int, to_world: np.ndarray | None = None,
-           x_fov: float | None = None) -> Projection:
+           x_fov: float | None = None, orthographic: bool = False) -> Projection:
         """The projection of ``scene``'s camera (with ``to_world`` instead of its own, and a horizontal fov of
-        ``x_fov`` degrees, when given)."""
+        ``x_fov`` degrees, when given); an orthographic camera's where ``orthographic`` allows it (the terms
+        written for it: the silhouettes'), else refused by name as any other kind but perspective."""
         cam = scene.camera
-        if cam.kind != "perspective":
-            raise ValueError(f"the boundary term of primary visibility is implemented for perspective cameras; "
-                             f"scene {scene.name!r} has a {cam.kind} camera")
+        if cam.kind != "perspective" and not (orthographic and cam.kind == "orthographic"):
+            what = "perspective and orthographic" if orthographic else "perspective"
+            raise ValueError(f"this boundary term is implemented for {what} cameras; scene {scene.name!r} has a "
+                             f"{cam.kind} camera")
         if to_world is not None:
             cam = dataclasses.replace(cam, to_world=np.asarray(to_world, np.float64))
         if x_fov is not None:
             cam = dataclasses.replace(cam, fov=x_fov, fov_axis="x")
         o, f, r, u = (np.asarray(v, np.float64) for v in cam.basis(width, height))
-        return cls(o, f / np.linalg.norm(f), r, u, width, height)
+        return cls(o, f / np.linalg.norm(f), r, u, width, height, cam.kind == "orthographic")
+
+    def _inverse(self) -> np.ndarray:
+        """B^-1 (rows: d sx/dp, d sy/dp, d t/dp) of an orthographic camera."""
+        return np.linalg.inv(np.stack([self.right, self.up, self.forward], axis=1))
 
     def depth(self, p: np.ndarray) -> np.ndarray:
+        if self.orthographic:
+            return (p - self.origin) @ self._inverse()[2]
         return (p - self.origin) @ self.forward
 
     def film(self, p: np.ndarray) -> np.ndarray:
         """(N, 2) film coordinates of points p (N, 3) in front of the camera."""
         d = p - self.origin
-        z = d @ self.forward
-        sx = (d @ self.right) / (self.right @ self.right) / z
-        sy = (d @ self.up) / (self.up @ self.up) / z
+        if self.orthographic:
+            inv = self._inverse()
+            sx, sy = d @ inv[0], d @ inv[1]
+        else:
+            z = d @ self.forward
+            sx = (d @ self.right) / (self.right @ self.right) / z
+            sy = (d @ self.up) / (self.up @ self.up) / z
         return np.stack([(sx + 1) * 0.5 * self.width, (1 - sy) * 0.5 * self.height], axis=1)
 
     def normal_velocity(self, p: np.ndarray, n: np.ndarray) -> np.ndarray:
         """(N, 3): n . d(film position)/dp at points p (N, 3) for film-space directions n (N, 2)."""
-        d = p - self.origin
-        z = (d @ self.forward)[:, None]
-        sx = ((d @ self.right) / (self.right @ self.right))[:, None] / z
-        sy = ((d @ self.up) / (self.up @ self.up))[:, None] / z
-        dsx = (self.right / (self.right @ self.right) - sx * self.forward) / z
-        dsy = (self.up / (self.up @ self.up) - sy * self.forward) / z
+        if self.orthographic:  # constant: the rows of B^-1
+            inv = self._inverse()
+            dsx, dsy = inv[0][None], inv[1][None]
+        else:
+            d = p - self.origin
+            z = (d @ self.forward)[:, None]
+            sx = ((d @ self.right) / (self.right @ self.right))[:, None] / z
+            sy = ((d @ self.up) / (self.up @ self.up))[:, None] / z
+            dsx = (self.right / (self.right @ self.right) - sx * self.forward) / z
+            dsy = (self.up / (self.up @ self.up) - sy * self.forward) / z
         return n[:, :1] * (0.5 * self.width) * dsx - n[:, 1:] * (0.5 * self.height) * dsy
 
 
@@ -201,9 +223,12 @@ def silhouette_edges(scene: Scene, meshes: Sequence[int], width: int, height: in
     (:func:`pyclpt.gradients.mirrors.mirror_planes`), those seen in it, but the mirror's own mesh's (see
     :func:`_view_edges`); in the mirrors of the meshes in ``mirrors`` (mirrors that move: they move every outline
     they show) those of every other mesh. Edges with an end at or behind the camera's plane are left out."""
-    proj = Projection.of(scene, width, height)
+    proj = Projection.of(scene, width, height, orthographic=True)
     parts = [_view_edges(scene, proj, i) for i in meshes]
     planes = mirror_planes(scene)
+    if planes and proj.orthographic:
+        raise ValueError(f"the outlines seen in planar mirrors are implemented for perspective cameras; scene "
+                         f"{scene.name!r} has an orthographic camera and a planar mirror")
     for k, plane in enumerate(planes):
         box = _footprint(scene, proj, plane)
         shown = range(len(scene.meshes)) if plane.mesh in mirrors else meshes
@@ -250,11 +275,14 @@ def _view_edges(scene: Scene, proj: Projection, i: int, plane: MirrorPlane | Non
     mesh = scene.meshes[i]
     p = mesh.positions.astype(np.float64)
     eye, seen = (proj.origin, p) if plane is None else (plane.reflect(proj.origin), plane.reflect(p))
-    pairs, _ = mesh_edges(mesh, eye, creases=flat_shaded(mesh))  # flat shading jumps at creases
+    # flat shading jumps at creases; an orthographic camera's silhouettes are those of its parallel rays
+    pairs, _ = mesh_edges(mesh, eye, creases=flat_shaded(mesh), direction=proj.forward if proj.orthographic else None)
     z0, z1 = proj.depth(seen[pairs[:, 0]]), proj.depth(seen[pairs[:, 1]])
     scale = max(float(np.abs(seen - proj.origin).max()), 1e-30)
     front = (z0 > 1e-6 * scale) & (z1 > 1e-6 * scale)
     pairs, z0, z1 = pairs[front], z0[front], z1[front]
+    if proj.orthographic:  # the film position is affine along the edge: its parameter t is s (z0 = z1)
+        z0, z1 = np.ones_like(z0), np.ones_like(z1)
     a, b = proj.film(seen[pairs[:, 0]]), proj.film(seen[pairs[:, 1]])
     s0, s1 = _clip(a, b, *(box or ((0, 0), (proj.width, proj.height))))
     if plane is not None:  # the part in front of the mirror, as parameters t of the 3D edge, then s on the film
@@ -348,7 +376,7 @@ def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *
     s = edges.s0[e] + local * (edges.s1[e] - edges.s0[e])
     z0, z1 = edges.z0[e], edges.z1[e]
     t = s * z0 / ((1 - s) * z1 + s * z0)
-    proj = Projection.of(scene, width, height)
+    proj = Projection.of(scene, width, height, orthographic=True)
     point = np.zeros((n_pts, 3))
     for i in set(edges.mesh[e].tolist()):
         m = edges.mesh[e] == i
@@ -490,8 +518,8 @@ def camera_velocity(scene: Scene, width: int, height: int, point: np.ndarray, no
         for c in range(4):
             d = np.zeros((4, 4))
             d[r, c] = CAMERA_STEP
-            up = Projection.of(scene, width, height, m + d).film(point)
-            down = Projection.of(scene, width, height, m - d).film(point)
+            up = Projection.of(scene, width, height, m + d, orthographic=True).film(point)
+            down = Projection.of(scene, width, height, m - d, orthographic=True).film(point)
             out[:, r, c] = np.einsum("nk,nk->n", normal, (up - down) / (2 * CAMERA_STEP))
     return out
 

@@ -142,12 +142,13 @@ def moving_instance_reason(scene: Scene, inst: Instance) -> str:
 
 def moving_camera_reason(scene: Scene) -> str:
     """Why the gradient of where the sensor is (its to_world, its x_fov) is not computed, or "" when it is: the
-    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole in a scene without an environment
-    map, emission textures or textures whose value jumps (instances or not); bilinear bitmaps slide under the
-    pixels as the camera's hits slide over them (geo_bsdf_bary)."""
-    if scene.camera.kind != "perspective":
+    interior term (cl/gradients/geometry.h, -DGRAD_CAMERA) holds for a pinhole or an orthographic camera (its
+    to_world: it has no x_fov) in a scene without an environment map, emission textures or textures whose value
+    jumps (instances or not); bilinear bitmaps slide under the pixels as the camera's hits slide over them
+    (geo_bsdf_bary)."""
+    if scene.camera.kind not in ("perspective", "orthographic"):
         return (f"a {scene.camera.kind} camera: the gradients of where the sensor is are implemented for perspective "
-                f"(pinhole) cameras; update() moves it")
+                f"(pinhole) and orthographic cameras; update() moves it")
     if isinstance(scene.environment, Envmap) or any(_jumping_texture(m) for m in scene.materials) or any(
             m.emission_texture is not None for m in scene.meshes):
         return ("an environment map, an emission texture, a checkerboard or a nearest-filtered bitmap in view: what "
