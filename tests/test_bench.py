@@ -324,7 +324,7 @@ def test_trees_ab_times_two_trees_in_alternation(capsys):
     """bench/studies/trees_ab.py (docs/benchmarks.md, "The living room's environment"): two processes, each
     importing the tree it is given, render in alternation; a tree that is not a checkout is refused by name."""
     ab = pytest.importorskip("bench.studies.trees_ab", reason="a source checkout's bench/studies")
-    root = str(Path(pyclpt.__file__).resolve().parents[1])
+    root = str(Path(__file__).resolve().parents[1])  # the checkout (pyclpt may be installed elsewhere)
     assert ab.main([root, root, "--scene", "builtin/cornell-box", "--size", "16", "--spp", "1", "--rounds", "2"]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert line.startswith("builtin/cornell-box, megakernel, 16x16, 1 spp, depth 8, 2 rounds on ")
