@@ -157,8 +157,10 @@ CASES = {
                                   "m.diffuse_reflectance.value", 256, 3, 0.05),
     "roughplastic-spec": (lambda: material_under_sky({"type": "roughplastic", "alpha": 0.3}),
                           "m.specular_reflectance.value", 256, 3, 0.05),
+    # h = 1 % of alpha: at 5 % the differences' truncation error was 5 % of the derivative (eight seeds: 0.95x,
+    # backward over differences, against 1.02x at 1 %)
     "roughplastic-alpha": (lambda: material_under_sky({"type": "roughplastic", "alpha": 0.3}),
-                           "m.alpha", 256, 3, 0.05),
+                           "m.alpha", 256, 3, 0.01),
     "roughdielectric-alpha": (lambda: material_under_sky({"type": "roughdielectric", "alpha": 0.3}),
                               "m.alpha.value", 1024, 3, 0.05),
     # the front of twosided pairs, whose backs (one a rough conductor) the camera sees too
@@ -166,6 +168,12 @@ CASES = {
                        "red-blue.brdf_0.reflectance.value", 16, 3, 0.01),
 }
 SIZE = 16
+#: Seeds whose sums are compared, where one seed's differences are too noisy for 5 %: a roughness's derivative is
+#: heavy-tailed per seed (the rough dielectric's at 1024 spp: -16 % to +21 % over seeds 11-26, -0.4 % summed over
+#: them; as much before the bounce's random numbers moved to two blocks, and -8 % to +7 % over groups of four):
+#: sixteen seeds for it, four for the others.
+SEEDS = {"roughconductor-alpha": (11, 12, 13, 14), "roughplastic-alpha": (11, 12, 13, 14),
+         "roughdielectric-alpha": tuple(range(11, 27))}
 
 
 def test_moved_alpha_records_cover_the_back_materials():
@@ -204,18 +212,20 @@ def test_backward_matches_finite_differences(case):
     d = (rng.standard_normal(v0.shape) if v0.size > 3 else rng.random(v0.shape) + 0.5).astype(np.float32)
     h = step * float(np.abs(v0).max())
     w = _loss_weights((SIZE, SIZE, 3))
-    opts = dict(spp=spp, seed=11, max_depth=depth, width=SIZE, height=SIZE)
+    fd = backward = forward = 0.0
+    for seed in SEEDS.get(case, (11,)):
+        opts = dict(spp=spp, seed=seed, max_depth=depth, width=SIZE, height=SIZE)
 
-    def loss(v):
-        params.update({name: v})
-        return float((w * pyclpt.render(scene, **opts)).sum(dtype=np.float64))
+        def loss(v, opts=opts):
+            params.update({name: v})
+            return float((w * pyclpt.render(scene, **opts)).sum(dtype=np.float64))
 
-    fd = (loss(v0 + h * d) - loss(v0 - h * d)) / (2 * h)
-    params.update({name: v0})
-    grad = pyclpt.render_backward(scene, w, params=[name], **opts)[name]
-    assert grad.shape == v0.shape
-    backward = float((grad.astype(np.float64) * d).sum())
-    forward = float((w * pyclpt.render_forward(scene, name, d, **opts)).sum(dtype=np.float64))
+        fd += (loss(v0 + h * d) - loss(v0 - h * d)) / (2 * h)
+        params.update({name: v0})
+        grad = pyclpt.render_backward(scene, w, params=[name], **opts)[name]
+        assert grad.shape == v0.shape
+        backward += float((grad.astype(np.float64) * d).sum())
+        forward += float((w * pyclpt.render_forward(scene, name, d, **opts)).sum(dtype=np.float64))
     assert abs(fd) > 1e-3
     assert backward == pytest.approx(fd, rel=0.05), (backward, fd)
     assert forward == pytest.approx(backward, rel=1e-3)

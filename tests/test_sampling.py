@@ -39,6 +39,20 @@ __kernel void rng_eval(__global const uint* keys, __global float* out1, __global
     out2[2 * i + 1] = r.y;
 }
 
+/* keys: (seed, pixel, sample, bounce) per item; out: rng_light's 3 numbers, then rng_bsdf's 4 */
+__kernel void rng_bounce_blocks(__global const uint* keys, __global float* out) {
+    int i = get_global_id(0);
+    __global const uint* k = keys + 5 * i;
+    RngKey key = rng_key(k[0], k[1], k[2]);
+    float sel, lobe, rr;
+    vec2 lu, bu;
+    rng_light(key, k[3], &sel, &lu);
+    rng_bsdf(key, k[3], &lobe, &bu, &rr);
+    __global float* o = out + 7 * i;
+    o[0] = sel; o[1] = lu.x; o[2] = lu.y;
+    o[3] = lobe; o[4] = bu.x; o[5] = bu.y; o[6] = rr;
+}
+
 __kernel void warp_eval(__global const float* u, __global float* hemi, __global float* sphere,
                         __global float* tri) {
     int i = get_global_id(0);
@@ -496,6 +510,36 @@ def test_rng_uncorrelated(kit):
     # consecutive samples of one stream (lag-1 autocorrelation)
     r = np.corrcoef(ref1[:-1], ref1[1:])[0, 1]
     assert abs(r) < limit, f"rng_1d lag-1 autocorrelation {r:.4f}"
+
+
+def test_bounce_blocks_are_the_philox_words(kit):
+    """A bounce draws two blocks (cl/core/rng.h): rng_light the words 0-2 of block DIM_LIGHT = 0 (selection, u, v),
+    rng_bsdf the words 0-3 of block DIM_BSDF = 3 (lobe, u, v, roulette), each word's top 24 bits over 2^24."""
+    rng = np.random.default_rng(3)
+    n = 64
+    keys = make_keys(seed=rng.integers(0, 2**32, n), pixel=rng.integers(0, 2**22, n),
+                     sample=rng.integers(0, 2**16, n), bounce=rng.integers(0, 64, n))
+    got = kit.run("rng_bounce_blocks", n, keys, Out(n, 7))
+    for (seed, pixel, sample, bounce, _), row in zip(keys, got):
+        light = philox_ref((sample, bounce, 0, 0), (seed, pixel))[:3]
+        bsdf = philox_ref((sample, bounce, 3, 0), (seed, pixel))
+        want = np.array([(w >> 8) * 2.0**-24 for w in light + bsdf], np.float32)
+        np.testing.assert_array_equal(row, want)
+
+
+def test_bounce_block_numbers_are_uncorrelated_and_jointly_uniform(kit):
+    """The seven numbers of a bounce, over many samples of one pixel: no pair correlated, each pair uniform on an
+    8x8 grid (the roulette's number beside the BSDF sample's (u, v), from one block)."""
+    n = 200_000
+    out = kit.run("rng_bounce_blocks", n, make_keys(seed=21, pixel=1234, sample=np.arange(n), bounce=2), Out(n, 7))
+    c = np.corrcoef(out.T)
+    off = np.abs(c[~np.eye(7, dtype=bool)])
+    assert off.max() < 5.0 / np.sqrt(n), f"bounce numbers correlated: {c.round(4)}"
+    for i in range(7):
+        for j in range(i + 1, 7):
+            cell = np.floor(out[:, i] * 8).astype(np.int64) * 8 + np.floor(out[:, j] * 8).astype(np.int64)
+            p = stats.chisquare(np.bincount(cell, minlength=64)).pvalue
+            assert p > 1e-4, f"numbers {i}, {j} of a bounce not jointly uniform: p={p:.2e}"
 
 
 # --------------------------------------------------------------------------

@@ -9,14 +9,12 @@
 
 #include "core/math.h"
 
-/* Dimensions used at each bounce (the camera's at bounce 0 only). */
-#define DIM_LIGHT_SELECT 0
-#define DIM_LIGHT_U 1
-#define DIM_LIGHT_V 2
-#define DIM_BSDF_LOBE 3
-#define DIM_BSDF_U 4
-#define DIM_BSDF_V 5
-#define DIM_ROULETTE 6
+/* Dimensions: each names one Philox block of a bounce, its counter (sample, bounce, dimension, extra). A block
+ * gives four words, so a bounce draws its light sample from one block (rng_light) and its BSDF sample and
+ * roulette from another (rng_bsdf): two ten-round blocks a bounce where five were drawn (docs/architecture.md,
+ * "Random numbers"). Dimensions 1, 2, 4, 5 and 6 are not used. */
+#define DIM_LIGHT 0 /* the light sample: selection, then the light's (u, v) */
+#define DIM_BSDF 3  /* the BSDF sample: lobe, then (u, v), then the Russian roulette */
 #define DIM_CAMERA_X 7
 #define DIM_CAMERA_Y 8
 #define DIM_MASK_CLOSEST 9 /* opacity tests of the path's ray (4th counter word: triangle) */
@@ -100,6 +98,31 @@ static inline vec2 rng_2d(RngKey key, uint bounce, uint dim) {
     uint r0, r1;
     rng_words(key, bounce, dim, 0u, &r0, &r1);
     return v2(rng_unit(r0), rng_unit(r1));
+}
+
+/* The four numbers of one block. */
+static inline __attribute__((always_inline)) void rng_4d(RngKey key, uint bounce, uint dim, float* u0, float* u1,
+                                                          float* u2, float* u3) {
+    uint r0, r1, r2, r3;
+    philox4x32_10_words(key.sample, bounce, dim, 0u, key.seed, key.pixel, &r0, &r1, &r2, &r3);
+    *u0 = rng_unit(r0);
+    *u1 = rng_unit(r1);
+    *u2 = rng_unit(r2);
+    *u3 = rng_unit(r3);
+}
+
+/* A bounce's light sample: the light's selection and its (u, v), the words 0, 1, 2 of block DIM_LIGHT. */
+static inline void rng_light(RngKey key, uint bounce, float* u_select, vec2* u) {
+    float x, y, unused;
+    rng_4d(key, bounce, DIM_LIGHT, u_select, &x, &y, &unused);
+    *u = v2(x, y);
+}
+
+/* A bounce's BSDF sample: the lobe, (u, v) and the Russian roulette's number, the words of block DIM_BSDF. */
+static inline void rng_bsdf(RngKey key, uint bounce, float* u_lobe, vec2* u, float* u_roulette) {
+    float x, y;
+    rng_4d(key, bounce, DIM_BSDF, u_lobe, &x, &y, u_roulette);
+    *u = v2(x, y);
 }
 
 #endif

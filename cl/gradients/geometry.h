@@ -370,7 +370,10 @@ static inline bool geo_light_end(const Scene* sc, RngKey key, int depth, const N
     int type = (int)l[LIGHT_TYPE];
     if (type == LIGHT_TRIANGLE) {
         int prim = as_int(l[LIGHT_PRIM]);
-        vec2 u = square_to_triangle(rng_2d(key, depth, DIM_LIGHT_U));
+        float u_select;
+        vec2 u;
+        rng_light(key, depth, &u_select, &u);
+        u = square_to_triangle(u);
         __global const float* t = sc->tris + 9 * prim;
         vec3 y = v3_add(v3_add(rgb_at(t, sc->unit), v3_scale(rgb_at(t + 3, sc->unit), u.x)),
                         v3_scale(rgb_at(t + 6, sc->unit), u.y));

@@ -162,8 +162,9 @@ typedef struct {
 static inline bool path_nee_sample(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, const PathState* ps,
                                    NeeSample* n, bool env_radiance) {
     if (bsdf_is_delta(b)) return false;
-    float u_sel = rng_1d(key, ps->depth, DIM_LIGHT_SELECT);
-    vec2 u = rng_2d(key, ps->depth, DIM_LIGHT_U);
+    float u_sel;
+    vec2 u;
+    rng_light(key, ps->depth, &u_sel, &u);
     if (!light_sample(sc, s->p, u_sel, u, &n->ls, env_radiance)) return false;
     vec3 wi = to_local(s->sh, v3_neg(ps->dir));
     n->wo = to_local(s->sh, n->ls.wi);
@@ -221,8 +222,9 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     if (!depth_allows(ps->depth + 1, max_depth)) return false;
     vec3 wi = to_local(s->sh, v3_neg(ps->dir));
     BsdfSample bs;
-    float u_lobe = rng_1d(key, ps->depth, DIM_BSDF_LOBE);
-    vec2 u = rng_2d(key, ps->depth, DIM_BSDF_U);
+    float u_lobe, u_roulette;
+    vec2 u;
+    rng_bsdf(key, ps->depth, &u_lobe, &u, &u_roulette);
     if (!bsdf_sample(b, wi, u_lobe, u, &bs)) return false;
     vec3 dir = to_world(s->sh, bs.wo);
     /* reject samples whose side disagrees between shading and geometric normals */
@@ -238,7 +240,7 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     if (!(beta_max > 0.0f)) return false;
     if (ps->depth >= RR_DEPTH) {
         float q = m_min(beta_max * ps->eta_scale * ps->eta_scale, 0.95f);
-        if (rng_1d(key, ps->depth - 1, DIM_ROULETTE) >= q) return false;
+        if (u_roulette >= q) return false;
         ps->beta = v3_divs(ps->beta, q);
     }
     return true;

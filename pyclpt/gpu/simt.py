@@ -267,9 +267,9 @@ class CostModel:
     surface: float = 90.0         # surface_hit: vertices, normals, uvs, frame
     emission: float = 25.0        # path_hit_emission (mostly not an emitter)
     bsdf_at: float = 40.0         # the material record (textures not counted)
-    nee: float = 280.0            # path_sample_light minus the material: 2 draws, light_sample, MIS, spawn
+    nee: float = 200.0            # path_sample_light minus the material: 1 draw (rng_light), light_sample, MIS, spawn
     material_eval: float = 80.0   # bsdf_eval of one material kind (per distinct kind in a warp)
-    sample: float = 310.0         # path_sample_bsdf minus the material: 3 draws, frame, spawn, roulette
+    sample: float = 150.0         # path_sample_bsdf minus the material: 1 draw (rng_bsdf), frame, spawn, roulette
     material_sample: float = 100.0  # bsdf_sample of one material kind (per distinct kind in a warp)
     light_add: float = 10.0       # adding an unoccluded light sample
     commit: float = 15.0          # film_commit
