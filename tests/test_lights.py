@@ -270,11 +270,37 @@ def test_envmap_sample_agrees_with_eval(env_kit):
     np.testing.assert_allclose(np.linalg.norm(s["wi"][ok], axis=1), 1.0, atol=1e-5)
 
 
-def test_envmap_sampling_picks_the_cells_of_a_whole_search(device):
-    """The guide tables (cdf_search_guided, pyclpt/buffers/lights.py cdf_guide) give each u the cell a binary
-    search of the whole float32 CDFs gives: the kernel's pdf is that cell's, computed here in float32, on a map
-    with black runs (flat stretches of the CDFs), a spike and 8 x 32 guide intervals. A guide entry one bin off
-    picks a neighbour, whose pdf differs."""
+def test_alias_tables_give_every_cell_its_probability():
+    """alias_tables (Vose's construction, every row at once): a cell's own share q / n plus the (1 - q) / n of the
+    entries aliased to it is its pmf, to float64 rounding, on rows with zeros, spikes, ties, one cell, all black."""
+    from pyclpt.buffers.lights import alias_tables
+
+    rng = np.random.default_rng(5)
+    rows = [rng.random((50, n)) ** rng.integers(1, 30, (50, 1)) for n in (1, 2, 3, 7, 64, 2048)]
+    edge = rng.random((6, 256))
+    edge[0] = 0.0  # black: uniform
+    edge[1] = 1.0  # ties: every q 1
+    edge[2, :] = 1e-30
+    edge[2, 17] = 1.0  # one spike over tiny cells
+    edge[3, rng.random(256) < 0.9] = 0.0  # black runs
+    edge[4] = np.arange(256.0)
+    for w in [*rows, edge]:
+        w = np.where(rng.random(w.shape) < 0.2, 0.0, w) if w is not edge else w
+        q, alias, pmf = alias_tables(w)
+        r, n = w.shape
+        assert q.min() >= 0.0 and q.max() <= 1.0 and alias.min() >= 0 and alias.max() < n
+        got = q / n
+        np.add.at(got, (np.repeat(np.arange(r), n), alias.ravel()), ((1.0 - q) / n).ravel())
+        np.testing.assert_allclose(got, pmf, rtol=0, atol=1e-12)
+        total = w.sum(axis=1, keepdims=True)
+        np.testing.assert_allclose(pmf, np.where(total > 0, w / np.where(total > 0, total, 1), 1 / n), rtol=1e-12)
+
+
+def test_envmap_sampling_picks_the_cells_of_its_tables(device):
+    """env_sample's cell is the marginal CDF's row (its guide table, cdf_search_guided) and that row's alias entry
+    (env_alias_pick): the kernel's pdf is the pdf of the cell a float32 numpy emulation of both picks, on a map with
+    black runs, a spike and 8 guide intervals. An alias entry read from the wrong row or column, or the alias's pmf
+    taken for the cell's, picks or prices another cell."""
     from pyclpt.buffers.lights import ENV_HEADER, cdf_guide, guide_size, pack_envmap
     from pyclpt.buffers.materials import TextureTable
 
@@ -284,27 +310,35 @@ def test_envmap_sampling_picks_the_cells_of_a_whole_search(device):
     px[20:30] = 0.0
     px[:, 100:180] *= 1e-4
     px[40, 7] = 500.0
-    env = Envmap(px, name="guided")
+    env = Envmap(px, name="alias")
     block, _ = pack_envmap(env, TextureTable())
-    assert (int(block[13]), int(block[14])) == (guide_size(h - 1), guide_size(w)) == (8, 32)
     rows = h - 1
-    marginal = block[ENV_HEADER:ENV_HEADER + rows]
-    conditional = block[ENV_HEADER + rows:ENV_HEADER + rows + rows * w].reshape(rows, w)
-    omega = block[ENV_HEADER + rows + rows * w:ENV_HEADER + 2 * rows + rows * w]
-    guides = block[ENV_HEADER + 2 * rows + rows * w + h:].view(np.int32)
-    assert len(guides) == 9 + rows * 33
-    np.testing.assert_array_equal(guides[:9], cdf_guide(marginal, 8))
+    assert int(block[13]) == guide_size(rows) == 8
+    entries = block[ENV_HEADER:ENV_HEADER + 4 * rows * w].reshape(rows, w, 4)
+    q, alias, pmf, alias_pmf = entries[..., 0], entries[..., 1].view(np.int32), entries[..., 2], entries[..., 3]
+    np.testing.assert_array_equal(alias_pmf, np.take_along_axis(pmf, alias, axis=1))
+    at = ENV_HEADER + 4 * rows * w
+    marginal, omega = block[at:at + rows], block[at + rows:at + 2 * rows]
+    guide = block[at + 2 * rows + h:].view(np.int32)
+    np.testing.assert_array_equal(guide, cdf_guide(marginal, 8))
     u = rng.random((100_000, 3), dtype=np.float32)
-    u[:64, 1:] = np.arange(64, dtype=np.float32)[:, None] / 64  # the guides' own boundaries
+    u[:64, 1:] = np.arange(64, dtype=np.float32)[:, None] / 64  # the guide's and the alias columns' boundaries
     s = LightKit(device, small_scene(env)).sample(u)
     assert s["ok"].all()
     r = np.minimum(np.searchsorted(marginal, u[:, 1], side="right"), rows - 1)
-    c = np.array([min(np.searchsorted(conditional[i], x, side="right"), w - 1) for i, x in zip(r, u[:, 2])])
-
+    x = u[:, 2] * np.float32(w)
+    i = np.minimum(x.astype(np.int32), w - 1)
+    f = np.minimum(x - i.astype(np.float32), np.float32(1 - 2**-24))
+    own = f < q[r, i]
+    c = np.where(own, i, alias[r, i])
+    cell_pmf = np.where(own, pmf[r, i], alias_pmf[r, i])
     prev_r = np.where(r > 0, marginal[np.maximum(r - 1, 0)], np.float32(0))
-    prev_c = np.where(c > 0, conditional[r, np.maximum(c - 1, 0)], np.float32(0))
-    pdf = (marginal[r] - prev_r) * (conditional[r, c] - prev_c)
-    np.testing.assert_allclose(s["pdf"], pdf / omega[r], rtol=2e-6)
+    np.testing.assert_allclose(s["pdf"], (marginal[r] - prev_r) * cell_pmf / omega[r], rtol=2e-6)
+    np.testing.assert_array_equal(cell_pmf, pmf[r, c])
+    # the directions fall in the cells picked: phi's column is c (the map is not rotated)
+    d = s["wi"]
+    col = np.floor((np.arctan2(d[:, 0], -d[:, 2]) / (2 * np.pi) % 1.0) * w - 0.5).astype(np.int64) % w
+    assert np.mean(col == c) > 0.999
 
 
 def test_deferred_environment_radiance_is_the_same_sample(env_kit):

@@ -17,11 +17,12 @@
  *   spot          position (3), axis (3, unit), cos(cutoff), cos(beam width), cutoff (radians),
  *                 1 / (cutoff - beam width), and with a texture world-to-light (9) and tan(cutoff)
  *                 (SPOT_* offsets below)
- *   envmap        ENV_HEADER floats (below), then the sampling tables:
- *                 marginal CDF over cell rows (R = H - 1 floats), conditional
- *                 CDF of each row (R * W), solid angle of one cell of each row (R),
- *                 cos(theta) of each texel row (H), then the CDFs' guide tables (ints:
- *                 the marginal's G_R + 1, each row's G_W + 1; cdf_search_guided).
+ *   envmap        ENV_HEADER floats (below), then the sampling tables: each row's
+ *                 alias table (R = H - 1 rows of W entries of 4 floats: env_alias_pick),
+ *                 the marginal CDF over cell rows (R floats), solid angle of one cell
+ *                 of each row (R), cos(theta) of each texel row (H), then the marginal
+ *                 CDF's guide table (G_R + 1 ints; cdf_search_guided). The block starts
+ *                 at a multiple of 16 floats, so no alias entry straddles a cache line.
  *
  * Environment-map convention (Mitsuba 3, src/emitters/envmap.cpp): a direction d
  * in the map's frame (to_world^-1 applied; +y is up) has
@@ -101,8 +102,8 @@
 #define ENV_TEXTURE 11 /* texture id of the texels (float RGBA, row 0 at the top) */
 #define ENV_SCALE 12   /* Mitsuba's `scale` */
 #define ENV_GUIDE_ROWS 13 /* G_R: the marginal CDF's guide intervals (a power of two) */
-#define ENV_GUIDE_COLS 14 /* G_W: each row's */
 #define ENV_HEADER 16
+#define ENV_ALIAS ENV_HEADER /* the rows' alias tables: entry (r, c) at ENV_ALIAS + 4 (r W + c) */
 
 typedef struct {
     vec3 wi;         /* unit direction from the shading point to the emitter */
@@ -119,7 +120,7 @@ static inline int num_lights(const Scene* sc) { return (int)sc->consts[CONST_NUM
  * found by a binary search between the entries of the CDF's guide table for u's interval
  * (pyclpt/buffers/lights.py, cdf_guide): guide[k] is the bin of u = k / g, g a power of two, so u * g is
  * exact and u's bin lies in [guide[k], guide[k + 1]]. The same bin as a search of the whole CDF in a few
- * steps: a 2048-bin envmap row's whole search touches about 7 cache lines, this one 1-2 and the guide's. */
+ * steps (the envmap's marginal CDF over its rows; each row's cell is its alias table's, env_alias_pick). */
 static inline int cdf_search_guided(__global const float* cdf, __global const float* guide, int g, float u) {
     int k = m_imax(m_imin((int)(u * (float)g), g - 1), 0);
     int lo = as_int(guide[k]), hi = as_int(guide[k + 1]);
@@ -217,16 +218,35 @@ static inline TexTaps env_taps(const Scene* sc, __global const float* e, vec2 xy
     return k;
 }
 
+/* The marginal CDF and the tables after it (the block's layout above). */
+typedef struct {
+    __global const float* alias;    /* R x W entries of 4 floats */
+    __global const float* marginal; /* R */
+    __global const float* cell_omega; /* R */
+    __global const float* row_cos;  /* H */
+    __global const float* guide;    /* G_R + 1 ints */
+    int w, rows;
+} EnvTables;
+
+static inline EnvTables env_tables(__global const float* e) {
+    EnvTables t;
+    t.w = (int)e[ENV_WIDTH];
+    t.rows = (int)e[ENV_HEIGHT] - 1;
+    t.alias = e + ENV_ALIAS;
+    t.marginal = t.alias + 4 * t.rows * t.w;
+    t.cell_omega = t.marginal + t.rows;
+    t.row_cos = t.cell_omega + t.rows;
+    t.guide = t.row_cos + t.rows + 1;
+    return t;
+}
+
 /* Solid-angle density with which env_sample produces the map-frame direction at xy. */
 static inline float env_pdf_at(__global const float* e, vec2 xy) {
-    int w = (int)e[ENV_WIDTH], rows = (int)e[ENV_HEIGHT] - 1;
-    __global const float* marginal = e + ENV_HEADER;
-    __global const float* conditional = marginal + rows;
-    __global const float* cell_omega = conditional + rows * w;
-    int c = m_imin((int)xy.x, w - 1), r = m_imin((int)xy.y, rows - 1);
-    float omega = cell_omega[r];
+    EnvTables t = env_tables(e);
+    int c = m_imin((int)xy.x, t.w - 1), r = m_imin((int)xy.y, t.rows - 1);
+    float omega = t.cell_omega[r];
     if (!(omega > 0.0f)) return 0.0f;
-    return cdf_pmf(marginal, r) * cdf_pmf(conditional + r * w, c) / omega;
+    return cdf_pmf(t.marginal, r) * t.alias[4 * (r * t.w + c) + 2] / omega;
 }
 
 /* Inverse of a cdf choice: where u falls inside bin i, in [0, 1). */
@@ -237,28 +257,46 @@ static inline float cdf_remap(__global const float* cdf, int i, float u) {
     return m_clamp(t, 0.0f, 0x1.fffffep-1f);
 }
 
+/* A cell of a row of n by its alias table (Walker; pyclpt/buffers/lights.py alias_tables): u n = i + f picks
+ * cell i where f < q (entry i's first float), else entry i's alias. Entry i is (q, alias bits, pmf of cell i,
+ * pmf of the alias): one 16-byte read, where the row's CDF search read a guide entry and a line of the CDF.
+ * Returns the cell, with its pmf and where f fell inside the part of [0, 1) that picked it (*u_in, in [0, 1)). */
+static inline int env_alias_pick(__global const float* row, int n, float u, float* pmf, float* u_in) {
+    float x = u * (float)n;
+    int i = m_imin((int)x, n - 1);
+    float f = m_min(x - (float)i, 0x1.fffffep-1f);
+    __global const float* a = row + 4 * i;
+    float q = a[0];
+    float t;
+    int cell;
+    if (f < q) {
+        cell = i;
+        *pmf = a[2];
+        t = f / q;
+    } else {
+        cell = as_int(a[1]);
+        *pmf = a[3];
+        t = q < 1.0f ? (f - q) / (1.0f - q) : 0.5f;
+    }
+    *u_in = m_clamp(t, 0.0f, 0x1.fffffep-1f);
+    return cell;
+}
+
 /* Sample a world direction from the map: returns it with its radiance and solid-angle pdf. */
 static inline vec3 env_sample(const Scene* sc, __global const float* e, vec2 u, vec3* radiance,
                                 float* pdf, bool want_radiance) {
-    int w = (int)e[ENV_WIDTH], rows = (int)e[ENV_HEIGHT] - 1;
-    __global const float* marginal = e + ENV_HEADER;
-    __global const float* conditional = marginal + rows;
-    __global const float* cell_omega = conditional + rows * w;
-    __global const float* row_cos = cell_omega + rows;
-    int g_rows = (int)e[ENV_GUIDE_ROWS], g_cols = (int)e[ENV_GUIDE_COLS];
-    __global const float* guide_rows = row_cos + rows + 1;
-    int r = cdf_search_guided(marginal, guide_rows, g_rows, u.x);
-    float ur = cdf_remap(marginal, r, u.x);
-    __global const float* cond = conditional + r * w;
-    int c = cdf_search_guided(cond, guide_rows + (g_rows + 1) + r * (g_cols + 1), g_cols, u.y);
-    float uc = cdf_remap(cond, c, u.y);
-    float cos_t = row_cos[r] + ur * (row_cos[r + 1] - row_cos[r]);
+    EnvTables t = env_tables(e);
+    int r = cdf_search_guided(t.marginal, t.guide, (int)e[ENV_GUIDE_ROWS], u.x);
+    float ur = cdf_remap(t.marginal, r, u.x);
+    float pmf_c, uc;
+    int c = env_alias_pick(t.alias + 4 * r * t.w, t.w, u.y, &pmf_c, &uc);
+    float cos_t = t.row_cos[r] + ur * (t.row_cos[r + 1] - t.row_cos[r]);
     float sin_t = m_sqrt(m_max(0.0f, 1.0f - cos_t * cos_t));
-    float phi = (2.0f * PI_F) * (((float)c + 0.5f + uc) / (float)w);
+    float phi = (2.0f * PI_F) * (((float)c + 0.5f + uc) / (float)t.w);
     float cos_phi, sin_phi = m_sincos(phi, &cos_phi);
     vec3 d = v3(sin_phi * sin_t, cos_t, -cos_phi * sin_t);
-    float omega = cell_omega[r];
-    *pdf = omega > 0.0f ? cdf_pmf(marginal, r) * cdf_pmf(cond, c) / omega : 0.0f;
+    float omega = t.cell_omega[r];
+    *pdf = omega > 0.0f ? cdf_pmf(t.marginal, r) * pmf_c / omega : 0.0f;
     *radiance = want_radiance ? env_lookup(sc, e, env_texel_coords(e, d)) : v3_splat(1.0f);
     return m_normalize(env_to_world(e, d));
 }

@@ -163,8 +163,8 @@ def guide_size(n: int) -> int:
 def cdf_guide(cdf: np.ndarray, g: int) -> np.ndarray:
     """The guide table (..., g + 1) of inclusive float32 CDFs ``cdf`` (..., n): entry k is the bin that u = k / g
     falls in (the first i with u < cdf[i], the last bin where none), so a u in [k / g, (k + 1) / g) falls in a bin
-    between entries k and k + 1 (cl/scene/lights.h, cdf_search_guided): the binary search of a 2048-texel row
-    shrinks to its few bins there, with the same result."""
+    between entries k and k + 1 (cl/scene/lights.h, cdf_search_guided): the binary search of an environment map's
+    marginal CDF shrinks to its few bins there, with the same result."""
     c = np.asarray(cdf, np.float32)
     n = c.shape[-1]
     u = (np.arange(g + 1, dtype=np.float64) / g).astype(np.float32)  # exact: g is a power of two
@@ -173,6 +173,46 @@ def cdf_guide(cdf: np.ndarray, g: int) -> np.ndarray:
     for r in range(flat.shape[0]):
         out[r] = np.minimum(np.searchsorted(flat[r], u, side="right"), n - 1)
     return out.reshape(*c.shape[:-1], g + 1)
+
+
+def alias_tables(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Walker alias tables of each row of ``weights`` (R, n), >= 0: (q (R, n), alias (R, n) int32, pmf (R, n)), all
+    float64 but alias. Cell i of a row is drawn as u n = i + f: i itself where f < q[i], else alias[i], which gives
+    cell i the probability pmf[i] (an all-zero row is uniform). Vose's construction, every row at once: the cells
+    below the mean (deficit 1 - n pmf) and those above it (excess n pmf - 1) are laid out in index order along one
+    axis each, a deficit is aliased to the cell whose excess holds its start, and a cell above the mean whose excess
+    a deficit overruns owes the overrun to the next one (its own q is 1 - overrun)."""
+    wts = np.asarray(weights, np.float64)
+    rows, n = wts.shape
+    total = wts.sum(axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pmf = np.where(total > 0, wts / np.where(total > 0, total, 1.0), 1.0 / n)
+    scaled = pmf * n
+    q = np.ones((rows, n))
+    alias = np.tile(np.arange(n, dtype=np.int32), (rows, 1))
+    small = scaled < 1.0
+    big_r, big_c = np.nonzero(~small)
+    small_r, small_c = np.nonzero(small)
+    if small_r.size == 0 or big_r.size == 0:
+        return q, alias, pmf
+    off = (np.arange(rows) * (n + 2.0))[:, None]  # the rows apart on one axis: each sums to less than n
+    deficit_end = (np.cumsum(np.where(small, 1.0 - scaled, 0.0), axis=1) + off)[small_r, small_c]
+    excess_end = (np.cumsum(np.where(small, 0.0, scaled - 1.0), axis=1) + off)[big_r, big_c]
+    last = np.full(rows, -1)
+    last[big_r] = np.arange(big_r.size)  # each row's last cell above the mean (rows without one keep q = 1)
+    start = deficit_end - (1.0 - scaled[small_r, small_c])
+    j = np.minimum(np.searchsorted(excess_end, start, side="right"), last[small_r])
+    ok = j >= 0
+    q[small_r[ok], small_c[ok]] = scaled[small_r[ok], small_c[ok]]
+    alias[small_r[ok], small_c[ok]] = big_c[j[ok]]
+    k = np.searchsorted(deficit_end, excess_end, side="right")  # the deficit that holds each excess's end
+    kk = np.minimum(k, small_r.size - 1)
+    nxt = np.searchsorted(excess_end, excess_end, side="right")
+    over = (k < small_r.size) & (small_r[kk] == big_r) & (start[kk] < excess_end) & (nxt <= last[big_r])
+    i = np.flatnonzero(over)
+    q[big_r[i], big_c[i]] = 1.0 - (deficit_end[kk[i]] - excess_end[i])
+    alias[big_r[i], big_c[i]] = big_c[nxt[i]]
+    return q, alias, pmf
 
 
 def pack_envmap(env: Envmap, textures: TextureTable) -> tuple[np.ndarray, float]:
@@ -191,20 +231,24 @@ def pack_envmap(env: Envmap, textures: TextureTable) -> tuple[np.ndarray, float]
     h, w = px.shape[:2]
     lum_w, rgb_w, cell_omega = envmap_cells(px)
     marginal = _cdf(lum_w.sum(axis=1))
-    conditional = _cdf(lum_w)
+    q, alias, pmf = alias_tables(lum_w)
     row_cos = np.cos(np.pi * np.arange(h) / (h - 1))
     row_cos[0], row_cos[-1] = 1.0, -1.0
     tex = textures.add(Bitmap(px.astype(np.float32), name=env.name, srgb=False, filter="bilinear",
                               wrap_mode="repeat"))
     header = np.zeros(ENV_HEADER, np.float64)
     header[0:9] = rot.reshape(-1)
-    g_rows, g_cols = guide_size(h - 1), guide_size(w)
-    header[9], header[10], header[11], header[12], header[13], header[14] = w, h, tex, scale, g_rows, g_cols
-    tables = np.concatenate([header, marginal, conditional.reshape(-1), cell_omega, row_cos]).astype(np.float32)
-    guides = np.concatenate([cdf_guide(tables[ENV_HEADER:ENV_HEADER + h - 1], g_rows),
-                             cdf_guide(tables[ENV_HEADER + h - 1:ENV_HEADER + (h - 1) * (w + 1)].reshape(h - 1, w),
-                                       g_cols).reshape(-1)])
-    block = np.concatenate([tables, guides.view(np.float32)])
+    g_rows = guide_size(h - 1)
+    header[9], header[10], header[11], header[12], header[13] = w, h, tex, scale, g_rows
+    # each cell's alias entry: q, the alias (int bits), its pmf and the alias's, 16 bytes (one cache line's quarter)
+    entries = np.empty((h - 1, w, 4), np.float32)
+    entries[..., 0] = q
+    entries[..., 1] = alias.view(np.float32)
+    entries[..., 2] = pmf
+    entries[..., 3] = np.take_along_axis(pmf, alias, axis=1)
+    tables = np.concatenate([header, marginal, cell_omega, row_cos]).astype(np.float32)
+    block = np.concatenate([tables[:ENV_HEADER], entries.reshape(-1), tables[ENV_HEADER:],
+                            cdf_guide(tables[ENV_HEADER:ENV_HEADER + h - 1], g_rows).view(np.float32)])
     integral = scale * max(float(lum_w.sum()), float(rgb_w.sum()) / 3.0)
     return block, integral / (4.0 * np.pi)
 
@@ -244,8 +288,12 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
     data: list[np.ndarray] = []
     data_size = 0
 
-    def add_data(block: np.ndarray) -> np.float32:
+    def add_data(block: np.ndarray, align: int = 1) -> np.float32:
+        """``block`` appended to light_data at an offset that is a multiple of ``align`` floats; the offset."""
         nonlocal data_size
+        if data_size % align:
+            data.append(np.zeros(align - data_size % align, np.float32))
+            data_size += data[-1].size
         offset = data_size
         data.append(np.asarray(block, np.float32).reshape(-1))
         data_size += data[-1].size
@@ -301,7 +349,7 @@ def pack_lights(scene: Scene, tris: np.ndarray, tri_emission: np.ndarray, bounds
         if mean_radiance > 0:
             rec = np.zeros(LIGHT_STRIDE, np.float32)
             rec[LIGHT_TEXTURE] = _int_bits(-1)
-            rec[LIGHT_PRIM] = add_data(block)
+            rec[LIGHT_PRIM] = add_data(block, 16)  # 64 bytes: no alias entry straddles two cache lines
             rec[LIGHT_TYPE] = LIGHT_ENVMAP
             env_light = len(tri_records) + len(records)
             records.append(rec)

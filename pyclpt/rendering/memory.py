@@ -65,8 +65,9 @@ def scene_bytes(scene: Scene) -> int:
     env = scene.environment
     if isinstance(env, Envmap):
         h, w = env.pixels.shape[:2]
-        # float RGBA texels, the sampling CDFs and cell solid angles, the CDFs' guide tables (buffers/lights.py)
-        total += 24 * h * w + 16 * (h + 16) + 4 * (h * (guide_size(w) + 1) + guide_size(h - 1) + 1)
+        # float RGBA texels, the rows' 16-byte alias entries, the marginal CDF, cell solid angles and row cosines,
+        # the marginal's guide table and the block's alignment (buffers/lights.py)
+        total += 32 * h * w + 16 * (h + 16) + 4 * (guide_size(h - 1) + 1) + 64
     return total
 
 
