@@ -341,6 +341,20 @@ def test_envmap_sampling_picks_the_cells_of_its_tables(device):
     assert np.mean(col == c) > 0.999
 
 
+def test_scene_memory_estimate_covers_the_envmap_tables():
+    """The estimate the renderer checks device memory with (rendering/memory.py scene_bytes) holds a map's texels and
+    alias tables: at least the packed buffers' bytes, and within 1 % of them plus the plain scene's."""
+    from pyclpt.rendering.memory import scene_bytes
+
+    px = np.random.default_rng(3).random((257, 512, 3)).astype(np.float32)
+    plain = small_scene()
+    scene = small_scene(Envmap(px, name="big"))
+    packed, packed_plain = pack_scene(scene).nbytes, pack_scene(plain).nbytes
+    estimate, estimate_plain = scene_bytes(scene), scene_bytes(plain)
+    assert estimate >= packed
+    assert estimate - estimate_plain == pytest.approx(packed - packed_plain, rel=0.01)
+
+
 def test_deferred_environment_radiance_is_the_same_sample(env_kit):
     """light_sample with env_radiance false (ENV_DEFERRED: the radiance is looked up once the shadow ray is
     found unoccluded, path_lit) draws the same direction with the same pdf and leaves the radiance at 1."""
