@@ -10,7 +10,7 @@
 /* The unit direction back along the path at the vertex whose record starts at q (above), of bounce `depth`. */
 static inline vec3 vertex_back(const Scene* sc, RngKey key, __global const float* q, int depth) {
     if (depth != 0) return v3(q[2], q[3], q[4]);
-    PathState cam; /* the camera ray through film position (q[2], q[3]) (perspective: no random numbers) */
+    PathState cam; /* the camera ray through film position (q[2], q[3]) (pinhole or orthographic: no random numbers) */
     camera_ray(sc, key, q[2], q[3], &cam);
     return v3_neg(cam.dir);
 }

@@ -30,6 +30,7 @@ import numpy as np
 from pyclpt.common.checks import check_int
 from pyclpt.device.context import Device
 from pyclpt.gradients.edges import (
+    mirrors_need_a_pinhole,
     primary_boundary,
     primary_boundary_forward,
     sensor_names,
@@ -126,8 +127,8 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     shift = int(np.ceil(np.log2(peak))) if peak > 1.0 else 0
     if shift:
         grad = np.ldexp(grad, -shift).astype(np.float32)
-    if boundary and any(p.kind in ("geometry", "camera") for p in chosen):  # before the replay's work
-        _shadow_terms_need_a_pinhole(scene, replay.max_depth < 0 or replay.max_depth >= 2)
+    if boundary and replay.max_depth != 0 and any(p.kind in ("geometry", "camera") for p in chosen):
+        mirrors_need_a_pinhole(scene)  # before the replay's work (an orthographic camera's outlines in mirrors)
     _warn_delta_outlines(scene, chosen)
     buffers = replay.backward(grad, spp, seed, _kinds(chosen), _moving_vertices(scene, chosen))
     if replay.dropped:
@@ -177,16 +178,6 @@ def _moving_vertices(scene: Scene, chosen: Sequence) -> tuple[int, int]:
     return min(lo for lo, _ in spans), max(lo + n for lo, n in spans)
 
 
-def _shadow_terms_need_a_pinhole(scene: Scene, bounce: bool) -> None:
-    """ValueError, naming the camera, where the boundary terms of shadows (written for perspective cameras: the
-    outlines in the light the shading points receive, mapped to the image) would run under an orthographic camera
-    (its silhouettes' term is written: max_depth 1, or boundary=False for the interior term alone)."""
-    if bounce and scene.camera.kind == "orthographic":
-        raise ValueError("the boundary terms of shadows (soft and hard shadows' outlines) are implemented for "
-                         "perspective cameras; under an orthographic camera pass max_depth=1 (its silhouettes' "
-                         "term) or boundary=False (the interior term alone)")
-
-
 def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str], parameters: SceneParameters, *,
                       seed: int, max_depth: int, device: Device | str | None, samples: int = 65536, spp: int = 4
                       ) -> dict[str, np.ndarray]:
@@ -213,7 +204,6 @@ def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str]
         for name, v in terms.items():
             out[name] = out.get(name, 0.0) + np.asarray(v, np.float64)
 
-    _shadow_terms_need_a_pinhole(scene, bounce)
     common = dict(seed=seed, max_depth=max_depth, parameters=parameters, device=device)
     if (meshes or cameras) and max_depth != 0:
         add(primary_boundary(scene, g, meshes + cameras, samples=samples, **common))
@@ -240,7 +230,6 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
     camera = name in sensor_names(scene)
     mesh = name.endswith((".vertex_positions", ".to_world")) and not camera and name not in moving_light_names(scene)
     bounce = max_depth < 0 or max_depth >= 2
-    _shadow_terms_need_a_pinhole(scene, bounce)
     if (mesh or camera) and max_depth != 0:
         image += primary_boundary_forward(scene, name, tangent, samples=samples, **common)
     if (mesh or camera) and bounce:
@@ -384,8 +373,8 @@ def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Ite
     else:
         parameter_slots(scene, replay.scene.arrays, p).scatter(tangent, d)
     geometry = p.kind in ("geometry", "camera")
-    if geometry and boundary:  # before the replay's work
-        _shadow_terms_need_a_pinhole(scene, replay.max_depth < 0 or replay.max_depth >= 2)
+    if geometry and boundary and replay.max_depth != 0:
+        mirrors_need_a_pinhole(scene)  # before the replay's work (an orthographic camera's outlines in mirrors)
     _warn_delta_outlines(scene, [p])
     image = replay.forward({b: tangent[b] for b in BUFFERS}, spp, seed, kinds=_kinds([p]))
     if replay.dropped:

@@ -101,7 +101,8 @@ class Projection:
            x_fov: float | None = None, orthographic: bool = False) -> Projection:
         """The projection of ``scene``'s camera (with ``to_world`` instead of its own, and a horizontal fov of
         ``x_fov`` degrees, when given); an orthographic camera's where ``orthographic`` allows it (the terms
-        written for it: the silhouettes'), else refused by name as any other kind but perspective."""
+        written for it: the silhouettes' and the shadows'), else refused by name as any other kind but
+        perspective."""
         cam = scene.camera
         if cam.kind != "perspective" and not (orthographic and cam.kind == "orthographic"):
             what = "perspective and orthographic" if orthographic else "perspective"
@@ -134,6 +135,17 @@ class Projection:
             sx = (d @ self.right) / (self.right @ self.right) / z
             sy = (d @ self.up) / (self.up @ self.up) / z
         return np.stack([(sx + 1) * 0.5 * self.width, (1 - sy) * 0.5 * self.height], axis=1)
+
+    def rays_to(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The camera rays that reach points p (N, 3) in front of the camera: their origins (N, 3), unit directions
+        (N, 3) and lengths (N,). A pinhole's start at its origin; an orthographic camera's go along forward from the
+        film rectangle, p - t forward, t the point's depth (camera_ray, cl/integrators/path.h)."""
+        if self.orthographic:
+            t = self.depth(p)
+            return p - t[:, None] * self.forward[None], np.tile(self.forward, (len(p), 1)), t
+        d = p - self.origin
+        dist = np.linalg.norm(d, axis=1)
+        return np.tile(self.origin, (len(p), 1)), d / np.maximum(dist, 1e-300)[:, None], dist
 
     def normal_velocity(self, p: np.ndarray, n: np.ndarray) -> np.ndarray:
         """(N, 3): n . d(film position)/dp at points p (N, 3) for film-space directions n (N, 2)."""
@@ -216,6 +228,15 @@ def mesh_edges(mesh: Mesh, camera_origin: np.ndarray | None, creases: bool = Fal
     return pairs[first][keep], count[keep]
 
 
+def mirrors_need_a_pinhole(scene: Scene, planes: Sequence[MirrorPlane] | None = None) -> None:
+    """ValueError, naming the scene, where the camera's outlines seen in planar mirrors (``planes``, by default the
+    scene's :func:`pyclpt.gradients.mirrors.mirror_planes`) would be sampled under an orthographic camera: they
+    are written for perspective cameras."""
+    if scene.camera.kind == "orthographic" and (mirror_planes(scene) if planes is None else planes):
+        raise ValueError(f"the outlines seen in planar mirrors are implemented for perspective cameras; scene "
+                         f"{scene.name!r} has an orthographic camera and a planar mirror")
+
+
 def silhouette_edges(scene: Scene, meshes: Sequence[int], width: int, height: int,
                      mirrors: Collection[int] = ()) -> ScreenEdges:
     """The silhouette edges of ``scene.meshes[i]`` for i in ``meshes`` seen by the scene's camera on a
@@ -226,9 +247,7 @@ def silhouette_edges(scene: Scene, meshes: Sequence[int], width: int, height: in
     proj = Projection.of(scene, width, height, orthographic=True)
     parts = [_view_edges(scene, proj, i) for i in meshes]
     planes = mirror_planes(scene)
-    if planes and proj.orthographic:
-        raise ValueError(f"the outlines seen in planar mirrors are implemented for perspective cameras; scene "
-                         f"{scene.name!r} has an orthographic camera and a planar mirror")
+    mirrors_need_a_pinhole(scene, planes)
     for k, plane in enumerate(planes):
         box = _footprint(scene, proj, plane)
         shown = range(len(scene.meshes)) if plane.mesh in mirrors else meshes

@@ -104,19 +104,23 @@ def flat_shaded(mesh: Mesh, tolerance: float = 1e-4) -> bool:
 
 
 def _camera_boundary_reason(scene: Scene) -> str:
-    """Why nothing that moves is differentiated under a camera other than a pinhole: the boundary terms (camera
-    silhouettes, the shadows' outlines mapped to the image) are written for perspective cameras."""
+    """Why nothing that moves is differentiated under a camera other than a pinhole or an orthographic one, or ""
+    when it may be: the boundary terms (camera silhouettes, the shadows' outlines mapped to the image) are written
+    for those two (a thin lens's rays through its aperture are not)."""
+    if scene.camera.kind in ("perspective", "orthographic"):
+        return ""
     return (f"a {scene.camera.kind} camera: the boundary terms of moving geometry (silhouettes, shadows' outlines) "
-            f"are implemented for perspective (pinhole) cameras; update() moves it")
+            f"are implemented for perspective (pinhole) and orthographic cameras; update() moves it")
 
 
 def moving_mesh_reason(scene: Scene, mesh: Mesh) -> str:
     """Why the gradient of where ``mesh`` is (its vertex_positions, its to_world) is not computed, or "" when it is:
     the interior term (cl/gradients/geometry.h) holds for meshes untextured or with bilinear bitmaps, flat or
     smooth-shaded (through the vertex normals update() writes: pyclpt/gradients/normals.py), in scenes with or
-    without instances (the boundary terms see instances' triangles: pyclpt/gradients/flatten.py)."""
+    without instances (the boundary terms see instances' triangles: pyclpt/gradients/flatten.py), seen by a pinhole
+    or an orthographic camera (:func:`_camera_boundary_reason`)."""
     mat = scene.materials[mesh.material]
-    if scene.camera.kind != "perspective":
+    if _camera_boundary_reason(scene):
         return _camera_boundary_reason(scene)
     if _jumping_texture(mat) or mesh.emission_texture is not None:
         return ("a checkerboard, a nearest-filtered bitmap or an emission texture: the outlines of a texture's jumps "
@@ -352,11 +356,11 @@ class _Walker:
                          "spot" if isinstance(light, SpotLight) else "point")
             if isinstance(light, SpotLight):
                 reason = "spot_texture" if light.texture is not None else ""
-                reason = _camera_boundary_reason(sc) if sc.camera.kind != "perspective" else reason
+                reason = _camera_boundary_reason(sc) or reason
                 self.add(f"{name}.to_world", "" if reason else "geometry", placement.spot_accessors(light), light,
                          reason, "geometry")
             elif isinstance(light, PointLight):
-                reason = _camera_boundary_reason(sc) if sc.camera.kind != "perspective" else ""
+                reason = _camera_boundary_reason(sc)
                 self.add(f"{name}.position", "" if reason else "geometry", placement.point_accessors(light), light,
                          reason, "geometry")
         for name, inst in zip(instance_names(sc), sc.instances):

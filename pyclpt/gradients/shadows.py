@@ -11,9 +11,11 @@ the image's integrand along a curve, whose derivative is the same Reynolds term 
 Points are sampled on the occluders' edges that the light sees as silhouettes (:func:`mesh_edges` from the
 light's position), stratified along their total length; each is projected from the light onto the first
 surface behind it (a ray cast with Embree on the host, through ``embreex``), kept where that point is lit
-through the edge and seen by the camera, and mapped to the image. There the outline's normal and speed
-come from the chain light -> edge point -> receiver plane -> film, and the radiance on its two sides from
-the ``edge_radiance`` kernel, as for silhouettes.
+through the edge and seen by the camera (along its ray to the point: a pinhole's from its origin, an orthographic
+camera's parallel one from its film rectangle, :meth:`Projection.rays_to`), and mapped to the image (a pinhole's
+or an orthographic camera's affine projection). There the outline's normal and speed come from the chain light ->
+edge point -> receiver plane -> film, and the radiance on its two sides from the ``edge_radiance`` kernel, as for
+silhouettes.
 
 Parameters: ``SHAPE.vertex_positions`` and ``SHAPE.to_world`` of the occluders and of the receivers (the outline
 slides along the light's rays with the receiver's plane), ``SENSOR.to_world`` and ``SENSOR.x_fov`` (the outline is
@@ -248,9 +250,9 @@ def sample_shadow_edges(scene: Scene, meshes: Sequence[int], width: int, height:
         keep &= np.isin(r_mesh, np.asarray(list(receivers), np.int64))
     receiver = start + np.where(np.isfinite(beyond), beyond, 0.0)[:, None] * d
     # seen by the camera
-    proj = Projection.of(scene, width, height)
-    view, view_dist = _unit(receiver - proj.origin)
-    seen, _ = tracer.hit(np.broadcast_to(proj.origin, receiver.shape), view)
+    proj = Projection.of(scene, width, height, orthographic=True)
+    eye, view, view_dist = proj.rays_to(receiver)  # an orthographic camera's: parallel, from its film rectangle
+    seen, _ = tracer.hit(eye, view)
     keep &= (proj.depth(receiver) > 0) & (seen >= view_dist * (1 - 1e-3))
     x = proj.film(receiver)
     keep &= np.all(np.isfinite(x), axis=1) & (x[:, 0] >= 0) & (x[:, 0] <= width) & (x[:, 1] >= 0) & (x[:, 1] <= height)
@@ -393,12 +395,16 @@ class MeshEdges:
 
 def _camera_rays(scene: Scene, film: np.ndarray, width: int, height: int, camera: Camera | None = None
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Origins and unit directions of the perspective camera's rays (``camera``'s, else the scene's) through film
-    positions (N, 2), as the kernels' camera_ray makes them."""
+    """Origins and unit directions of the camera's rays (``camera``'s, else the scene's) through film positions
+    (N, 2), as the kernels' camera_ray makes them: a pinhole's from its origin through the film plane at unit depth;
+    an orthographic camera's parallel, along forward from the film rectangle (origin + sx right + sy up)."""
     cam = scene.camera if camera is None else camera
     o, f, r, u = (np.asarray(v, np.float64) for v in cam.basis(width, height))
     sx = 2.0 * film[:, 0] / width - 1.0
     sy = 1.0 - 2.0 * film[:, 1] / height
+    if cam.kind == "orthographic":
+        d, _ = _unit(np.tile(f, (len(film), 1)))
+        return o[None] + sx[:, None] * r[None] + sy[:, None] * u[None], d
     d, _ = _unit(f[None] + sx[:, None] * r[None] + sy[:, None] * u[None])
     return np.broadcast_to(o, d.shape).copy(), d
 
@@ -529,7 +535,7 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
     The pixels go in bands of SOFT_CHUNK // spp (each band's random numbers keyed by (seed, its first pixel)), one
     SoftSamples a band: every host array of a band stays a few MB, so the allocator reuses the last band's
     memory instead of mapping fresh pages (on a VM that maps them slowly, a third of the term's time)."""
-    Projection.of(scene, width, height)  # perspective cameras only (the others are refused by name)
+    Projection.of(scene, width, height, orthographic=True)  # pinhole and orthographic cameras (a thin lens: refused)
     rfilter = scene.film.rfilter
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
     first, order = _triangle_tables(scene, replay)
@@ -880,7 +886,7 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
     relative to the receiver's material point r by P (sigma dq + (1 - sigma) dl - dr), P projecting along the
     light's ray onto the receiver's plane, and on the shading point's sphere of directions by that over |r - y|
     (the shading point's own motion moves both alike). In bands of pixels as :func:`soft_sample_chunks`."""
-    Projection.of(scene, width, height)
+    Projection.of(scene, width, height, orthographic=True)  # pinhole and orthographic cameras (a thin lens: refused)
     rfilter = scene.film.rfilter
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
     if not (replay.max_depth < 0 or replay.max_depth > 2):  # a light sample after a bounce
