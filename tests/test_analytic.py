@@ -164,7 +164,8 @@ def test_camera_behind_an_area_light_sees_its_back_black(integrator):
         img = render(scene, integrator, spp=4, max_depth=depth, seed=4)
         assert img[back].max() == 0.0, depth
         if depth > 1:
-            assert img[far].mean() > 0.05, depth  # the floor outside the quad's shadow is lit
+            # the floor outside the quad's shadow is lit: 0.0515 at 1024 spp, 0.0499-0.0525 at 4 spp (seeds 0-5)
+            assert img[far].mean() > 0.025, depth
 
 
 @pytest.mark.parametrize("integrator", INTEGRATORS)
