@@ -246,9 +246,9 @@ def pack_envmap(env: Envmap, textures: TextureTable) -> tuple[np.ndarray, float]
     entries[..., 1] = alias.view(np.float32)
     entries[..., 2] = pmf
     entries[..., 3] = np.take_along_axis(pmf, alias, axis=1)
-    tables = np.concatenate([header, marginal, cell_omega, row_cos]).astype(np.float32)
-    block = np.concatenate([tables[:ENV_HEADER], entries.reshape(-1), tables[ENV_HEADER:],
-                            cdf_guide(tables[ENV_HEADER:ENV_HEADER + h - 1], g_rows).view(np.float32)])
+    rest = np.concatenate([marginal, cell_omega, row_cos]).astype(np.float32)
+    block = np.concatenate([header.astype(np.float32), entries.reshape(-1), rest,
+                            cdf_guide(marginal, g_rows).view(np.float32)])  # cdf_guide: of the float32 CDF
     integral = scale * max(float(lum_w.sum()), float(rgb_w.sum()) / 3.0)
     return block, integral / (4.0 * np.pi)
 
