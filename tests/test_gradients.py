@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pyopencl
 import pytest
 from gradient_scenes import filling_sphere, material_under_sky, sphere_under_envmap, textured_quad
 
@@ -352,6 +353,77 @@ def test_device_memory_does_not_grow_with_spp_or_depth(box):
     deep = replay_for(box, width=16, height=16, max_depth=64)
     pyclpt.render_backward(box, grad, spp=64, seed=1, width=16, height=16, max_depth=64)
     assert deep.device_bytes == small
+
+
+def _pose_gradient(scene: pyclpt.Scene, device: pyclpt.Device, mode: str, seed: int = 5) -> np.ndarray:
+    """The small box's pose gradient (backward) or the image's derivative along its x translation (forward), with
+    both terms, 24 x 24, 4 spp, depth 3."""
+    kw = dict(spp=4, seed=seed, max_depth=3, width=24, height=24, device=device)
+    if mode == "backward":
+        grad = np.ones((24, 24, 3), np.float32)
+        return pyclpt.render_backward(scene, grad, params=["small-box.to_world"], **kw)["small-box.to_world"]
+    along_x = np.zeros((4, 4))
+    along_x[0, 3] = 1.0
+    return pyclpt.render_forward(scene, "small-box.to_world", along_x, **kw)
+
+
+@pytest.mark.parametrize("mode", ["backward", "forward"])
+def test_boundary_terms_run_beside_the_replay(box, each_device, mode, monkeypatch):
+    """render_backward and render_forward compute the boundary terms while the replay's kernel runs: their kernels go
+    to a second queue where the device runs two queues at once (Intel's runtime), to the replay's own on PoCL (one
+    command at a time). The gradient is the one the two give one after the other, and the pass's kernels, once
+    recorded, are those of the last pass alone."""
+    from pyclpt.gradients.replay import PathReplay
+
+    beside = _pose_gradient(box, each_device, mode)
+    replay = replay_for(box, width=24, height=24, max_depth=3, device=each_device)
+    events = replay.profile.events
+    main = each_device.queue.int_ptr
+    queues = {name: {ev.get_info(pyopencl.event_info.COMMAND_QUEUE).int_ptr for ev in evs}
+              for name, evs in events.items()}
+    assert queues[mode] == {main}
+    assert queues["vertex_radiance"] == ({main} if each_device.is_pocl else {replay.side_queue.int_ptr})
+    launches = len(replay.profile.sequence)
+    _pose_gradient(box, each_device, mode, seed=6)
+    assert len(replay.profile.sequence) == launches  # the last pass's alone
+    with monkeypatch.context() as m:  # one queue, one after the other
+        m.setattr(PathReplay, "side_queue", property(lambda self: self.device.queue))
+        after = _pose_gradient(box, each_device, mode)
+    np.testing.assert_allclose(beside, after, rtol=1e-4, atol=1e-6 * np.abs(after).max())
+    assert np.abs(after).max() > 0
+
+
+def test_boundary_kernels_reuse_their_buffers(box, device, monkeypatch):
+    """The boundary terms' kernels keep their arguments' buffers from pass to pass (a fresh buffer a launch cost the
+    CPU device fresh pages each time): a second pass allocates none."""
+    import pyclpt.gradients.replay as replay_module
+
+    _pose_gradient(box, device, "backward")
+    calls = []
+    real = replay_module.alloc
+    monkeypatch.setattr(replay_module, "alloc", lambda *a, **k: calls.append(a[2]) or real(*a, **k))
+    _pose_gradient(box, device, "backward", seed=6)
+    assert calls == []
+    replay = replay_for(box, width=24, height=24, max_depth=3, device=device)
+    assert replay.device_bytes > replay.scene.arrays.nbytes + sum(b.size for b in replay._scratch_buffers.values())
+
+
+def test_a_failing_boundary_term_leaves_the_replay_as_it_was(box, each_device, monkeypatch):
+    """An error in the boundary terms propagates, after the replay's kernel is waited for, and the next pass is
+    whole: the same gradient as before the error."""
+    import pyclpt.gradients.differentiate as differentiate
+
+    before = _pose_gradient(box, each_device, "backward")
+    with monkeypatch.context() as m:
+        def fail(*args, **kwargs):
+            raise RuntimeError("boundary term failed")
+        m.setattr(differentiate, "boundary_backward", fail)
+        with pytest.raises(RuntimeError, match="boundary term failed"):
+            _pose_gradient(box, each_device, "backward")
+    replay = replay_for(box, width=24, height=24, max_depth=3, device=each_device)
+    assert replay._queue is each_device.queue
+    np.testing.assert_allclose(_pose_gradient(box, each_device, "backward"), before, rtol=1e-4,
+                               atol=1e-6 * np.abs(before).max())
 
 
 # ---- inverse rendering ------------------------------------------------------------------------------

@@ -130,7 +130,13 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
     if boundary and replay.max_depth != 0 and any(p.kind in ("geometry", "camera") for p in chosen):
         mirrors_need_a_pinhole(scene)  # before the replay's work (an orthographic camera's outlines in mirrors)
     _warn_delta_outlines(scene, chosen)
-    buffers = replay.backward(grad, spp, seed, _kinds(chosen), _moving_vertices(scene, chosen))
+    moving = [p.name for p in chosen if p.kind in ("geometry", "camera")]
+    collect = replay.backward_started(grad, spp, seed, _kinds(chosen), _moving_vertices(scene, chosen))
+    try:  # the boundary terms while the backward kernel runs (their kernels on a second queue)
+        terms = boundary_backward(scene, image_grad, moving, table, seed=seed, max_depth=replay.max_depth,
+                                  device=device, samples=edge_samples, spp=edge_spp) if moving and boundary else {}
+    finally:
+        buffers = collect()
     if replay.dropped:
         log.warning("%s: render_backward dropped %d paths with NaN/inf radiance", scene.name, replay.dropped)
     out = {}
@@ -157,11 +163,8 @@ def render_backward(scene: Scene, image_grad: np.ndarray, spp: int | None = None
             exact = np.ldexp(parameter_slots(scene, replay.scene.arrays, p).gather(buffers), shift)
         _check_float32(exact, p.name, peak)
         out[p.name] = exact.astype(np.float32).reshape(value_shape)
-    moving = [p.name for p in chosen if p.kind in ("geometry", "camera")]
-    if moving and boundary:
-        for name, g in boundary_backward(scene, image_grad, moving, table, seed=seed, max_depth=replay.max_depth,
-                                         device=device, samples=edge_samples, spp=edge_spp).items():
-            out[name] = (out[name] + g.reshape(out[name].shape)).astype(np.float32)
+    for name, g in terms.items():
+        out[name] = (out[name] + g.reshape(out[name].shape)).astype(np.float32)
     return out
 
 
@@ -376,11 +379,13 @@ def render_forward(scene: Scene, param: str, direction: np.ndarray | float | Ite
     if geometry and boundary and replay.max_depth != 0:
         mirrors_need_a_pinhole(scene)  # before the replay's work (an orthographic camera's outlines in mirrors)
     _warn_delta_outlines(scene, [p])
-    image = replay.forward({b: tangent[b] for b in BUFFERS}, spp, seed, kinds=_kinds([p]))
+    collect = replay.forward_started({b: tangent[b] for b in BUFFERS}, spp, seed, kinds=_kinds([p]))
+    try:  # the boundary terms while the forward kernel runs (their kernels on a second queue)
+        terms = boundary_forward(scene, param, d, table, width=replay.width, height=replay.height, seed=seed,
+                                 max_depth=replay.max_depth, device=device, samples=edge_samples,
+                                 spp=edge_spp) if geometry and boundary else None
+    finally:
+        image = collect()
     if replay.dropped:
         log.warning("%s: render_forward dropped %d NaN/inf samples", scene.name, replay.dropped)
-    if geometry and boundary:
-        image = (image + boundary_forward(scene, param, d, table, width=replay.width, height=replay.height,
-                                          seed=seed, max_depth=replay.max_depth, device=device, samples=edge_samples,
-                                          spp=edge_spp)).astype(np.float32)
-    return image
+    return image if terms is None else (image + terms).astype(np.float32)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Iterable
+from typing import TypeVar
 
 import numpy as np
 import pyopencl as cl
@@ -28,6 +29,8 @@ from pyclpt.gradients.layout import BUFFERS, buffer_sizes
 from pyclpt.gradients.parameters import KINDS
 from pyclpt.integrators.megakernel import Megakernel
 from pyclpt.scene.model import BumpMap, Mask, Scene, TwoSided
+
+T = TypeVar("T")
 
 LAUNCH = 1 << 18  # paths per launch (film slots)
 LOCAL_SIZE = 64
@@ -104,11 +107,14 @@ class PathReplay:
         self.max_depth = max_depth
         self.film = Film(device, width, height, precision="double",
                          batch=frames_per_batch(width * height, LAUNCH), rfilter=scene.scene.film.rfilter)
-        self.profile = KernelProfile()
+        self.profile = KernelProfile()  # the last pass's kernels (a backward or forward pass clears it)
         self.dropped = 0  # paths dropped by the last pass (NaN or inf radiance)
         self._programs: dict[tuple[str, ...], cl.Kernel] = {}
         self._image_grad: cl.Buffer | None = None
         self._grads: dict[str, cl.Buffer] = {}
+        self._queue = device.queue  # _batched's: the side queue while a backward pass runs (backward_started)
+        self._side_queue: cl.CommandQueue | None = None
+        self._scratch_buffers: dict[tuple[str, int], cl.Buffer] = {}  # _batched's, by (kernel, argument)
         self._alpha: tuple[bytes, cl.Buffer, cl.Buffer] | None = None
         self._primal: Megakernel | None = None
         self.compile_seconds = 0.0
@@ -132,11 +138,13 @@ class PathReplay:
 
     @property
     def device_bytes(self) -> int:
-        """Bytes of device memory this replay holds: scene, film batch, image gradient, gradient buffers."""
+        """Bytes of device memory this replay holds: scene, film batch, image gradient, gradient buffers, the
+        boundary terms' kernels' arguments (at most LAUNCH items each, :meth:`_scratch`)."""
         film = self.film.pixels * (self.film.batch * (3 * 4 + 1) + 12) + self.film.accumulator.state_bytes
         grads = sum(b.size for b in self._grads.values())
         image = self._image_grad.size if self._image_grad is not None else 0
-        return self.scene.arrays.nbytes + film + grads + image
+        scratch = sum(b.size for b in self._scratch_buffers.values())
+        return self.scene.arrays.nbytes + film + grads + image + scratch
 
     def _alpha_records(self) -> tuple[cl.Buffer, cl.Buffer]:
         """alpha_up and alpha_down for the scene's current materials (packed again when they change)."""
@@ -198,8 +206,19 @@ class PathReplay:
         packed vertices [lo, hi) whose adjoints (``verts``, ``vnormals``) are wanted (the moving meshes': the
         kernel replays only the paths that meet their triangles and scatters no others', cl/gradients/geometry.h,
         geo_moving_prim); default: all."""
+        return self.backward_started(image_grad, spp, seed, kinds, moving)()
+
+    def backward_started(self, image_grad: np.ndarray, spp: int, seed: int, kinds: Iterable[str],
+                         moving: tuple[int, int] = (0, 2**31 - 1)) -> Callable[[], dict[str, np.ndarray]]:
+        """:meth:`backward`, its kernels enqueued and not waited for: returns the call that waits for them and
+        gives the gradient buffers (call it exactly once). Until then the boundary terms' kernels (:meth:`_batched`)
+        go to a second queue: on a device that runs two queues' commands at once (Intel's CPU runtime, GPUs) they
+        and the host's share of the boundary terms run while the backward kernel does; PoCL runs one command at a
+        time, in the order they came (the same as one queue). The scene's buffers are complete on the device
+        before either starts."""
         kinds = [k for k in kinds if k in KINDS or k in ("rigid", "instance")]
         kernel = self.kernel("backward", kinds)
+        self.profile.clear()  # this pass's kernels (and its boundary terms'), not every pass's since the first
         grads = self._buffers()
         if self.film.splat is not None:  # per pixel, over its mean sum of weights per frame (backward.cl)
             self.film.clear()
@@ -213,16 +232,33 @@ class PathReplay:
         else:
             cl.enqueue_copy(self.device.queue, self._image_grad, arr)
         self.film.clear()
+        self.device.queue.finish()  # the scene's buffers complete: the second queue's kernels read them
         self._launch(kernel, "backward", spp, seed, (self._image_grad, self.film.drop_marks),
                      (np.float32(1.0 / spp), *(grads[b] for b in BUFFERS), *self._alpha_records(),
                       *(np.int32(min(max(v, 0), 2**31 - 1)) for v in moving)))
-        self.dropped = self.film.dropped_samples()
-        out = {}
-        for name in BUFFERS:
-            host = np.empty(self._grads[name].size // 4, np.float32)
-            cl.enqueue_copy(self.device.queue, host, self._grads[name])
-            out[name] = host
-        return out
+
+        def collect() -> dict[str, np.ndarray]:
+            self.dropped = self.film.dropped_samples()
+            out = {}
+            for name in BUFFERS:
+                host = np.empty(self._grads[name].size // 4, np.float32)
+                cl.enqueue_copy(self.device.queue, host, self._grads[name])
+                out[name] = host
+            return out
+
+        return self._beside(collect)
+
+    def _beside(self, finish: Callable[[], T]) -> Callable[[], T]:
+        """After a pass's kernels are enqueued: until the call returned is made (it gives ``finish()``),
+        :meth:`_batched`'s kernels go to :attr:`side_queue`."""
+        self.device.queue.flush()
+        self._queue = self.side_queue
+
+        def collect() -> T:
+            self._queue = self.device.queue
+            return finish()
+
+        return collect
 
     def edge_radiance(self, points: np.ndarray, seed: int, eps: float) -> np.ndarray:
         """The radiance (N, 2, 3) of the camera paths through film points ``points[:, :2]`` minus and plus
@@ -326,15 +362,15 @@ class PathReplay:
         ``outputs`` (host arrays, first axis the item, zeroed on the device and filled from it; the first
         ``written`` ones are not zeroed: the kernel writes every item's), then ``tail(count)``."""
         kernel = self.kernel(name)
-        q = self.device.queue
+        q = self._queue
         for start in range(0, n, LAUNCH):
             count = min(LAUNCH, n - start)
-            ins = [a if isinstance(a, cl.Buffer) else upload(self.device, a[start:start + count], f"{name} input")
-                   for a in inputs]
+            ins = [a if isinstance(a, cl.Buffer) else self._scratch_copy(name, k, a[start:start + count])
+                   for k, a in enumerate(inputs)]
             outs = []
             for k, a in enumerate(outputs):
                 nbytes = a[start:start + count].nbytes
-                outs.append(alloc(self.device, max(nbytes, 1), f"{name} output"))
+                outs.append(self._scratch(name, len(inputs) + k, nbytes))
                 if k >= written:
                     fill_buffer(q, outs[-1], np.uint8(0), 0, nbytes)
             g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
@@ -342,18 +378,59 @@ class PathReplay:
             for a, b in zip(outputs, outs):
                 cl.enqueue_copy(q, a[start:start + count], b)
 
+    def _scratch(self, name: str, slot: int, nbytes: int) -> cl.Buffer:
+        """Kernel ``name``'s device buffer for argument ``slot`` of :meth:`_batched`, at least ``nbytes``: kept
+        and reused from pass to pass (a fresh buffer a launch cost the CPU device fresh pages each time, a quarter
+        of the boundary terms' time on a VM), grown when too small."""
+        buf = self._scratch_buffers.get((name, slot))
+        if buf is None or buf.size < nbytes:
+            buf = self._scratch_buffers[(name, slot)] = alloc(self.device, max(nbytes, 4), f"{name} argument {slot}")
+        return buf
+
+    def _scratch_copy(self, name: str, slot: int, array: np.ndarray) -> cl.Buffer:
+        """:meth:`_scratch` holding a copy of ``array`` (blocking: the host array may go at once)."""
+        arr = np.ascontiguousarray(array)
+        buf = self._scratch(name, slot, arr.nbytes)
+        if arr.nbytes:
+            cl.enqueue_copy(self._queue, buf, arr)
+        return buf
+
+    @property
+    def side_queue(self) -> cl.CommandQueue:
+        """A second in-order queue on the device: :meth:`_batched`'s while a backward pass runs
+        (:meth:`backward_started`). PoCL's and Oclgrind's own queue: PoCL runs one command at a time whatever the
+        queue, and Oclgrind's buffer fills are written from the host per queue (``fill_buffer``)."""
+        if self.device.is_pocl or self.device.is_oclgrind:
+            return self.device.queue
+        if self._side_queue is None:
+            self._side_queue = cl.CommandQueue(self.device.context, self.device.device,
+                                               properties=cl.command_queue_properties.PROFILING_ENABLE)
+        return self._side_queue
+
     def forward(self, tangent: dict[str, np.ndarray], spp: int, seed: int, kinds: Iterable[str] = ()) -> np.ndarray:
         """Forward mode: the derivative of the image (H, W, 3) along ``tangent`` (host arrays by buffer
         name, layout.py); ``kinds``: ``geometry`` when the tangent moves vertices or lights, ``camera`` when it moves
         the camera (-DGRAD_GEOMETRY, -DGRAD_CAMERA: the interior term of cl/gradients/geometry.h)."""
+        return self.forward_started(tangent, spp, seed, kinds)()
+
+    def forward_started(self, tangent: dict[str, np.ndarray], spp: int, seed: int, kinds: Iterable[str] = ()
+                        ) -> Callable[[], np.ndarray]:
+        """:meth:`forward`, started as :meth:`backward_started` starts a backward pass: the call returned gives
+        the image."""
         kernel = self.kernel("forward", [k for k in kinds if k in ("geometry", "camera", "rigid", "instance")])
+        self.profile.clear()
         bufs = self._buffers()
         for name in BUFFERS:
             data = np.ascontiguousarray(tangent[name], np.float32)
             if data.size:
                 cl.enqueue_copy(self.device.queue, bufs[name], data)
         self.film.clear()
+        self.device.queue.finish()  # the scene's buffers complete: the second queue's kernels read them
         self._launch(kernel, "forward", spp, seed, (self.film.frame, self.film.drop_marks),
                      (*(bufs[b] for b in BUFFERS), *self._alpha_records(), np.int32(0), np.int32(0)))
-        self.dropped = self.film.dropped_samples()
-        return self.film.image()
+
+        def image() -> np.ndarray:
+            self.dropped = self.film.dropped_samples()
+            return self.film.image()
+
+        return self._beside(image)

@@ -178,8 +178,17 @@ class _HostTracer:
 
 
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    n = np.linalg.norm(v, axis=-1)
+    n = np.sqrt(np.einsum("...c,...c->...", v, v))
     return v / np.maximum(n, 1e-300)[..., None], n
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, 3): the cross products of rows (np.cross without its axis shuffling, a third of its time)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def receiver_motion(p: np.ndarray, q: np.ndarray, light: np.ndarray, n_r: np.ndarray,
@@ -599,7 +608,8 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
         # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel (the side
         # whose ray meets the occluder first is 0: the material form, cl/gradients/incident.h); a sample with no jump
         # (no silhouette, both sides meet the occluder or pass it, the same light) contributes nothing: left out
-        nz = np.flatnonzero(np.any(radiance[:, 0] != radiance[:, 1], axis=1) & (outline[:, 0] > 0))
+        r = radiance.reshape(-1, 6)
+        nz = np.flatnonzero(((r[:, 0] != r[:, 3]) | (r[:, 1] != r[:, 4]) | (r[:, 2] != r[:, 5])) & (outline[:, 0] > 0))
         edge = pick[nz]
         mesh = edge_records[edge, 15].astype(np.int64)
         sel, prims, hits, outline = sel[nz], prims[nz], hits[nz], outline[nz].astype(np.float64)
@@ -618,7 +628,7 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
         bary = table[sel, :2].astype(np.float64)
         corners = positions[replay.scene.arrays.tri_vidx[prim[sel]]]  # (n, 3, 3), leaf order
         x = _at_bary(corners, bary)
-        ng, _ = _unit(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+        ng, _ = _unit(_cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
         ray = -table[sel, 2:5].astype(np.float64)
         at_camera = np.flatnonzero(~attached[sel])
         ray[at_camera] = _camera_rays(scene, film[sel[at_camera]], width, height)[1]
