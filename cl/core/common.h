@@ -38,6 +38,16 @@
 #define GPU_INLINE
 #endif
 
+/* ALWAYS_INLINE: a function inlined wherever it is called, on every device (the backward pass's walk, called with a
+ * constant `replay` at two places: cl/gradients/backward.cl). Not in a build without optimisation (-cl-opt-disable,
+ * Oclgrind's): its interpreter cannot create a kernel into which a function with pointer arguments was inlined at
+ * -O0 (llvm.experimental.noalias.scope.decl). */
+#ifdef __OPTIMIZE__
+#define ALWAYS_INLINE __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE
+#endif
+
 /* Ray offset from a surface, scaled by the hit point's magnitude. */
 #define RAY_EPS 1e-4f
 

@@ -159,13 +159,13 @@ static inline void geo_nee(const Scene* sc, Grads* gr, RngKey key, int depth, co
  * shadow-ray visibility in *visible and the closest hits of bounces before REPLAY_HITS in hits. The
  * replay (replay true, L_total known) takes those hits (walk_closest) and scatters the BSDF-sample
  * terms of the vertices from DEFERRED_VERTICES on. Returns the path's radiance.
- * Inlined at both calls, each with its own constant `replay` (a call with a run-time flag kept the replay's
- * branches in the primal walk's loop and its arrays behind pointers: the walk alone took 1.1x as long on Intel's
- * runtime, the backward pass with the boundary terms 1.04x on Intel's and on PoCL; docs/differentiable.md). */
-static inline __attribute__((always_inline)) vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pixel,
-                                                                int max_depth, vec3 dL, bool replay, vec3 L_total,
-                                                                uint* visible, Hit* hits, Deferred* deferred,
-                                                                int* n_deferred, bool* more, bool* touched) {
+ * Inlined at both calls (ALWAYS_INLINE, cl/core/common.h), each with its own constant `replay` (a call with a
+ * run-time flag kept the replay's branches in the primal walk's loop and its arrays behind pointers: the walk alone
+ * took 1.1x as long on Intel's runtime, the backward pass with the boundary terms 1.04x on Intel's and on PoCL;
+ * docs/differentiable.md). */
+static inline ALWAYS_INLINE vec3 backward_walk(const Scene* sc, Grads* gr, RngKey key, int pixel, int max_depth,
+                                              vec3 dL, bool replay, vec3 L_total, uint* visible, Hit* hits,
+                                              Deferred* deferred, int* n_deferred, bool* more, bool* touched) {
     PathState ps;
     camera_path(sc, key, pixel, &ps);
     if (max_depth == 0) return ps.L;
