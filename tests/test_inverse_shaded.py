@@ -21,14 +21,20 @@ def test_recover_a_shaded_pose_and_the_camera():
     and 0.25 / 0.2; the loss falls. The gradients are summed by float atomics, so a run is not bit-reproducible and
     the optimisation amplifies the difference: over five runs the box ended within 0.026 and 0.2-1.1 degrees, the
     camera within 0.01 (at 60 steps the angle ended at 0.1-2.6 degrees: too close to the bound, which CI hit). (The
-    example's large floor, whose edges are out of view, is the harder case: too slow for a test at this size.)"""
+    example's large floor, whose edges are out of view, is the harder case: too slow for a test at this size.)
+    The loss of each step's 8-spp render against the 128-spp target ends at its noise floor, 0.493-0.505 of the
+    first step's in six runs (a bound of 0.5 failed in CI at 0.5035): it is bounded at 0.6. The image error itself
+    is measured without that noise, the final and the starting pose rendered with the target's random numbers:
+    0.2-0.7 % of the start's."""
     h = inverse_shaded.recover_pose(steps=100, width=32, height=32, spp=8, edge_samples=8192, target_spp=128,
                                     floor=1.8)
     pose, truth = np.array(h["pose"]), np.array(h["truth_pose"])
     assert np.abs(pose[:2] - truth[:2]).max() < 0.05, h["pose_error"][-1]
     assert abs(pose[2] - truth[2]) * inverse_shaded.DEGREES < 2.5, h["pose_error"][-1]
     assert np.abs(np.array(h["camera"]) - np.array(h["truth_camera"])).max() < 0.03, h["camera_error"][-1]
-    assert np.mean(h["losses"][-5:]) < 0.5 * h["losses"][0]
+    assert np.mean(h["losses"][-5:]) < 0.6 * h["losses"][0]
+    start, final = (np.mean((h[k] - h["target"]) ** 2) for k in ("start", "final"))
+    assert final < 0.05 * start, (final, start)
 
 
 def test_recover_a_shaded_shape():
