@@ -789,3 +789,60 @@ def test_hard_shadows_after_a_bounce_under_an_orthographic_camera():
     assert delta + soft == pytest.approx(fd, rel=0.06), (delta, soft, fd)
     assert abs(soft - fd) > 0.5 * abs(fd)
     assert not shadows.shadow_boundary_forward(scene, "occluder.to_world", t, samples=1024, seed=0, max_depth=3).any()
+
+
+def test_bands_keep_a_kernel_queued_while_the_host_works():
+    """shadows._bands runs the bands' stages in the pipelined order (a band's shading points two bands ahead, its
+    sides one band ahead of the host's work on the last band's), so that the device has a kernel queued whenever
+    the host works; the bands come back in order, one that ends early (no samples) among them."""
+    log = []
+
+    def band(p0, p1):
+        log.append(("points", p0))
+        yield
+        log.append(("sides", p0))
+        if p0 == 2:
+            return "early"
+        yield
+        log.append(("samples", p0))
+        return p0
+
+    out = list(shadows._bands(5, shadows.SOFT_CHUNK, band))  # bands of one pixel
+    assert out == [0, 1, "early", 3, 4]
+    assert log == [("points", 0), ("points", 1), ("sides", 0), ("points", 2), ("sides", 1), ("points", 3),
+                   ("samples", 0), ("sides", 2), ("points", 4), ("samples", 1), ("sides", 3), ("sides", 4),
+                   ("samples", 3), ("samples", 4)]
+
+
+def _one_band_at_a_time(pixels, spp, band):
+    step = max(1, shadows.SOFT_CHUNK // spp)
+    for p0 in range(0, pixels, step):
+        run = band(p0, min(p0 + step, pixels))
+        try:
+            while True:
+                next(run)
+        except StopIteration as stop:
+            yield stop.value
+
+
+def test_pipelined_bands_give_the_samples_of_one_band_at_a_time(each_device, monkeypatch):
+    """With 16 bands in flight two and three at a time (their kernels share one set of buffers on the queue, their
+    copies are not waited for until read), the soft and later hard-shadow terms' samples are those of one band at
+    a time, bit for bit, on each device."""
+    monkeypatch.setattr(shadows, "SOFT_CHUNK", 1024)
+    box = pyclpt.load("cornell-box")
+    kw = dict(spp=4, seed=7, max_depth=5, device=each_device)
+
+    def samples():
+        soft = shadows.sample_soft_edges(box, [6], 64, 64, receivers=[1], **kw)  # the small box over the floor
+        delta = list(shadows.delta_sample_chunks(_bounce_scene(size=64), 64, 64, **kw))
+        return [soft] + delta
+
+    pipelined = samples()
+    monkeypatch.setattr(shadows, "_bands", _one_band_at_a_time)
+    alone = samples()
+    assert len(pipelined) == len(alone) == 17
+    assert sum(len(s.jump) for s in pipelined[1:]) > 100 and len(pipelined[0].jump) > 1000
+    for a, b in zip(pipelined, alone):
+        for f in dataclasses.fields(a):
+            np.testing.assert_array_equal(getattr(a, f.name), getattr(b, f.name), err_msg=f.name)

@@ -389,7 +389,7 @@ def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *
     n = np.stack([-d[:, 1], d[:, 0]], axis=1) / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
     replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
     points = np.concatenate([x, n], axis=1).astype(np.float32)
-    radiance = replay.edge_radiance(points, seed, SIDE_EPS).astype(np.float64)  # (N, 2, 3): minus, plus
+    sides = replay.edge_radiance_started(points, seed, SIDE_EPS)  # (N, 2, 3): minus, plus; the rest meanwhile
     pix, w, _ = _filter_weights(scene.film.rfilter, x, width, height)
     # the 3D point of each sample (1/z is linear along the projected edge), the edge's normal velocity there
     s = edges.s0[e] + local * (edges.s1[e] - edges.s0[e])
@@ -422,6 +422,7 @@ def sample_edges(scene: Scene, meshes: Sequence[int], width: int, height: int, *
             shading = None if mirror.normals is None else mirror.normals.astype(np.float64)[corners[m]]
             by_position[m], by_normal[m] = reflection_velocity(
                 proj, mirror.positions.astype(np.float64)[corners[m]], bary, point[m], n[m], shading)
+    radiance = sides().astype(np.float64)
     return EdgeSamples(pix, w, (radiance[:, 0] - radiance[:, 1]) * total / n_pts, edges.mesh[e], edges.v0[e],
                        edges.v1[e], t, velocity, point, n, seen, mirror_mesh, corners, by_position, by_normal)
 

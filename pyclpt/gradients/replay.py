@@ -93,6 +93,10 @@ class SideSamples:
         return iter((self.radiance, self.first_prim, self.first_hit, self.pick, self.outline))
 
 
+def _nothing() -> None:
+    """Nothing to wait for."""
+
+
 class PathReplay:
     """The gradient kernels of one scene on one device, at one resolution and depth limit."""
 
@@ -261,22 +265,40 @@ class PathReplay:
         return collect
 
     def edge_radiance(self, points: np.ndarray, seed: int, eps: float) -> np.ndarray:
+        """:meth:`edge_radiance_started`, waited for."""
+        return self.edge_radiance_started(points, seed, eps)()
+
+    def edge_radiance_started(self, points: np.ndarray, seed: int, eps: float) -> Callable[[], np.ndarray]:
         """The radiance (N, 2, 3) of the camera paths through film points ``points[:, :2]`` minus and plus
         ``eps`` times the unit film directions ``points[:, 2:]`` (the edge_radiance kernel; N, 4 float32),
-        both with the random numbers of (seed, point). NaN or inf paths give 0 and are counted in
-        :attr:`dropped`."""
+        both with the random numbers of (seed, point), from the call returned (the kernel is enqueued, and that
+        call waits for it). NaN or inf paths give 0 and are counted in :attr:`dropped`."""
         pts = np.ascontiguousarray(points, np.float32).reshape(-1, 4)
         out = np.zeros((len(pts), 2, 3), np.float32)
         marks = np.zeros((len(pts), 2), np.uint8)
-        self._batched("edge_radiance", len(pts), self.scene.args(self.width, self.height), [pts], [out, marks],
-                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)),
-                      written=1)
-        self.dropped = int(marks.astype(np.int64).sum())
-        return out
+        wait = self._batched("edge_radiance", len(pts), self.scene.args(self.width, self.height), [pts],
+                             [out, marks],
+                             lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth),
+                                            np.float32(eps)), written=1)
+
+        def collect() -> np.ndarray:
+            wait()
+            self.dropped = int(marks.astype(np.int64).sum())
+            return out
+
+        return collect
 
     def vertex_radiance(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, moves: np.ndarray,
                         edges: np.ndarray, blocks: np.ndarray, spheres: np.ndarray, mesh_vertices: np.ndarray,
                         mesh_moving: np.ndarray, seed: int, eps: float) -> SideSamples:
+        """:meth:`vertex_radiance_started`, waited for."""
+        return self.vertex_radiance_started(prims, samples, depths, moves, edges, blocks, spheres, mesh_vertices,
+                                            mesh_moving, seed, eps)()
+
+    def vertex_radiance_started(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, moves: np.ndarray,
+                                edges: np.ndarray, blocks: np.ndarray, spheres: np.ndarray,
+                                mesh_vertices: np.ndarray, mesh_moving: np.ndarray, seed: int, eps: float
+                                ) -> Callable[[], SideSamples]:
         """At vertices of camera paths (:meth:`path_vertices`: the camera rays' first hits, depth 0, and later
         vertices), the leaf-order triangles ``prims`` (N,), ``samples`` (N, 8) = barycentrics, the direction back
         along the path (at depth 0: the camera ray's film position x, y and 0), the uniforms of the edge's pick
@@ -290,17 +312,19 @@ class PathReplay:
         kernel). ``mesh_vertices`` (M + 1,): the meshes' packed vertex ranges, ``mesh_moving`` (M,) whether each
         moves: the side that meets the edge's mesh at the edge's faces first gives 0 untraced (its ``first_prim``
         -2), and both do unless exactly one side meets it, or where nothing there moves (cl/gradients/incident.h).
-        NaN or inf ones give 0 and are counted in :attr:`dropped`."""
+        NaN or inf ones give 0 and are counted in :attr:`dropped`. The kernel is enqueued (:meth:`_batched`): the
+        call returned waits for it and gives the samples."""
         n = len(prims)
         out = SideSamples(np.zeros((n, 2, 3), np.float32), np.full((n, 2), -1, np.int32),
                           np.zeros((n, 2, 3), np.float32), np.full(n, -1, np.int32), np.zeros((n, 5), np.float32))
         marks = np.zeros((n, 2), np.uint8)
+        wait = _nothing
         if n and len(edges):
             tables = [upload(self.device, np.ascontiguousarray(a, dtype).reshape(-1), f"silhouette {what}")
                       for a, dtype, what in ((edges, np.float32, "edges"), (blocks, np.int32, "blocks"),
                                              (spheres, np.float32, "spheres"), (mesh_vertices, np.int32, "ranges"),
                                              (mesh_moving, np.int32, "motion"))]
-            self._batched("vertex_radiance", n, self.scene.args(self.width, self.height),
+            wait = self._batched("vertex_radiance", n, self.scene.args(self.width, self.height),
                           [np.ascontiguousarray(prims, np.int32).reshape(-1),
                            np.ascontiguousarray(samples, np.float32).reshape(-1, 8),
                            np.ascontiguousarray(depths, np.int32).reshape(-1),
@@ -309,25 +333,37 @@ class PathReplay:
                           lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps),
                                          np.int32(len(blocks)), np.int32(len(mesh_moving))),
                           written=3)
-        self.dropped = int(marks.astype(np.int64).sum())
-        return out
+
+        def collect() -> SideSamples:
+            wait()
+            self.dropped = int(marks.astype(np.int64).sum())
+            return out
+
+        return collect
 
     def delta_shadow_sides(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, edge_ids: np.ndarray,
                            edges: np.ndarray, seed: int, eps: float) -> DeltaSides:
+        """:meth:`delta_shadow_sides_started`, waited for."""
+        return self.delta_shadow_sides_started(prims, samples, depths, edge_ids, edges, seed, eps)()
+
+    def delta_shadow_sides_started(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray,
+                                   edge_ids: np.ndarray, edges: np.ndarray, seed: int, eps: float
+                                   ) -> Callable[[], DeltaSides]:
         """At vertices of camera paths (as :meth:`vertex_radiance`'s: leaf-order triangles ``prims`` (N,), their
         bounces ``depths`` (N,), ``samples`` (N, 6) = barycentrics, the direction back along the path (at depth 0:
         the camera ray's film position x, y and 0) and the edge point's t), the outline that candidate edge
         ``edges[edge_ids]`` (E, DELTA_EDGE_STRIDE: its end points and the record of the point or spot light that
         sees it as a silhouette) casts, seen from there, and the vertex's BSDF and cosine times that light's
         direct contribution either side of it (the delta_shadow_sides kernel, cl/gradients/delta_sides.h). NaN or
-        inf ones give 0 and are counted in :attr:`dropped`."""
+        inf ones give 0 and are counted in :attr:`dropped`. The call returned waits for the kernel and gives them."""
         n = len(prims)
         out = DeltaSides(np.zeros((n, 2, 3), np.float32), np.full(n, -1, np.int32), np.zeros((n, 3), np.float32),
                          np.zeros((n, 5), np.float32))
         marks = np.zeros((n, 2), np.uint8)
+        wait = _nothing
         if n and len(edges):
             e_buf = upload(self.device, np.ascontiguousarray(edges, np.float32).reshape(-1), "shadow edges")
-            self._batched("delta_shadow_sides", n, self.scene.args(self.width, self.height),
+            wait = self._batched("delta_shadow_sides", n, self.scene.args(self.width, self.height),
                           [np.ascontiguousarray(prims, np.int32).reshape(-1),
                            np.ascontiguousarray(samples, np.float32).reshape(-1, 6),
                            np.ascontiguousarray(depths, np.int32).reshape(-1),
@@ -335,37 +371,57 @@ class PathReplay:
                           [out.radiance, out.receiver_prim, out.receiver_hit, marks, out.outline],
                           lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)),
                           written=5)
-        self.dropped = int(marks.astype(np.int64).sum())
-        return out
+
+        def collect() -> DeltaSides:
+            wait()
+            self.dropped = int(marks.astype(np.int64).sum())
+            return out
+
+        return collect
 
     def path_vertices(self, film: np.ndarray, seed: int
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`path_vertices_started`, waited for."""
+        return self.path_vertices_started(film, seed)()
+
+    def path_vertices_started(self, film: np.ndarray, seed: int
+                              ) -> Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
         """One later vertex of the camera path through each film position (N, 2) (the path_vertices kernel, random
         numbers of (seed, i)): its leaf-order triangle (N,) (-1: none), (N, 8) its barycentrics, the direction
         back along the path and its throughput over the probability of the choice, and its bounce (N,); and the
-        camera ray's first hit: its leaf-order triangle (N,) (-1: none), (N, 3) its distance and barycentrics."""
+        camera ray's first hit: its leaf-order triangle (N,) (-1: none), (N, 3) its distance and barycentrics. The
+        call returned waits for the kernel and gives them."""
         f = np.ascontiguousarray(film, np.float32).reshape(-1, 2)
         prims = np.full(len(f), -1, np.int32)
         vertex = np.zeros((len(f), 8), np.float32)
         depths = np.zeros(len(f), np.int32)
         first_prims = np.full(len(f), -1, np.int32)
         first_hits = np.zeros((len(f), 3), np.float32)
-        self._batched("path_vertices", len(f), self.scene.args(self.width, self.height), [f],
-                      [prims, vertex, depths, first_prims, first_hits],
-                      lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth)), written=5)
-        return prims, vertex, depths, first_prims, first_hits
+        wait = self._batched("path_vertices", len(f), self.scene.args(self.width, self.height), [f],
+                             [prims, vertex, depths, first_prims, first_hits],
+                             lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth)), written=5)
+
+        def collect() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            wait()
+            return prims, vertex, depths, first_prims, first_hits
+
+        return collect
 
     def _batched(self, name: str, n: int, head: tuple, inputs: list, outputs: list[np.ndarray],
-                 tail: Callable[[int], tuple], written: int = 0) -> None:
+                 tail: Callable[[int], tuple], written: int = 0) -> Callable[[], None]:
         """Launch kernel ``name`` over n items, LAUNCH a time, one work-item an item, with the arguments ``head``,
         then ``inputs`` (host arrays, first axis the item: that launch's items uploaded; a cl.Buffer: whole), then
         ``outputs`` (host arrays, first axis the item, zeroed on the device and filled from it; the first
-        ``written`` ones are not zeroed: the kernel writes every item's), then ``tail(count)``."""
+        ``written`` ones are not zeroed: the kernel writes every item's), then ``tail(count)``. Everything is
+        enqueued, nothing waited for: returns the call that waits until ``outputs`` are filled (call it before
+        reading them). The kernel's buffers are :meth:`_scratch`'s, one per argument: on an in-order queue a
+        launch's copies in run after the last one's copies out, so launches in flight together share them."""
         kernel = self.kernel(name)
         q = self._queue
+        events: list[cl.Event] = []  # the copies' (a NannyEvent keeps its host array alive until it completes)
         for start in range(0, n, LAUNCH):
             count = min(LAUNCH, n - start)
-            ins = [a if isinstance(a, cl.Buffer) else self._scratch_copy(name, k, a[start:start + count])
+            ins = [a if isinstance(a, cl.Buffer) else self._scratch_copy(name, k, a[start:start + count], events)
                    for k, a in enumerate(inputs)]
             outs = []
             for k, a in enumerate(outputs):
@@ -376,7 +432,14 @@ class PathReplay:
             g = -(-count // LOCAL_SIZE) * LOCAL_SIZE
             self.profile.record(name, kernel(q, (g,), (LOCAL_SIZE,), *head, *ins, *outs, *tail(count)))
             for a, b in zip(outputs, outs):
-                cl.enqueue_copy(q, a[start:start + count], b)
+                events.append(cl.enqueue_copy(q, a[start:start + count], b, is_blocking=False))
+        q.flush()
+
+        def wait() -> None:
+            cl.wait_for_events(events)
+            events.clear()
+
+        return wait
 
     def _scratch(self, name: str, slot: int, nbytes: int) -> cl.Buffer:
         """Kernel ``name``'s device buffer for argument ``slot`` of :meth:`_batched`, at least ``nbytes``: kept
@@ -387,12 +450,12 @@ class PathReplay:
             buf = self._scratch_buffers[(name, slot)] = alloc(self.device, max(nbytes, 4), f"{name} argument {slot}")
         return buf
 
-    def _scratch_copy(self, name: str, slot: int, array: np.ndarray) -> cl.Buffer:
-        """:meth:`_scratch` holding a copy of ``array`` (blocking: the host array may go at once)."""
+    def _scratch_copy(self, name: str, slot: int, array: np.ndarray, events: list[cl.Event]) -> cl.Buffer:
+        """:meth:`_scratch` with a copy of ``array`` enqueued into it (its event appended to ``events``)."""
         arr = np.ascontiguousarray(array)
         buf = self._scratch(name, slot, arr.nbytes)
         if arr.nbytes:
-            cl.enqueue_copy(self._queue, buf, arr)
+            events.append(cl.enqueue_copy(self._queue, buf, arr, is_blocking=False))
         return buf
 
     @property

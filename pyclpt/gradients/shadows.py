@@ -29,8 +29,10 @@ from each pixel's shading points with the ``vertex_radiance`` kernel.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from dataclasses import dataclass
+from functools import partial
+from typing import TypeVar
 
 import numpy as np
 
@@ -60,6 +62,8 @@ from pyclpt.gradients.parameters import SceneParameters, traverse
 from pyclpt.gradients.replay import SIDE_OCCLUDER, PathReplay
 from pyclpt.gradients.session import replay_for
 from pyclpt.scene.model import Camera, DirectionalLight, PointLight, Scene, SpotLight
+
+T = TypeVar("T")
 
 #: Relative offsets of the host's shadow-outline rays: the lit test stops this far short of the edge point, the
 #: receiver ray starts this far beyond it, and the camera's view of the receiver point may end this far short.
@@ -479,26 +483,54 @@ def _at_bary(corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
             + bary[:, 1:] * corners[:, 2])
 
 
-def _bands(pixels: int, spp: int, band: Callable[[int, int], object]) -> Iterator:
-    """``band(p0, p1)`` over the pixels in runs of SOFT_CHUNK // spp (the soft and later hard-shadow terms)."""
+def _bands(pixels: int, spp: int, band: Callable[[int, int], Generator[None, None, T]]) -> Iterator[T]:
+    """The pixels in runs of SOFT_CHUNK // spp (the soft and later hard-shadow terms), each run's samples from
+    ``band(p0, p1)``: a generator that yields twice, each time after enqueuing kernels whose results it reads next
+    (its shading points', then its sides'), and returns the run's samples. Pipelined so that the device always
+    has a kernel queued while the host works: run k's host work (its shading points back, its samples' tables,
+    then its sides back and their arrays) goes while the kernels of runs k + 1 and k + 2 run, and run k's samples
+    are yielded (the caller's sums) while they still do. In order; the same samples as one run at a time."""
     step = max(1, SOFT_CHUNK // spp)
-    for p0 in range(0, pixels, step):
-        yield band(p0, min(p0 + step, pixels))
+    runs = [band(p0, min(p0 + step, pixels)) for p0 in range(0, pixels, step)]
+    done: dict[int, T] = {}
+
+    def advance(k: int) -> None:
+        if 0 <= k < len(runs) and k not in done:
+            try:
+                next(runs[k])
+            except StopIteration as stop:
+                done[k] = stop.value
+
+    # the queue's order: shading points 0, 1, sides 0, shading points 2, sides 1, shading points 3, sides 2, ...
+    for k in range(-3, len(runs)):
+        advance(k + 1)  # its shading points back: its sides' kernel enqueued
+        advance(k + 3)  # its shading points' kernel enqueued
+        if k >= 0:
+            advance(k)  # its sides back: its samples
+            yield done.pop(k)
 
 
-def shading_points(replay, rfilter, width: int, p0: int, p1: int, spp: int, rng: np.random.Generator,
-                   later: bool) -> tuple[np.ndarray, ...]:
+def shading_points_started(replay, rfilter, width: int, p0: int, p1: int, spp: int, rng: np.random.Generator,
+                           later: bool) -> Callable[[], tuple[np.ndarray, ...]]:
     """The shading points of pixels p0 .. p1 - 1 (flat indices, rows of ``width``), ``spp`` film positions each
     drawn from the pixel's filter: the camera rays' first hits, and (with ``later``, where the depth allows a
     bounce after them) the later vertices of camera paths through the same film positions (path_vertices: one a
     path, attached to its surface, weighted by the throughput that reached it). Returns their film positions
     (N, 2), pixels (N,), leaf-order triangles (N,) (-1: none), bounces (N,), tables (N, 8) (barycentrics, the
     direction back along the path, for the camera's hits their film positions and 0, the vertex_radiance.cl
-    convention, and the throughput that reached them) and whether each is attached (a later vertex) (N,)."""
+    convention, and the throughput that reached them) and whether each is attached (a later vertex) (N,), from
+    the call returned: the path_vertices kernel is enqueued, and that call waits for it."""
     pix = np.repeat(np.arange(p0, p1), spp)
     cell, u = np.stack([pix % width, pix // width], axis=1), rng.random((len(pix), 2))
     film = cell + u if rfilter.kind == "box" else cell + 0.5 + sample_offsets(rfilter, u)
-    vprim, vert, vdepth, prim, hit = replay.path_vertices(film, int(rng.integers(2**32)))
+    vertices = replay.path_vertices_started(film, int(rng.integers(2**32)))
+    return partial(_shading_points, replay, film, pix, later, vertices)
+
+
+def _shading_points(replay, film: np.ndarray, pix: np.ndarray, later: bool, vertices: Callable[[], tuple]
+                    ) -> tuple[np.ndarray, ...]:
+    """:func:`shading_points_started`'s results, once the path_vertices kernel (``vertices``) is done."""
+    vprim, vert, vdepth, prim, hit = vertices()
     n_first = len(film)
     table = np.zeros((n_first, 8), np.float32)
     table[:, :2], table[:, 2:4], table[:, 5:] = hit[:, 1:], film, 1.0
@@ -585,10 +617,12 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
     mesh_moving = np.isin(np.arange(len(scene.meshes)), sorted(moving_meshes)).astype(np.int32)
     positions = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
 
-    def band(p0: int, p1: int) -> SoftSamples:
-        """The samples of pixels p0 .. p1 - 1."""
+    def band(p0: int, p1: int) -> Generator[None, None, SoftSamples]:
+        """The samples of pixels p0 .. p1 - 1 (:func:`_bands`: yields when a kernel is enqueued)."""
         rng = np.random.default_rng([seed, 0x736F6674, p0])  # "soft"
-        film, pix, prim, depth, table, attached = shading_points(replay, rfilter, width, p0, p1, spp, rng, later)
+        points = shading_points_started(replay, rfilter, width, p0, p1, spp, rng, later)
+        yield
+        film, pix, prim, depth, table, attached = points()
         valid = prim >= 0
         mesh_hit = prim_mesh(prim)
         tri_hit = np.where(valid, order[np.maximum(prim, 0)] - first[np.maximum(mesh_hit, 0)], -1)
@@ -602,9 +636,11 @@ def soft_sample_chunks(scene: Scene, meshes: Sequence[int], width: int, height: 
         samples[:, :5] = table[sel, :5]
         # the edge's pick, its point t, the pick's strategy (edge_pick.h)
         samples[:, 5:] = u = rng.random((len(sel), 3)).astype(np.float32)
-        radiance, prims, hits, pick, outline = replay.vertex_radiance(
+        sides = replay.vertex_radiance_started(
             prim[sel], samples, depth[sel], moving[sel], edge_records, block_table, sphere_table, mesh_vertices,
             mesh_moving, int(rng.integers(2**32)), SOFT_SIDE_EPS)
+        yield
+        radiance, prims, hits, pick, outline = sides()
         # the curve integral per shading point: jump x |d w/dt| / p(edge), a shading point per 1/spp pixel (the side
         # whose ray meets the occluder first is 0: the material form, cl/gradients/incident.h); a sample with no jump
         # (no silhouette, both sides meet the occluder or pass it, the same light) contributes nothing: left out
@@ -887,8 +923,8 @@ def _delta_edge_table(scene: Scene, replay) -> tuple[np.ndarray, np.ndarray, np.
 def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed: int, max_depth: int | None = None,
                         device: Device | str | None = None) -> Iterator[DeltaSamples]:
     """Point, spot and directional lights' hard shadows seen after the first bounce: at ``spp`` shading points a
-    pixel and one later vertex of a camera path through each (:func:`shading_points`, as the soft term's), one point
-    on an edge that a delta light sees as a silhouette (every mesh's, chosen in proportion to its length), the
+    pixel and one later vertex of a camera path through each (:func:`shading_points_started`, as the soft term's),
+    one point on an edge that a delta light sees as a silhouette (every mesh's, chosen in proportion to its length), the
     outline it casts on the first surface behind it, and, where the vertex sees that point, the vertex's BSDF and cosine
     times the light's direct contribution either side of the outline (the delta_shadow_sides kernel,
     cl/gradients/delta_sides.h). The outline lies on the receiver's surface, at the next vertex of a path through
@@ -911,16 +947,21 @@ def delta_sample_chunks(scene: Scene, width: int, height: int, *, spp: int, seed
     positions = np.concatenate([m.positions for m in scene.meshes]).astype(np.float64)
     by_index = {h.index: h for h in hard_lights(scene)}
 
-    def band(p0: int, p1: int) -> DeltaSamples:
+    def band(p0: int, p1: int) -> Generator[None, None, DeltaSamples]:
+        """The samples of pixels p0 .. p1 - 1 (:func:`_bands`: yields when a kernel is enqueued)."""
         rng = np.random.default_rng([seed, 0x64656C7461, p0])  # "delta"
-        film, pix, prim, depth, table, _ = shading_points(replay, rfilter, width, p0, p1, spp, rng, True)
+        points = shading_points_started(replay, rfilter, width, p0, p1, spp, rng, True)
+        yield
+        film, pix, prim, depth, table, _ = points()
         sel = np.flatnonzero(prim >= 0)
         u = rng.random((len(sel), 2))
         e = np.minimum(np.searchsorted(cdf, u[:, 0], side="right"), len(cdf) - 1)
         samples = np.empty((len(sel), 6), np.float32)
         samples[:, :5], samples[:, 5] = table[sel, :5], u[:, 1]
-        out = replay.delta_shadow_sides(prim[sel], samples, depth[sel], e, table_e, int(rng.integers(2**32)),
-                                        SOFT_SIDE_EPS)
+        sides = replay.delta_shadow_sides_started(prim[sel], samples, depth[sel], e, table_e,
+                                                  int(rng.integers(2**32)), SOFT_SIDE_EPS)
+        yield
+        out = sides()
         nz = np.flatnonzero(np.any(out.radiance[:, 0] != out.radiance[:, 1], axis=1) & (out.receiver_prim >= 0))
         sel, e, t = sel[nz], e[nz], u[nz, 1]
         # in float64: the shading point y, the edge point q, the light l, the receiver point r and its normal
