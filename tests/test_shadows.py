@@ -846,3 +846,13 @@ def test_pipelined_bands_give_the_samples_of_one_band_at_a_time(each_device, mon
     for a, b in zip(pipelined, alone):
         for f in dataclasses.fields(a):
             np.testing.assert_array_equal(getattr(a, f.name), getattr(b, f.name), err_msg=f.name)
+
+
+def test_boundary_kernels_take_no_items():
+    """The boundary terms' kernels called with no items give empty results (nothing enqueued, nothing to wait for)."""
+    from pyclpt.gradients.session import replay_for
+
+    replay = replay_for(_soft_scene(), width=24, height=24, max_depth=2)
+    prims, vertex, depths, first_prims, first_hits = replay.path_vertices(np.zeros((0, 2)), 3)
+    assert prims.shape == (0,) and vertex.shape == (0, 8) and first_hits.shape == (0, 3)
+    assert replay.edge_radiance(np.zeros((0, 4)), 3, shadows.SOFT_SIDE_EPS).shape == (0, 2, 3)

@@ -436,7 +436,8 @@ class PathReplay:
         q.flush()
 
         def wait() -> None:
-            cl.wait_for_events(events)
+            if events:  # none where n is 0 (clWaitForEvents refuses an empty list)
+                cl.wait_for_events(events)
             events.clear()
 
         return wait
