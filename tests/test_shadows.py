@@ -856,3 +856,30 @@ def test_boundary_kernels_take_no_items():
     prims, vertex, depths, first_prims, first_hits = replay.path_vertices(np.zeros((0, 2)), 3)
     assert prims.shape == (0,) and vertex.shape == (0, 8) and first_hits.shape == (0, 3)
     assert replay.edge_radiance(np.zeros((0, 4)), 3, shadows.SOFT_SIDE_EPS).shape == (0, 2, 3)
+
+
+def test_the_boundary_terms_say_how_many_samples_they_dropped(caplog):
+    """A light of radiance 3e38 seen in a sharp rough conductor overflows float32 at the occluder's outline: the
+    boundary kernels' NaN or inf samples count as 0 (the gradient stays finite) and render_backward and
+    render_forward say how many (before, each call's count was overwritten by the next and lost). (The forward
+    image's largest derivatives themselves pass float32's range here, whatever is dropped.)"""
+    scene = pyclpt.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40, "fov_axis": "x",
+                   "to_world": tf.look_at([0, -2, 1], [0, 0, 0], [0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": 24, "height": 24, "rfilter": {"type": "box"}}},
+        "light": {"type": "rectangle", "to_world": tf.look_at([0, 2.5, 1.25], [0, 0, 0], [0, 0, 1]),
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [3e38] * 3}}},
+        "floor": {"type": "rectangle", "to_world": tf.scale(6.0), "bsdf": {"type": "roughconductor", "alpha": 0.05}},
+        "occluder": {"type": "rectangle", "to_world": tf.look_at([0.3, 1.2, 0.6], [0, 0, 0], [0, 0, 1]) @ tf.scale(0.3),
+                     "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5] * 3}}},
+    })
+    kw = dict(spp=4, max_depth=3, seed=1)
+    with caplog.at_level("WARNING", logger="pyclpt"):
+        g = pyclpt.render_backward(scene, np.full((24, 24, 3), 1e-3, np.float32), params=["occluder.to_world"],
+                                   **kw)
+        pyclpt.render_forward(scene, "occluder.to_world", np.eye(4)[[0]].T @ np.eye(4)[[3]], **kw)
+    assert np.all(np.isfinite(g["occluder.to_world"]))
+    said = [r.getMessage() for r in caplog.records if "boundary terms dropped" in r.getMessage()]
+    assert len(said) == 2, [r.getMessage() for r in caplog.records]
+    assert all(int(m.split("dropped ")[1].split()[0]) > 0 for m in said)

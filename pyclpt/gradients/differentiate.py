@@ -196,6 +196,8 @@ def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str]
                                   max_depth=max_depth, device=device, samples=samples, spp=spp)
         return flat.fold(names, terms)
     g = np.asarray(image_grad, np.float64)
+    replay = replay_for(scene, width=g.shape[1], height=g.shape[0], max_depth=max_depth, device=device)
+    dropped = replay.boundary_dropped
     cameras = [n for n in names if n in sensor_names(scene)]
     lights = moving_light_names(scene)
     meshes = [n for n in names if n.endswith((".vertex_positions", ".to_world")) and n not in cameras + list(lights)]
@@ -216,7 +218,15 @@ def boundary_backward(scene: Scene, image_grad: np.ndarray, names: Sequence[str]
         add(shadow_boundary(scene, g, list(names), samples=samples, **common))
     if delta and (max_depth < 0 or max_depth > 2):  # seen after a bounce
         add(delta_shadow_boundary(scene, g, list(names), spp=spp, **common))
+    _warn_dropped(scene, replay.boundary_dropped - dropped)
     return out
+
+
+def _warn_dropped(scene: Scene, dropped: int) -> None:
+    """Say how many of the boundary terms' samples had NaN or inf radiance (each counted as 0)."""
+    if dropped:
+        log.warning("%s: the boundary terms dropped %d samples with NaN/inf radiance (counted as 0)", scene.name,
+                    dropped)
 
 
 def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: SceneParameters, *, width: int,
@@ -229,6 +239,8 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
                                      height=height, seed=seed, max_depth=max_depth, device=device, samples=samples,
                                      spp=spp) for part in flat.names([name])), np.zeros((height, width, 3)))
     common = dict(width=width, height=height, seed=seed, max_depth=max_depth, parameters=parameters, device=device)
+    replay = replay_for(scene, width=width, height=height, max_depth=max_depth, device=device)
+    dropped = replay.boundary_dropped
     image = np.zeros((height, width, 3), np.float64)
     camera = name in sensor_names(scene)
     mesh = name.endswith((".vertex_positions", ".to_world")) and not camera and name not in moving_light_names(scene)
@@ -241,6 +253,7 @@ def boundary_forward(scene: Scene, name: str, tangent: np.ndarray, parameters: S
         image += shadow_boundary_forward(scene, name, tangent, samples=samples, **common)
         if max_depth < 0 or max_depth > 2:  # seen after a bounce
             image += delta_shadow_boundary_forward(scene, name, tangent, spp=spp, **common)
+    _warn_dropped(scene, replay.boundary_dropped - dropped)
     return image
 
 

@@ -113,6 +113,7 @@ class PathReplay:
                          batch=frames_per_batch(width * height, LAUNCH), rfilter=scene.scene.film.rfilter)
         self.profile = KernelProfile()  # the last pass's kernels (a backward or forward pass clears it)
         self.dropped = 0  # paths dropped by the last pass (NaN or inf radiance)
+        self.boundary_dropped = 0  # the boundary kernels' samples dropped since the replay was made (the same)
         self._programs: dict[tuple[str, ...], cl.Kernel] = {}
         self._image_grad: cl.Buffer | None = None
         self._grads: dict[str, cl.Buffer] = {}
@@ -283,7 +284,7 @@ class PathReplay:
 
         def collect() -> np.ndarray:
             wait()
-            self.dropped = int(marks.astype(np.int64).sum())
+            self._count_dropped(marks)
             return out
 
         return collect
@@ -336,7 +337,7 @@ class PathReplay:
 
         def collect() -> SideSamples:
             wait()
-            self.dropped = int(marks.astype(np.int64).sum())
+            self._count_dropped(marks)
             return out
 
         return collect
@@ -374,7 +375,7 @@ class PathReplay:
 
         def collect() -> DeltaSides:
             wait()
-            self.dropped = int(marks.astype(np.int64).sum())
+            self._count_dropped(marks)
             return out
 
         return collect
@@ -406,6 +407,12 @@ class PathReplay:
             return prims, vertex, depths, first_prims, first_hits
 
         return collect
+
+    def _count_dropped(self, marks: np.ndarray) -> None:
+        """A boundary kernel's drop marks (1 a NaN or inf sample, given 0): :attr:`dropped` of that call, and added
+        to :attr:`boundary_dropped`."""
+        self.dropped = int(marks.astype(np.int64).sum())
+        self.boundary_dropped += self.dropped
 
     def _batched(self, name: str, n: int, head: tuple, inputs: list, outputs: list[np.ndarray],
                  tail: Callable[[int], tuple], written: int = 0) -> Callable[[], None]:
