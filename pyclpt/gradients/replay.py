@@ -281,13 +281,7 @@ class PathReplay:
                              [out, marks],
                              lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth),
                                             np.float32(eps)), written=1)
-
-        def collect() -> np.ndarray:
-            wait()
-            self._count_dropped(marks)
-            return out
-
-        return collect
+        return self._collected(wait, out, marks)
 
     def vertex_radiance(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, moves: np.ndarray,
                         edges: np.ndarray, blocks: np.ndarray, spheres: np.ndarray, mesh_vertices: np.ndarray,
@@ -334,13 +328,7 @@ class PathReplay:
                           lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps),
                                          np.int32(len(blocks)), np.int32(len(mesh_moving))),
                           written=3)
-
-        def collect() -> SideSamples:
-            wait()
-            self._count_dropped(marks)
-            return out
-
-        return collect
+        return self._collected(wait, out, marks)
 
     def delta_shadow_sides(self, prims: np.ndarray, samples: np.ndarray, depths: np.ndarray, edge_ids: np.ndarray,
                            edges: np.ndarray, seed: int, eps: float) -> DeltaSides:
@@ -372,13 +360,7 @@ class PathReplay:
                           [out.radiance, out.receiver_prim, out.receiver_hit, marks, out.outline],
                           lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth), np.float32(eps)),
                           written=5)
-
-        def collect() -> DeltaSides:
-            wait()
-            self._count_dropped(marks)
-            return out
-
-        return collect
+        return self._collected(wait, out, marks)
 
     def path_vertices(self, film: np.ndarray, seed: int
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -401,18 +383,20 @@ class PathReplay:
         wait = self._batched("path_vertices", len(f), self.scene.args(self.width, self.height), [f],
                              [prims, vertex, depths, first_prims, first_hits],
                              lambda count: (np.uint32(seed), np.int32(count), np.int32(self.max_depth)), written=5)
+        return self._collected(wait, (prims, vertex, depths, first_prims, first_hits))
 
-        def collect() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _collected(self, wait: Callable[[], None], out: T, marks: np.ndarray | None = None) -> Callable[[], T]:
+        """The call that waits for a boundary kernel (``wait``, :meth:`_batched`'s) and gives its outputs ``out``;
+        with ``marks`` (1 a NaN or inf sample, given 0) it counts them first: :attr:`dropped` of that call, added
+        to :attr:`boundary_dropped`."""
+        def collect() -> T:
             wait()
-            return prims, vertex, depths, first_prims, first_hits
+            if marks is not None:
+                self.dropped = int(marks.astype(np.int64).sum())
+                self.boundary_dropped += self.dropped
+            return out
 
         return collect
-
-    def _count_dropped(self, marks: np.ndarray) -> None:
-        """A boundary kernel's drop marks (1 a NaN or inf sample, given 0): :attr:`dropped` of that call, and added
-        to :attr:`boundary_dropped`."""
-        self.dropped = int(marks.astype(np.int64).sum())
-        self.boundary_dropped += self.dropped
 
     def _batched(self, name: str, n: int, head: tuple, inputs: list, outputs: list[np.ndarray],
                  tail: Callable[[int], tuple], written: int = 0) -> Callable[[], None]:
