@@ -439,6 +439,18 @@ def test_merge_refuses_a_cancelled_task_s_exception():
             merge_tiles(parts, 2, 1, 1)
 
 
+def _processing(scheduler, prefix: str) -> bool:
+    """Whether a task whose key starts with ``prefix`` is running, read from the in-process scheduler of a
+    LocalCluster (its loop's thread may change the table meanwhile: then it is read again). Not the client's
+    ``processing()``, a call to the scheduler without a timeout, which hung once in a full run."""
+    while True:
+        try:
+            return any(str(ts.key).startswith(prefix) and ts.state == "processing"
+                       for ts in list(scheduler.tasks.values()))
+        except RuntimeError:  # dictionary changed size during iteration
+            continue
+
+
 def test_lost_scheduler_is_a_clear_error_at_once():
     """The scheduler closes mid-render: ConnectionError naming its address and the lost connection (the
     tasks are cancelled then), not an AttributeError, nor the job's TimeoutError, after the whole job."""
@@ -460,7 +472,7 @@ def test_lost_scheduler_is_a_clear_error_at_once():
         thread = threading.Thread(target=job)
         thread.start()
         deadline = time.monotonic() + JOB_TIMEOUT
-        while not any(str(k).startswith("pyclpt-") for keys in c.processing().values() for k in keys):
+        while not _processing(cluster.scheduler, "pyclpt-"):
             assert time.monotonic() < deadline, "no task started"
             time.sleep(0.005)
         cluster.sync(cluster.scheduler.close)
