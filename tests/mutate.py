@@ -58,6 +58,7 @@ T_FRONT_ONLY = "tests/test_analytic.py::test_area_lights_emit_from_their_front_o
 T_BACK_BLACK = "tests/test_analytic.py::test_camera_behind_an_area_light_sees_its_back_black"
 T_GLASS_INSIDE = "tests/test_analytic.py::test_camera_inside_glass_sphere_sees_eta_squared"
 T_FURNACE = "tests/test_render.py::test_interior_furnace"
+T_ROULETTE = "tests/test_wavefront.py::test_roulette_keeps_paths_by_their_throughput_relative_to_the_first_bounce"
 T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
 T_GRAD_FD = "tests/test_gradients.py::test_backward_matches_finite_differences"
 T_UV_TRANSFORMS = "tests/test_plugins.py::test_plugin_matches_mitsuba[uv-transforms]"
@@ -205,6 +206,13 @@ MUTANTS: list[Mutant] = [
     Mutant("roulette-not-compensated", "ps->beta = v3_divs(ps->beta, q);", "ps->beta = v3_divs(ps->beta, 1.0f);",
            (T_FURNACE,),
            "surviving paths not divided by the survival probability"),
+    Mutant("roulette-absolute-throughput", "if (ps->depth == 1 && beta_max < 1.0f) ps->rr_scale /= beta_max;",
+           "if (false) ps->rr_scale /= beta_max;", (T_ROULETTE,),
+           "the roulette weighs the throughput alone, not relative to the first bounce's (unbiased: only the "
+           "queue counts see it)"),
+    Mutant("roulette-factor-1", "float q = m_min(RR_FACTOR * beta_max * ps->rr_scale, 0.95f);",
+           "float q = m_min(beta_max * ps->rr_scale, 0.95f);", (T_ROULETTE,),
+           "the roulette without its factor 2 (unbiased: only the queue counts see it)"),
     Mutant("image-upside-down", "float sy = 1.0f - 2.0f * (y / c[CONST_HEIGHT]);",
            "float sy = 2.0f * (y / c[CONST_HEIGHT]) - 1.0f;",
            ("tests/test_render.py::test_depth_one_shows_only_emitters",), "the camera's image rows reversed"),

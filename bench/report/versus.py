@@ -8,7 +8,8 @@ pyclpt renders in this process (``pyclpt.Renderer``: megakernel and wavefront So
 subprocess of the Python of its own environment (``--mitsuba-python``, else ``$PYCLPT_MITSUBA_PYTHON``),
 which runs ``bench/report/mitsuba_driver.py`` and answers one render per request. Both sides render the
 same file with the same spp, max depth, resolution, a box reconstruction filter and Russian
-roulette from bounce 3 (the driver's docstring says how Mitsuba's scene is edited). Compilation is
+roulette from bounce 3 (the driver's docstring says how Mitsuba's scene is edited; each side keeps its own
+survival probability: docs/architecture.md, "Russian roulette"). Compilation is
 excluded on both sides (pyclpt when the renderer is made, Mitsuba by a warm-up render); then
 ``--repeats`` rounds alternate one render of every pyclpt integrator and one of Mitsuba, rotating
 the order. Reported: median seconds, Msamples/s (pixels x spp / s), pyclpt / Mitsuba and the image

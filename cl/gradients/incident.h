@@ -88,7 +88,7 @@ static inline vec3 side_radiance(const Scene* sc, RngKey key, const Surface* s, 
     ps.beta = v3_splat(1.0f);
     ps.L = v3_splat(0.0f);
     ps.prev_pdf = 0.0f;
-    ps.eta_scale = 1.0f;
+    ps.rr_scale = 1.0f;
     ps.depth = depth;
     ps.flags = PATH_PREV_DELTA;
     path_continue_from(sc, key, &ps, max_depth, aov_out(0, 0, 0), st->found ? &st->hit : 0);

@@ -24,6 +24,11 @@
 #ifndef RR_DEPTH
 #define RR_DEPTH 3
 #endif
+/* ... and keeps a path with probability min(RR_FACTOR * its throughput relative to the first bounce's * eta^2,
+ * 0.95) (path_sample_bsdf; docs/architecture.md, "Russian roulette": 2 was the most efficient of 1 to 4). */
+#ifndef RR_FACTOR
+#define RR_FACTOR 2.0f
+#endif
 
 #define PATH_PREV_DELTA 1
 /* The flags a BSDF sample keeps: the G-buffer's (gbuffer.h), and only when it is recorded. */
@@ -38,7 +43,8 @@ typedef struct {
     vec3 beta;        /* throughput */
     vec3 L;           /* radiance gathered so far */
     float prev_pdf;   /* solid-angle pdf of the BSDF sample that made the ray */
-    float eta_scale;  /* product of the relative IORs crossed (for roulette) */
+    float rr_scale;   /* the roulette's scale of the throughput (path_continue): the squared product of
+                       * the relative IORs crossed, over the first bounce's throughput when that is below 1 */
     int depth;        /* bounce index of the current ray */
     int flags;        /* PATH_* */
 } PathState;
@@ -101,7 +107,7 @@ static inline void camera_ray(const Scene* sc, RngKey key, float x, float y, Pat
     ps->beta = v3_splat(1.0f);
     ps->L = v3_splat(0.0f);
     ps->prev_pdf = 0.0f;
-    ps->eta_scale = 1.0f;
+    ps->rr_scale = 1.0f;
     ps->depth = 0;
     ps->flags = PATH_PREV_DELTA; /* the camera ray counts as a delta sample: no MIS */
 }
@@ -230,7 +236,7 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     /* reject samples whose side disagrees between shading and geometric normals */
     if (m_dot(dir, s->ng) * bs.wo.z <= 0.0f) return false;
     ps->beta = v3_mul(ps->beta, bs.weight);
-    ps->eta_scale *= bs.eta;
+    ps->rr_scale *= bs.eta * bs.eta;
     ps->prev_pdf = bs.pdf;
     ps->flags = PATH_KEPT_FLAGS(ps->flags) | (bs.delta ? PATH_PREV_DELTA : 0);
     ps->org = spawn_origin(s, dir);
@@ -238,8 +244,12 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
     ps->depth += 1;
     float beta_max = max3(ps->beta);
     if (!(beta_max > 0.0f)) return false;
+    /* The roulette weighs the throughput relative to the first bounce's (docs/architecture.md, "Russian
+     * roulette"): what a path adds to its pixel, as a share of what the pixel shows. A dark first surface
+     * (whose pixel is dark too) no longer ends its paths sooner than a bright one. */
+    if (ps->depth == 1 && beta_max < 1.0f) ps->rr_scale /= beta_max;
     if (ps->depth >= RR_DEPTH) {
-        float q = m_min(beta_max * ps->eta_scale * ps->eta_scale, 0.95f);
+        float q = m_min(RR_FACTOR * beta_max * ps->rr_scale, 0.95f);
         if (u_roulette >= q) return false;
         ps->beta = v3_divs(ps->beta, q);
     }

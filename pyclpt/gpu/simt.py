@@ -400,7 +400,7 @@ def _expand(names: tuple[str, ...]) -> list[str]:
 #: the environment's radiance: ENV_DEFERRED, cl/scene/lights.h). One scalar access per component (the accessors
 #: are scalar in both layouts).
 STAGE_ACCESS: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
-    "path_init": [("all", "w", ("film_slot", "L", "org", "dir", "beta", "eta_scale", "prev_pdf", "flags",
+    "path_init": [("all", "w", ("film_slot", "L", "org", "dir", "beta", "rr_scale", "prev_pdf", "flags",
                                 "depth"))],
     "intersect": [("all", "r", ("film_slot", "org", "dir")),
                   ("hit", "w", ("hit_t", "hit_u", "hit_v", "hit_prim"))],
@@ -413,8 +413,8 @@ STAGE_ACCESS: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
     "shadow_test": [("all", "r", ("film_slot", "shadow_org", "shadow_dir", "shadow_tmax")),
                     ("env_lit", "r", ("shadow_contrib",)), ("env_lit", "w", ("shadow_contrib",))],
     "light_contribution": [("all", "r", ("L", "shadow_contrib")), ("all", "w", ("L",))],
-    "sample_bsdf": [("all", "r", ("dir", "beta", "eta_scale", "hit_prim", "hit_u", "hit_v", "film_slot")),
-                    ("continued", "w", ("org", "dir", "beta", "eta_scale", "prev_pdf", "flags", "depth")),
+    "sample_bsdf": [("all", "r", ("dir", "beta", "rr_scale", "hit_prim", "hit_u", "hit_v", "film_slot")),
+                    ("continued", "w", ("org", "dir", "beta", "rr_scale", "prev_pdf", "flags", "depth")),
                     ("ended", "r", ("L",))],
 }
 

@@ -43,7 +43,7 @@ FIELDS: tuple[Field, ...] = (
     Field("beta", "float", 3, "throughput"),
     Field("L", "float", 3, "radiance gathered so far"),
     Field("prev_pdf", "float", 1, "pdf of the BSDF sample that made the ray"),
-    Field("eta_scale", "float", 1, "product of relative IORs crossed"),
+    Field("rr_scale", "float", 1, "the roulette's scale of the throughput"),
     Field("hit_t", "float", 1, "closest-hit distance"),
     Field("hit_u", "float", 1, "closest-hit barycentric u"),
     Field("hit_v", "float", 1, "closest-hit barycentric v"),

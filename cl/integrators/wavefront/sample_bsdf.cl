@@ -16,7 +16,7 @@ __kernel void sample_bsdf(SCENE_PARAMS, PATH_PARAMS, QUEUE_ARGS, __global const 
     PathState ps;
     ps.dir = path_get_dir(&P, slot);
     ps.beta = path_get_beta(&P, slot);
-    ps.eta_scale = path_get_eta_scale(&P, slot);
+    ps.rr_scale = path_get_rr_scale(&P, slot);
     ps.depth = bounce;
 #ifdef AOVS
     ps.flags = path_get_flags(&P, slot); /* PATH_ALBEDO_DONE carries on (PATH_KEPT_FLAGS, path.h) */

@@ -93,7 +93,7 @@ static inline PathState path_load_shading(const PathStore* P, int slot, int boun
 static inline PathState path_load_ray(const PathStore* P, int slot, int bounce) {
     PathState ps = path_load_shading(P, slot, bounce);
     ps.org = path_get_org(P, slot);
-    ps.eta_scale = path_get_eta_scale(P, slot);
+    ps.rr_scale = path_get_rr_scale(P, slot);
     return ps;
 }
 
@@ -119,7 +119,7 @@ static inline void path_store_ray(const PathStore* P, int slot, const PathState*
     path_set_org(P, slot, ps->org);
     path_set_dir(P, slot, ps->dir);
     path_set_beta(P, slot, ps->beta);
-    path_set_eta_scale(P, slot, ps->eta_scale);
+    path_set_rr_scale(P, slot, ps->rr_scale);
     path_set_prev_pdf(P, slot, ps->prev_pdf);
     path_set_flags(P, slot, ps->flags);
     path_set_depth(P, slot, ps->depth);
