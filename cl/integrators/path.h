@@ -43,7 +43,7 @@ typedef struct {
     vec3 beta;        /* throughput */
     vec3 L;           /* radiance gathered so far */
     float prev_pdf;   /* solid-angle pdf of the BSDF sample that made the ray */
-    float rr_scale;   /* the roulette's scale of the throughput (path_continue): the squared product of
+    float rr_scale;   /* the roulette's scale of the throughput (path_sample_bsdf): the squared product of
                        * the relative IORs crossed, over the first bounce's throughput when that is below 1 */
     int depth;        /* bounce index of the current ray */
     int flags;        /* PATH_* */
