@@ -58,6 +58,7 @@ T_FRONT_ONLY = "tests/test_analytic.py::test_area_lights_emit_from_their_front_o
 T_BACK_BLACK = "tests/test_analytic.py::test_camera_behind_an_area_light_sees_its_back_black"
 T_GLASS_INSIDE = "tests/test_analytic.py::test_camera_inside_glass_sphere_sees_eta_squared"
 T_FURNACE = "tests/test_render.py::test_interior_furnace"
+T_GPU_STEPS = "tests/test_gpu_layout.py::test_gpu_shading_steps_give_the_megakernels_image_and_gbuffer"
 T_ROULETTE = "tests/test_wavefront.py::test_roulette_keeps_paths_by_their_throughput_relative_to_the_first_bounce"
 T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
 T_GRAD_FD = "tests/test_gradients.py::test_backward_matches_finite_differences"
@@ -98,8 +99,9 @@ MUTANTS: list[Mutant] = [
     Mutant("fresnel-eta-inverted", "float eta_it = outside ? eta : 1.0f / eta;",
            "float eta_it = outside ? 1.0f / eta : eta;", (T_GLASS_INSIDE,),
            "the dielectric Fresnel term with the relative IOR inverted", issue=True),
-    Mutant("eta2-scaling-dropped", "s->weight = v3_scale(b->trans, eta_ti * eta_ti);", "s->weight = b->trans;",
-           (T_GLASS_INSIDE,), "refraction through smooth glass without the eta^2 radiance scaling", issue=True,
+    Mutant("eta2-scaling-dropped", "s->weight = v3_scale(bsdf_trans(b), eta_ti * eta_ti);",
+           "s->weight = bsdf_trans(b);", (T_GLASS_INSIDE,),
+           "refraction through smooth glass without the eta^2 radiance scaling", issue=True,
            after="static inline bool dielectric_sample("),
     Mutant("envmap-cell-omega-no-sin-theta",
            "cell_omega = (2.0 * np.pi / w) * 2.0 * np.sin(mid) * np.sin(half)",
@@ -188,7 +190,7 @@ MUTANTS: list[Mutant] = [
            "a light sample multiplied by its pdf instead of divided"),
     Mutant("shadow-ray-reaches-light", "ls.dist * (1.0f - 1e-4f)", "ls.dist * (1.0f + 1e-4f)", (T_ANALYTIC_QUAD,),
            "shadow rays long enough to hit the light they test"),
-    Mutant("bsdf-pdf-not-kept", "ps->prev_pdf = bs.pdf;", "ps->prev_pdf = 1.0f;", (T_ANALYTIC_QUAD,),
+    Mutant("bsdf-pdf-not-kept", "ps->prev_pdf = bs->pdf;", "ps->prev_pdf = 1.0f;", (T_ANALYTIC_QUAD,),
            "MIS weights of emission hits computed with a wrong BSDF pdf"),
     Mutant("wavefront-miss-not-committed", "film_commit(frame, drop_marks, f, ps.L);",
            "(void)frame;", ("tests/test_wavefront.py::test_every_pixel_is_committed_once_per_sample",),
@@ -322,7 +324,7 @@ MUTANTS: list[Mutant] = [
            "g_slide = v3_splat(0.0f);", ("tests/test_interior.py::test_smooth_shaded_floor",),
            "a sliding hit's shading normal keeps its barycentrics' vertex normals (reverse mode)"),
     Mutant("geometry-smooth-hit-does-not-slide-forward",
-           "dm = v3_add(dm, v3_add(v3_scale(v3_sub(n1, n0), db1), v3_scale(v3_sub(n2, n0), db2)));", "dm = dm;",
+           "dm = v3_add(dm, v3_add(v3_scale(v3_sub(n1, n0), v->db1), v3_scale(v3_sub(n2, n0), v->db2)));", "dm = dm;",
            ("tests/test_interior.py::test_smooth_shaded_floor",), "the same in forward mode"),
     Mutant("geometry-vertex-normals-still",
            "exact = exact + _normals(p, table, gn, normals_backward).reshape(exact.shape)", "exact = exact",
@@ -491,7 +493,15 @@ MUTANTS: list[Mutant] = [
     Mutant("instance-drops-the-uv-frame", "    if (mat_flags(scene_material(sc, s.material)) & MAT_FLAG_UV_FRAME) {",
            "    if (false) {", ("tests/test_instances.py::test_instanced_scene_renders_as_flattened[False-True]",),
            "an instanced anisotropic material's tangent frame rebuilt from the normal, not turned with it",
-           after="Surface s = surface_local(sc, prim & ((1 << bits) - 1), u, v);"),
+           after="Surface s = surface_local(sc, surface_local_prim(sc, prim), u, v);"),
+    # the GPU's shading stages in steps (docs/gpu.md, "The shading stages in steps"), run on PoCL with the GPU layout
+    Mutant("gpu-kept-normal-unwritten", "    path_set_org(P, slot, s.sh.n);", "    (void)s;", (T_GPU_STEPS,),
+           "the wavefront's GPU steps rebuild the surface from a shading normal that was never kept"),
+    Mutant("gpu-textures-not-applied", "    b.color = v3_mul(b.color, f.color);", "    (void)f;", (T_GPU_STEPS,),
+           "the GPU steps' material without its looked-up texture (the diffuse reflectance or transmittance)",
+           after="static inline GPU_INLINE Bsdf bsdf_textured("),
+    Mutant("gpu-light-delta-sign-lost", "n.ls.delta = pdf < 0.0f;", "n.ls.delta = false;", (T_GPU_STEPS,),
+           "the GPU steps forget that the kept light sample was a delta light's (MIS against BSDF sampling)"),
 ]
 
 

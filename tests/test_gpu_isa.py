@@ -15,7 +15,7 @@ from pyclpt.device.program import empty_kernels, record_programs
 from pyclpt.gpu.check import check_programs
 from pyclpt.gpu.collect import collect_programs, merge_specialisations
 from pyclpt.gpu.isa import ToolchainMissing, compile_program, find_toolchain, parse_amdgcn, parse_ptxas
-from pyclpt.gpu.report import budgets, markdown
+from pyclpt.gpu.report import SHADING_STAGES, budgets, markdown
 from pyclpt.gpu.targets import TARGETS, occupancy, resident_slots
 from pyclpt.rendering.renderer import Renderer
 from scenes import material_zoo  # tests/ is on sys.path (conftest.py)
@@ -72,19 +72,25 @@ def test_every_kernel_compiles_for_every_gpu_target(report):
 
 def test_gpu_layout_meets_the_budgets(report):
     """The GPU layout's traversal (binary BVH, a 64-entry node stack, the texture lookup of masks inlined) on
-    sm_90: at most 96 registers and 256 bytes of stack in every scene; the Cornell box's shading stages at most
-    64 registers without the G-buffer; no wavefront stage spills on gfx1030 in any scene (docs/gpu.md)."""
+    sm_90: at most 96 registers and 256 bytes of stack in every scene. The shading stages (process_hit and
+    sample_bsdf in steps, built with NVIDIA's register cap of 64 as the driver builds them) at most 64 registers
+    without spilling in every scene and variant, their stack at most the 16 bytes ptxas may keep around IEEE
+    division's slow path under the cap, none on the Cornell box (docs/gpu.md, "The shading stages in steps"); no
+    wavefront stage spills on gfx1030 in any scene."""
     traversal = [c for c in report.costs if c.target == "sm_90" and c.kernel in ("intersect", "shadow_test")]
     assert {s for c in traversal for s in c.scenes} >= {"cornell-box", "material-zoo"}
     assert [c for c in traversal if c.registers > 96 or c.stack > 256] == []
-    box = {c.kernel: c for c in report.costs if c.target == "sm_90" and "cornell-box" in c.scenes
-           and "-DAOVS=1" not in c.options}
-    for k in ("path_init", "miss", "light_contribution", "sample_bsdf", "process_hit"):
-        assert box[k].registers <= 64 and box[k].stack == 0, box[k]
+    shading = [c for c in report.costs if c.target == "sm_90" and c.kernel in SHADING_STAGES]
+    assert {s for c in shading for s in c.scenes} >= {"cornell-box", "material-zoo"}
+    assert {c.register_cap for c in shading if c.kernel in ("process_hit", "sample_bsdf")} == {64}
+    assert [c for c in shading if c.registers > 64 or c.spills or c.stack > 16] == []
+    assert [c for c in shading if "cornell-box" in c.scenes and c.stack] == []
     stages = {"path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf",
               "compact_count", "compact_scatter"}
     assert not [c for c in report.costs if c.target == "gfx1030" and c.kernel in stages and c.spills]
     assert "gfx1030 spills among the wavefront stages: none" in budgets(report)
+    lines = [b for b in budgets(report) if b.startswith(("process_hit:", "sample_bsdf:"))]
+    assert len(lines) == 2 and all(", cap 64 (budget 64 without spills: met" in b for b in lines), lines
 
 
 def test_occupancy_agrees_with_llvm(report):

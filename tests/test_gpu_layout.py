@@ -93,6 +93,35 @@ def test_gpu_layout_renders(scene_name, cornell_box, device, monkeypatch):
         np.testing.assert_allclose(mega.mean((0, 1)), cpu.mean((0, 1)), rtol=0.05)
 
 
+@pytest.mark.parametrize("scene_name", ["material_zoo", "twosided-pair", "anisotropy"])
+def test_gpu_shading_steps_give_the_megakernels_image_and_gbuffer(scene_name, device, monkeypatch):
+    """On GPUs process_hit and sample_bsdf run in steps that rebuild the surface after a store (the kept shading
+    normal, the G-buffer at the end, light sampling in two steps through the shadow ray's slots; docs/gpu.md, "The
+    shading stages in steps"): the megakernel's image and G-buffer bit for bit, with bump maps and textures (the
+    zoo), two-sided materials with a back (the normal that picks the side is the kept one) and anisotropic frames
+    (no normal kept: the surface rebuilt whole), over several bounces and both path-state layouts; and the CPU's
+    single-pass stages' image and G-buffer on the same binary BVH."""
+    from pathlib import Path
+
+    data = Path(__file__).parent / "data"
+    scene = material_zoo(16) if scene_name == "material_zoo" else pyclpt.load(data / f"{scene_name}.xml")
+    kw = dict(spp=2, max_depth=6, width=20, height=16, seed=7, device=device, aovs=True)
+    monkeypatch.setattr(bvh_mod, "DEFAULT_SETTINGS", bvh_mod.BuildSettings(width=2))
+    cpu, cpu_aovs = pyclpt.render(scene, integrator="wavefront", **kw)
+    monkeypatch.setenv(CLASS_ENV, "gpu")
+    mega, mega_aovs = pyclpt.render(scene, integrator="megakernel", **kw)
+    assert mega.max() > 0
+    np.testing.assert_array_equal(mega, cpu)
+    for name in cpu_aovs:
+        np.testing.assert_array_equal(mega_aovs[name], cpu_aovs[name], err_msg=f"CPU {name}")
+    for layout in ("soa", "aos"):
+        wave, wave_aovs = pyclpt.render(scene, integrator="wavefront", layout=layout, **kw)
+        np.testing.assert_array_equal(wave, mega)
+        assert wave_aovs.keys() == mega_aovs.keys()
+        for name in mega_aovs:
+            np.testing.assert_array_equal(wave_aovs[name], mega_aovs[name], err_msg=f"{layout} {name}")
+
+
 def test_gpu_layout_instanced_scene(monkeypatch):
     """Two-level traversal with the node-only stacks (bottom and top level): the flattened scene's image within
     noise, megakernel == wavefront."""

@@ -79,16 +79,23 @@ def speedups(p) -> dict[str, float]:
 def isa_registers(isa: dict | None, scene: str) -> dict[str, int]:
     """sm_90 registers per kernel for ``scene`` from a gpu-isa report: the scene's own variant where the report
     names the scene (without the G-buffer if it has one; a variant shared by several scenes is named after the
-    first), else the most registers over the report; :data:`REGISTERS` without a report."""
+    first), else the most registers over the report; :data:`REGISTERS` without a report. A kernel built under the
+    driver's register cap that spills there (the megakernel, finish_paths) counts with its uncapped registers: the
+    model has no cost for spills, and would credit the cap's occupancy without its local-memory traffic."""
     regs = dict(REGISTERS)
     if isa is None:
         return regs
+
+    def used(c: dict) -> int:
+        spills = c.get("spill_stores", 0) or c.get("spill_loads", 0)
+        return c.get("uncapped_registers") or c["registers"] if spills else c["registers"]
+
     costs = [c for c in isa["costs"] if c["target"] == "sm_90" and c["kernel"] in regs]
-    for c in sorted(costs, key=lambda c: c["registers"]):  # the worst last
-        regs[c["kernel"]] = c["registers"]
+    for c in sorted(costs, key=used):  # the worst last
+        regs[c["kernel"]] = used(c)
     own = sorted((c for c in costs if scene in c.get("scenes", ())), key=lambda c: "-DAOVS=1" not in c["options"])
     for c in own:  # the scene's variant without the G-buffer last: it wins
-        regs[c["kernel"]] = c["registers"]
+        regs[c["kernel"]] = used(c)
     return regs
 
 

@@ -480,8 +480,8 @@ static inline vec3 geo_fresnel_slope(const Scene* sc, const Bsdf* b, const GeoVe
     *dc_dns = v3_scale(m->d, sign);
     float c0 = m_max(c - GEO_FD_STEP, 0.0f), c1 = m_min(c + GEO_FD_STEP, 1.0f);
     if (!(c1 > c0)) return v3_splat(0.0f);
-    vec3 df = v3_sub(fresnel_conductor(c1, b->eta, b->k), fresnel_conductor(c0, b->eta, b->k));
-    return safe_div3(v3_scale(df, 1.0f / (c1 - c0)), fresnel_conductor(c, b->eta, b->k));
+    vec3 df = v3_sub(fresnel_conductor(c1, bsdf_eta(b), b->k), fresnel_conductor(c0, bsdf_eta(b), b->k));
+    return safe_div3(v3_scale(df, 1.0f / (c1 - c0)), fresnel_conductor(c, bsdf_eta(b), b->k));
 }
 
 /* Reverse mode: the moving mirror m's Fresnel factor, through which `through` (everything gathered after m) flows,

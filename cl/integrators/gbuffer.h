@@ -75,21 +75,28 @@ static inline vec2 gbuffer_motion(const Scene* sc, vec3 p, bool at_infinity) {
     return seen ? v2(prev.x - cur.x, prev.y - cur.y) : v2(AOV_OFFSCREEN, AOV_OFFSCREEN);
 }
 
-/* A path's ray of bounce `depth` along dir hit triangle `prim` at distance t, surface s; beta is the
- * path's throughput and *flags its PATH_* flags (PATH_ALBEDO_DONE is set once the albedo is recorded). */
-static inline void gbuffer_hit(const Scene* sc, AovOut o, int prim, const Surface* s, float t, int depth,
-                               vec3 dir, vec3 beta, int* flags) {
-    bool albedo = !(*flags & PATH_ALBEDO_DONE);
+/* What every hit of a path records (gbuffer_hit): the second ray's hit distance, and the albedo at the first
+ * non-delta vertex (times the throughput beta; PATH_ALBEDO_DONE is then set in *flags). */
+static inline void gbuffer_albedo(AovOut o, const Bsdf* b, vec3 beta, int* flags) {
+    if (bsdf_is_delta(b)) return;
+    aov_put3(o, AOV_ALBEDO, v3_mul(beta, bsdf_albedo(b)));
+    *flags |= PATH_ALBEDO_DONE;
+}
+
+static inline GPU_INLINE void gbuffer_hit_path(const Scene* sc, AovOut o, const Surface* s, float t, int depth,
+                                               vec3 beta, int* flags) {
     if (depth == 1) aov_put(o, AOV_HITDIST, t);
-    if (depth != 0 && !albedo) return;
+    if (*flags & PATH_ALBEDO_DONE) return;
     Bsdf b = bsdf_at(sc, s);
-    if (albedo && !bsdf_is_delta(&b)) {
-        aov_put3(o, AOV_ALBEDO, v3_mul(beta, bsdf_albedo(&b)));
-        *flags |= PATH_ALBEDO_DONE;
-    }
-    if (depth != 0) return;
+    gbuffer_albedo(o, &b, beta, flags);
+}
+
+/* What the camera ray's hit records (gbuffer_hit): its normal, roughness (of the material's record: no texture
+ * changes it), view depth, motion vector, emitted radiance and ids. */
+static inline GPU_INLINE void gbuffer_hit_first(const Scene* sc, AovOut o, int prim, const Surface* s, vec3 dir) {
     __global const float* c = sc->consts;
     aov_put3(o, AOV_NORMAL, s->sh.n);
+    Bsdf b = bsdf_from(scene_material(sc, s->material), sc->unit);
     aov_put(o, AOV_ROUGHNESS, bsdf_roughness(&b));
     aov_put(o, AOV_DEPTH, m_dot(v3_sub(s->p, rgb_at(c + CONST_CAM_ORIGIN, sc->unit)),
                                  rgb_at(c + CONST_CAM_FORWARD, sc->unit)));
@@ -99,6 +106,14 @@ static inline void gbuffer_hit(const Scene* sc, AovOut o, int prim, const Surfac
     aov_put3(o, AOV_EMISSION, light_emitted(sc, s->light, s->ng, dir, s->uv)); /* path_hit_emission's, w = 1 */
     aov_put(o, AOV_PRIM, as_float(prim));
     aov_put(o, AOV_MATERIAL, as_float(s->material));
+}
+
+/* A path's ray of bounce `depth` along dir hit triangle `prim` at distance t, surface s; beta is the
+ * path's throughput and *flags its PATH_* flags (PATH_ALBEDO_DONE is set once the albedo is recorded). */
+static inline void gbuffer_hit(const Scene* sc, AovOut o, int prim, const Surface* s, float t, int depth,
+                               vec3 dir, vec3 beta, int* flags) {
+    gbuffer_hit_path(sc, o, s, t, depth, beta, flags);
+    if (depth == 0) gbuffer_hit_first(sc, o, prim, s, dir);
 }
 
 /* A path's ray of bounce `depth` along dir left the scene: the camera ray's motion vector (a point at

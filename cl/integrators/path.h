@@ -162,33 +162,58 @@ typedef struct {
     float weight;   /* MIS weight / pdf */
 } NeeSample;
 
-/* hit processing, part 2: next-event estimation, with its factors (NeeSample). Writes a shadow ray
- * only for a sample that can contribute (pdf > 0, non-zero value). With env_radiance false an environment
- * sample's radiance is left out of ls.radiance and contrib (ENV_DEFERRED: path_lit adds it). */
-static inline bool path_nee_sample(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, const PathState* ps,
-                                   NeeSample* n, bool env_radiance) {
-    if (bsdf_is_delta(b)) return false;
+/* Next-event estimation, part 1: the light sample seen from the point p at the path's bounce (false: none). */
+static inline GPU_INLINE bool path_nee_light(const Scene* sc, RngKey key, vec3 p, int depth, LightSample* ls,
+                                             bool env_radiance) {
     float u_sel;
     vec2 u;
-    rng_light(key, ps->depth, &u_sel, &u);
-    if (!light_sample(sc, s->p, u_sel, u, &n->ls, env_radiance)) return false;
-    vec3 wi = to_local(s->sh, v3_neg(ps->dir));
+    rng_light(key, depth, &u_sel, &u);
+    return light_sample(sc, p, u_sel, u, ls, env_radiance);
+}
+
+/* Next-event estimation, part 2: the light sample n->ls (path_nee_light) seen from the surface s along the path's
+ * ray: the directions in the shading frame (n->wo, *wi) and the shadow ray's origin, direction and length. False
+ * where the geometric normal and the shading frame disagree about the side, or the ray has no length. */
+static inline GPU_INLINE bool path_nee_ray(const Surface* s, const PathState* ps, NeeSample* n, vec3* wi) {
+    *wi = to_local(s->sh, v3_neg(ps->dir));
     n->wo = to_local(s->sh, n->ls.wi);
-    float bsdf_pdf;
-    n->f = bsdf_eval(b, wi, n->wo, &bsdf_pdf);
     /* the geometric normal must agree with the shading frame about the side */
     if (m_dot(n->ls.wi, s->ng) * n->wo.z <= 0.0f) return false;
-    /* a delta light (point) cannot be hit by BSDF sampling: its sample takes the whole weight */
-    float w = n->ls.delta ? 1.0f : power_heuristic(n->ls.pdf, bsdf_pdf);
-    n->weight = w / n->ls.pdf;
-    vec3 contrib = v3_scale(v3_mul(v3_mul(ps->beta, n->f), n->ls.radiance), n->weight);
-    if (!(max3(contrib) > 0.0f)) return false;
     ShadowRay* sr = &n->sr;
     sr->org = spawn_origin(s, n->ls.wi);
     sr->dir = n->ls.wi;
     sr->tmax = m_isinf(n->ls.dist) ? INF_F : n->ls.dist * (1.0f - 1e-4f) - m_length(v3_sub(sr->org, s->p));
-    sr->contrib = contrib;
     return sr->tmax > 0.0f;
+}
+
+/* Next-event estimation, part 3: the BSDF b at the light sample (path_nee_ray's directions): n->f, and the pdf of
+ * BSDF sampling the same direction. */
+static inline GPU_INLINE float path_nee_eval(const Bsdf* b, vec3 wi, NeeSample* n) {
+    float bsdf_pdf;
+    n->f = bsdf_eval(b, wi, n->wo, &bsdf_pdf);
+    return bsdf_pdf;
+}
+
+/* Next-event estimation, part 4: the light sample's MIS weight against BSDF sampling (bsdf_pdf: path_nee_eval's) and
+ * the shadow ray's contribution. False for a sample that cannot contribute (a zero value). */
+static inline GPU_INLINE bool path_nee_weigh(const PathState* ps, float bsdf_pdf, NeeSample* n) {
+    /* a delta light (point) cannot be hit by BSDF sampling: its sample takes the whole weight */
+    float w = n->ls.delta ? 1.0f : power_heuristic(n->ls.pdf, bsdf_pdf);
+    n->weight = w / n->ls.pdf;
+    n->sr.contrib = v3_scale(v3_mul(v3_mul(ps->beta, n->f), n->ls.radiance), n->weight);
+    return max3(n->sr.contrib) > 0.0f;
+}
+
+/* hit processing, part 2: next-event estimation, with its factors (NeeSample): path_nee_light, path_nee_ray,
+ * path_nee_eval, then path_nee_weigh (the steps of the GPU's process_hit). Writes a shadow ray only for a sample that
+ * can contribute (pdf > 0, non-zero value). With env_radiance false an environment sample's radiance is left out of
+ * ls.radiance and contrib (ENV_DEFERRED: path_lit adds it). */
+static inline bool path_nee_sample(const Scene* sc, RngKey key, const Surface* s, const Bsdf* b, const PathState* ps,
+                                   NeeSample* n, bool env_radiance) {
+    if (bsdf_is_delta(b)) return false;
+    vec3 wi;
+    return path_nee_light(sc, key, s->p, ps->depth, &n->ls, env_radiance) && path_nee_ray(s, ps, n, &wi) &&
+           path_nee_weigh(ps, path_nee_eval(b, wi, n), n);
 }
 
 /* path_nee_sample with every factor, the light's radiance included (the gradient kernels) */
@@ -222,23 +247,17 @@ static inline vec3 path_lit(const Scene* sc, const ShadowRay* sr) {
     return sr->contrib;
 }
 
-/* BSDF sampling: the next direction, throughput update and Russian roulette.
- * Returns false when the path ends (depth limit, no valid sample, roulette). */
-static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b, PathState* ps, int max_depth) {
-    if (!depth_allows(ps->depth + 1, max_depth)) return false;
-    vec3 wi = to_local(s->sh, v3_neg(ps->dir));
-    BsdfSample bs;
-    float u_lobe, u_roulette;
-    vec2 u;
-    rng_bsdf(key, ps->depth, &u_lobe, &u, &u_roulette);
-    if (!bsdf_sample(b, wi, u_lobe, u, &bs)) return false;
-    vec3 dir = to_world(s->sh, bs.wo);
+/* BSDF sampling, after bsdf_sample: the sample bs taken from the surface s: the next ray, throughput update and
+ * Russian roulette. Returns false when the path ends (the sample's side, zero throughput, roulette). */
+static inline GPU_INLINE bool path_bsdf_take(const Surface* s, const BsdfSample* bs, float u_roulette,
+                                             PathState* ps) {
+    vec3 dir = to_world(s->sh, bs->wo);
     /* reject samples whose side disagrees between shading and geometric normals */
-    if (m_dot(dir, s->ng) * bs.wo.z <= 0.0f) return false;
-    ps->beta = v3_mul(ps->beta, bs.weight);
-    ps->rr_scale *= bs.eta * bs.eta;
-    ps->prev_pdf = bs.pdf;
-    ps->flags = PATH_KEPT_FLAGS(ps->flags) | (bs.delta ? PATH_PREV_DELTA : 0);
+    if (m_dot(dir, s->ng) * bs->wo.z <= 0.0f) return false;
+    ps->beta = v3_mul(ps->beta, bs->weight);
+    ps->rr_scale *= bs->eta * bs->eta;
+    ps->prev_pdf = bs->pdf;
+    ps->flags = PATH_KEPT_FLAGS(ps->flags) | (bs->delta ? PATH_PREV_DELTA : 0);
     ps->org = spawn_origin(s, dir);
     ps->dir = dir;
     ps->depth += 1;
@@ -254,6 +273,19 @@ static inline bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b,
         ps->beta = v3_divs(ps->beta, q);
     }
     return true;
+}
+
+/* BSDF sampling: the next direction, throughput update and Russian roulette (the random numbers, bsdf_sample, then
+ * path_bsdf_take). Returns false when the path ends (depth limit, no valid sample, roulette). */
+static inline GPU_INLINE bool path_sample_bsdf(RngKey key, const Surface* s, const Bsdf* b, PathState* ps,
+                                               int max_depth) {
+    if (!depth_allows(ps->depth + 1, max_depth)) return false;
+    float u_lobe, u_roulette;
+    vec2 u;
+    rng_bsdf(key, ps->depth, &u_lobe, &u, &u_roulette);
+    BsdfSample bs;
+    if (!bsdf_sample(b, to_local(s->sh, v3_neg(ps->dir)), u_lobe, u, &bs)) return false;
+    return path_bsdf_take(s, &bs, u_roulette, ps);
 }
 
 /* -DPATH_TRACE (never in a normal render; pyclpt/gpu/simt.py builds the megakernel with it): path_continue

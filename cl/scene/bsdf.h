@@ -68,14 +68,19 @@
 #define HAS_MATERIAL(t) true
 #endif
 
-/* True when the material has only delta lobes (no light sampling there). */
-static inline bool bsdf_is_delta(const Bsdf* b) {
-    int t = b->type; /* one test per kind, each compiled only for a kind the scene has */
+/* True when a material of kind t (MAT_*) and relative IOR ior has only delta lobes (no light sampling there). */
+static inline bool kind_is_delta(int t, float ior) {
+    /* one test per kind, each compiled only for a kind the scene has */
     if (HAS_MATERIAL(MAT_CONDUCTOR) && t == MAT_CONDUCTOR) return true;
     if (HAS_MATERIAL(MAT_DIELECTRIC) && t == MAT_DIELECTRIC) return true;
     if (HAS_MATERIAL(MAT_THINDIELECTRIC) && t == MAT_THINDIELECTRIC) return true;
-    return HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC && bsdf_index_matched(b);
+    return HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC && ior_index_matched(ior);
 }
+
+static inline bool bsdf_is_delta(const Bsdf* b) { return kind_is_delta(b->type, b->ior); }
+
+/* The same from the material's record, before its textures are looked up (bsdf_at). */
+static inline bool mat_is_delta(Material m) { return kind_is_delta(mat_type(m), m[MAT_IOR]); }
 
 /* The G-buffer's albedo (film/aovs.h), what a denoiser demodulates by: the diffuse reflectance of
  * diffuse and plastic materials, a rough conductor's specular reflectance times its Fresnel
@@ -84,13 +89,13 @@ static inline bool bsdf_is_delta(const Bsdf* b) {
 static inline vec3 bsdf_albedo(const Bsdf* b) {
     int t = b->type;
     if (HAS_MATERIAL(MAT_ROUGHCONDUCTOR) && t == MAT_ROUGHCONDUCTOR) {
-        vec3 e = b->eta, k = b->k;
+        vec3 e = bsdf_eta(b), k = b->k;
         vec3 k2 = v3_mul(k, k);
         vec3 em = v3_sub(e, v3_splat(1.0f)), ep = v3_add(e, v3_splat(1.0f));
         vec3 f0 = v3_div(v3_add(v3_mul(em, em), k2), v3_add(v3_mul(ep, ep), k2));
         return v3_mul(b->spec, f0);
     }
-    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC) return b->trans;
+    if (HAS_MATERIAL(MAT_ROUGHDIELECTRIC) && t == MAT_ROUGHDIELECTRIC) return bsdf_trans(b);
     return b->color;
 }
 
@@ -121,7 +126,7 @@ static inline void bsdf_orient(const Bsdf* b, vec3* wi, vec3* wo) {
 
 /* f(wi, wo) |cos wo| and the solid-angle pdf of bsdf_sample producing wo, both of the
  * non-delta lobes only (zero for delta materials). */
-static inline vec3 bsdf_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
+static inline GPU_INLINE vec3 bsdf_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
     *pdf = 0.0f;
     int type = b->type;
     /* two-sided by nature: both directions as they are */
@@ -137,7 +142,7 @@ static inline vec3 bsdf_eval(const Bsdf* b, vec3 wi, vec3 wo, float* pdf) {
 }
 
 /* Sample wo given wi; false when no direction could be sampled. */
-static inline bool bsdf_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
+static inline GPU_INLINE bool bsdf_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u, BsdfSample* s) {
     int type = b->type;
     s->eta = 1.0f;
     s->delta = false;

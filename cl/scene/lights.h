@@ -303,7 +303,7 @@ static inline vec3 env_sample(const Scene* sc, __global const float* e, vec2 u, 
 
 /* Radiance of the environment along the world direction dir (zero without one); with want_pdf,
  * *pdf is the solid-angle density with which light_sample produces dir, emitter choice included. */
-static inline vec3 env_eval(const Scene* sc, vec3 dir, bool want_pdf, float* pdf) {
+static inline GPU_INLINE vec3 env_eval(const Scene* sc, vec3 dir, bool want_pdf, float* pdf) {
     *pdf = 0.0f;
 #if defined(SCENE_LIGHTS) && !((SCENE_LIGHTS) & ((1 << LIGHT_CONSTANT) | (1 << LIGHT_ENVMAP)))
     return v3_splat(0.0f); /* no environment in the scene */

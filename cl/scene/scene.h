@@ -137,19 +137,61 @@ static inline int film_pixels(const Scene* sc) {
 #endif
 }
 
+#ifdef DEVICE_CLASS_GPU
+/* GPUs: a material's textures looked up apart from its constants (bsdf_textures, then bsdf_textured: bsdf_at's
+ * values), so that a wavefront stage can look them up in a step of its own (docs/gpu.md, "The shading stages in
+ * steps"): the factors of Bsdf.color and spec, 1 where untextured (which leaves a product unchanged). */
+typedef struct {
+    vec3 color, spec;
+} BsdfTextures;
+
+static inline GPU_INLINE BsdfTextures bsdf_textures(const Scene* sc, const Surface* s) {
+    BsdfTextures f;
+    f.color = v3_splat(1.0f);
+    f.spec = f.color;
+#ifdef SCENE_HAS_TEXTURES
+    Material m = scene_material(sc, s->material);
+    int type = mat_type(m);
+    /* one lookup at a time (a loop kept rolled), so that two lookups' texels are not in registers together */
+#pragma unroll 1
+    for (int k = 0; k < 2; ++k) {
+        int t = k == 0 ? mat_color_texture(m, type) : (int)m[MAT_SPEC_TEX];
+        if (t < 0) continue;
+        vec3 c = tex_eval(&sc->tex, t, s->uv);
+        if (k == 0) f.color = c;
+        else f.spec = c;
+    }
+#endif
+    return f;
+}
+
+static inline GPU_INLINE Bsdf bsdf_textured(const Scene* sc, const Surface* s, BsdfTextures f) {
+    Bsdf b = bsdf_from(scene_material(sc, s->material), sc->unit);
+#ifdef SCENE_HAS_TEXTURES
+    b.color = v3_mul(b.color, f.color);
+    b.spec = v3_mul(b.spec, f.spec);
+#endif
+    return b;
+}
+#endif
+
 /* The material of a surface with its textures looked up at the surface's uv. */
-static inline Bsdf bsdf_at(const Scene* sc, const Surface* s) {
+static inline GPU_INLINE Bsdf bsdf_at(const Scene* sc, const Surface* s) {
+#ifdef DEVICE_CLASS_GPU
+    /* the textures looked up first, and the material's constants read after them, so that the constants are not
+     * in registers together with a lookup's texels */
+    return bsdf_textured(sc, s, bsdf_textures(sc, s));
+#else
     Material m = scene_material(sc, s->material);
     Bsdf b = bsdf_from(m, sc->unit);
 #ifdef SCENE_HAS_TEXTURES /* pyclpt/buffers/materials.py: some reflectance or transmittance is textured */
-    int t = (int)m[MAT_COLOR_TEX];
+    int t = mat_color_texture(m, b.type); /* the diffuse reflectance's or the transmittance's */
     if (t >= 0) b.color = v3_mul(b.color, tex_eval(&sc->tex, t, s->uv));
     t = (int)m[MAT_SPEC_TEX];
     if (t >= 0) b.spec = v3_mul(b.spec, tex_eval(&sc->tex, t, s->uv));
-    t = (int)m[MAT_TRANS_TEX];
-    if (t >= 0) b.trans = v3_mul(b.trans, tex_eval(&sc->tex, t, s->uv));
 #endif
     return b;
+#endif
 }
 
 /* dp/du of triangle prim from its uvs (Mitsuba's Mesh::compute_surface_interaction); false where the
@@ -174,7 +216,7 @@ static inline bool tri_dpdu(const Scene* sc, int prim, int info, vec3* dpdu, vec
  * by scale * height(uv) and take the normal of the displaced surface; the height
  * gradient is a forward difference over one texel (one hundredth of the unit
  * square for procedural textures). Needs the mesh's uv parameterisation. */
-static inline vec3 bump_normal(const Scene* sc, Material m, int prim, int info, vec2 uv, vec3 ns) {
+static inline GPU_INLINE vec3 bump_normal(const Scene* sc, Material m, int prim, int info, vec2 uv, vec3 ns) {
     int t = (int)m[MAT_BUMP_TEX];
     vec3 dpdu, dpdv;
     if (t < 0 || !tri_dpdu(sc, prim, info, &dpdu, &dpdv)) return ns;
@@ -217,17 +259,26 @@ static inline Frame uv_frame(const Scene* sc, int prim, int info, vec3 ng, vec3 
 }
 #endif
 
-/* The surface at barycentrics u, v of leaf-order triangle prim, in its mesh's space. */
-static inline Surface surface_local(const Scene* sc, int prim, float u, float v) {
+/* The surface's geometry at barycentrics u, v of leaf-order triangle prim, in its mesh's space: its position,
+ * geometric normal, material, emitter and texture coordinates, without the shading frame (surface_local);
+ * *info: the triangle's info word. */
+static inline GPU_INLINE Surface surface_geometry_local(const Scene* sc, int prim, float u, float v, int* info) {
     Surface s;
     __global const float* t = sc->tris + 9 * prim;
     vec3 v0 = rgb_at(t, sc->unit), e1 = rgb_at(t + 3, sc->unit), e2 = rgb_at(t + 6, sc->unit);
     s.p = v3_add(v3_add(v0, v3_scale(e1, u)), v3_scale(e2, v));
     s.ng = m_normalize(m_cross(e1, e2));
-    int info = sc->tri_info[2 * prim];
-    s.material = info & TRI_MAT_MASK;
+    *info = sc->tri_info[2 * prim];
+    s.material = *info & TRI_MAT_MASK;
     s.light = sc->tri_info[2 * prim + 1];
-    s.uv = tri_uv(sc->tri_vidx, sc->vuvs, prim, info, u, v);
+    s.uv = tri_uv(sc->tri_vidx, sc->vuvs, prim, *info, u, v);
+    return s;
+}
+
+/* The surface at barycentrics u, v of leaf-order triangle prim, in its mesh's space. */
+static inline GPU_INLINE Surface surface_local(const Scene* sc, int prim, float u, float v) {
+    int info;
+    Surface s = surface_geometry_local(sc, prim, u, v, &info);
     vec3 ns = s.ng;
     if (info & TRI_HAS_NORMALS) {
         int i0 = sc->tri_vidx[3 * prim], i1 = sc->tri_vidx[3 * prim + 1], i2 = sc->tri_vidx[3 * prim + 2];
@@ -251,12 +302,19 @@ static inline Surface surface_local(const Scene* sc, int prim, float u, float v)
 #ifdef SCENE_HAS_INSTANCES
 /* prim is the packed id of instances.h: the triangle's surface through its instance's transforms
  * (points by object-to-world, normals by its inverse transpose, as Mitsuba's instances). */
-static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
-    int bits = inst_tri_bits(sc->nodes);
-    Surface s = surface_local(sc, prim & ((1 << bits) - 1), u, v);
-    __global const float* rec = inst_record(sc->nodes, prim >> bits);
-    s.p = inst_point(rec + INST_O2W, s.p);
-    s.ng = m_normalize(inst_normal(rec + INST_NORMAL, s.ng));
+static inline int surface_local_prim(const Scene* sc, int prim) { return prim & ((1 << inst_tri_bits(sc->nodes)) - 1); }
+static inline __global const float* surface_instance(const Scene* sc, int prim) {
+    return inst_record(sc->nodes, prim >> inst_tri_bits(sc->nodes));
+}
+/* The position and geometric normal of a surface in its mesh's space carried into the world by instance record rec. */
+static inline GPU_INLINE void surface_place(__global const float* rec, Surface* s) {
+    s->p = inst_point(rec + INST_O2W, s->p);
+    s->ng = m_normalize(inst_normal(rec + INST_NORMAL, s->ng));
+}
+static inline GPU_INLINE Surface surface_at(const Scene* sc, int prim, float u, float v) {
+    Surface s = surface_local(sc, surface_local_prim(sc, prim), u, v);
+    __global const float* rec = surface_instance(sc, prim);
+    surface_place(rec, &s);
     vec3 ns = m_normalize(inst_normal(rec + INST_NORMAL, s.sh.n));
 #ifdef SCENE_HAS_ANISOTROPY
     if (mat_flags(scene_material(sc, s.material)) & MAT_FLAG_UV_FRAME) {
@@ -276,21 +334,45 @@ static inline Surface surface_at(const Scene* sc, int prim, float u, float v) {
     return s;
 }
 #else
-static inline Surface surface_at(const Scene* sc, int prim, float u, float v) { return surface_local(sc, prim, u, v); }
+static inline GPU_INLINE Surface surface_at(const Scene* sc, int prim, float u, float v) {
+    return surface_local(sc, prim, u, v);
+}
 #endif
 
-/* The surface a path's ray along dir hit, on the side it hit: with -DSCENE_HAS_BACK_MATERIALS a
- * material with a different back (MAT_FLAG_BACK, Mitsuba `twosided` with two BSDFs) is replaced by its
- * back material where wi = -dir is below the shading normal (to_local(s.sh, -dir).z < 0, the test
- * Mitsuba's twosided makes; negation is exact, so the two tests agree to the bit). */
-static inline Surface surface_hit(const Scene* sc, int prim, float u, float v, vec3 dir) {
-    Surface s = surface_at(sc, prim, u, v);
+/* A two-sided material with a different back (-DSCENE_HAS_BACK_MATERIALS; MAT_FLAG_BACK, Mitsuba `twosided` with
+ * two BSDFs) replaced by its back material where wi = -dir is below the shading normal (to_local(s.sh, -dir).z < 0,
+ * the test Mitsuba's twosided makes; negation is exact, so the two tests agree to the bit). */
+static inline void surface_face(const Scene* sc, Surface* s, vec3 dir) {
 #ifdef SCENE_HAS_BACK_MATERIALS
-    Material m = scene_material(sc, s.material);
-    if ((mat_flags(m) & MAT_FLAG_BACK) && m_dot(dir, s.sh.n) > 0.0f) s.material = (int)m[MAT_BACK];
+    Material m = scene_material(sc, s->material);
+    if ((mat_flags(m) & MAT_FLAG_BACK) && m_dot(dir, s->sh.n) > 0.0f) s->material = (int)m[MAT_BACK];
 #endif
+}
+
+/* The surface a path's ray along dir hit, on the side it hit (surface_face). */
+static inline GPU_INLINE Surface surface_hit(const Scene* sc, int prim, float u, float v, vec3 dir) {
+    Surface s = surface_at(sc, prim, u, v);
+    surface_face(sc, &s, dir);
     return s;
 }
+
+#ifndef SCENE_HAS_ANISOTROPY
+/* surface_hit where its shading normal ns is known (a surface_hit's s.sh.n, kept by the wavefront's stages on GPUs:
+ * cl/integrators/wavefront/wavefront.h, path_hit_surface): the same Surface without the vertex normals and the bump
+ * map. The shading frame is frame_from(ns) in a scene without anisotropic materials (uv_frame). */
+static inline GPU_INLINE Surface surface_hit_shaded(const Scene* sc, int prim, float u, float v, vec3 dir, vec3 ns) {
+    int info;
+#ifdef SCENE_HAS_INSTANCES
+    Surface s = surface_geometry_local(sc, surface_local_prim(sc, prim), u, v, &info);
+    surface_place(surface_instance(sc, prim), &s);
+#else
+    Surface s = surface_geometry_local(sc, prim, u, v, &info);
+#endif
+    s.sh = frame_from(ns);
+    surface_face(sc, &s, dir);
+    return s;
+}
+#endif
 
 /* The opacity test of a path's query: dim is DIM_MASK_CLOSEST or DIM_MASK_SHADOW. */
 static inline AlphaTest scene_alpha(const Scene* sc, RngKey key, int bounce, uint dim) {

@@ -182,7 +182,7 @@ static inline GPU_INLINE vec4 tex_eval4(const Textures* tx, int id, vec2 uv) {
     return v4(c.x * scale.x, c.y * scale.y, c.z * scale.z, c.w);
 }
 
-static inline vec3 tex_eval(const Textures* tx, int id, vec2 uv) { return v4_xyz(tex_eval4(tx, id, uv)); }
+static inline GPU_INLINE vec3 tex_eval(const Textures* tx, int id, vec2 uv) { return v4_xyz(tex_eval4(tx, id, uv)); }
 
 /* The texels a lookup of texture `id` at uv blends, with their weights: tex_eval4's value is
  * scale * sum_k w[k] * texel(at[k]) (before sRGB decoding of 8-bit texels: the weights apply to linear
@@ -241,7 +241,7 @@ static inline TexTaps tex_taps(const Textures* tx, int id, vec2 uv) {
 /* A scalar view of a texture (opacity, bump height): the mean of rgb, as Mitsuba's
  * `eval_1` of an RGB texture. A checkerboard's colours trade places here, as in Mitsuba 3.9's
  * `checkerboard.eval_1` (color1 where `eval` gives color0). */
-static inline float tex_eval1(const Textures* tx, int id, vec2 uv) {
+static inline GPU_INLINE float tex_eval1(const Textures* tx, int id, vec2 uv) {
     __global const float* t = tx->info + TEX_STRIDE * id;
     vec3 c;
     if ((int)t[TEX_KIND] == TEX_CHECKER) {

@@ -58,11 +58,16 @@ class IsaReport:
     failures: list[Failure] = field(default_factory=list)
 
     def worst(self) -> dict[tuple[str, str], KernelCost]:
-        """Per (kernel, target), the variant with the most registers (then the largest stack)."""
+        """Per (kernel, target), the variant with the most registers (then the largest stack, then the most
+        spilled bytes: under a register cap, the variants that reach it are told apart by what they spill)."""
         out: dict[tuple[str, str], KernelCost] = {}
+
+        def size(c: KernelCost) -> tuple[int, int, int]:
+            return c.registers, c.stack, c.spill_stores
+
         for c in self.costs:
             k = (c.kernel, c.target)
-            if k not in out or (c.registers, c.stack) > (out[k].registers, out[k].stack):
+            if k not in out or size(c) > size(out[k]):
                 out[k] = c
         return out
 

@@ -24,10 +24,10 @@ import shutil
 import subprocess
 import sysconfig
 import tempfile
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from pyclpt.device.program import kernel_names
+from pyclpt.device.program import NV_REGISTER_CAP, REGISTER_CAPPED, kernel_names
 from pyclpt.gpu.targets import TARGETS, Target, occupancy, resident_slots, target
 
 log = logging.getLogger("pyclpt.gpu.isa")
@@ -111,6 +111,8 @@ class KernelCost:
     llvm_occupancy: int | None = None  # AMD: LLVM's own figure, for the cross-check
     scenes: tuple[str, ...] = ()   # scenes that build the program (pyclpt.gpu.check)
     options: tuple[str, ...] = ()  # its build options
+    register_cap: int | None = None  # NVIDIA: the cap ptxas was given (register_cap: what the driver gets)
+    uncapped_registers: int | None = None  # ... and the registers ptxas takes without it
 
     @property
     def spills(self) -> bool:
@@ -205,16 +207,31 @@ def front_end(text: str, options: list[str] | tuple[str, ...], t: Target, tc: To
     return (folder / "k.bc").read_bytes()
 
 
+def register_cap(program: str, t: Target) -> int | None:
+    """The register cap the driver of ``t`` builds ``program`` (a .cl file's stem) with: NVIDIA's
+    ``-cl-nv-maxrregcount`` for the programs of REGISTER_CAPPED (pyclpt.device.program.register_cap_options),
+    which ptxas gets as ``--maxrregcount``; None elsewhere."""
+    return NV_REGISTER_CAP if t.vendor == "nvidia" and program in REGISTER_CAPPED else None
+
+
 def back_end(t: Target, tc: Toolchain, folder: Path, what: str, program: str) -> list[KernelCost]:
-    """libclc linked in, optimised, code generated (and for NVIDIA assembled by ptxas) from
-    ``folder/k.bc``: the cost of each kernel."""
+    """libclc linked in, optimised, code generated (and for NVIDIA assembled by ptxas, under the register cap
+    the driver builds ``program`` with: register_cap) from ``folder/k.bc``: the cost of each kernel."""
     d = folder
     _run([tc.llvm_link, str(d / "k.bc"), str(tc.libclc / t.libclc), "-only-needed", "-o", str(d / "l.bc")], what)
     _run([tc.opt, "-O3", str(d / "l.bc"), "-o", str(d / "o.bc")], what)
     if t.vendor == "nvidia":
         _run([tc.llc, *t.llc_args, str(d / "o.bc"), "-o", str(d / "k.ptx")], what)
-        report = _run([tc.ptxas, f"-arch={t.name}", "-v", str(d / "k.ptx"), "-o", str(d / "k.cubin")], what)
-        return parse_ptxas(report, program, t)
+        costs = parse_ptxas(_run([tc.ptxas, f"-arch={t.name}", "-v", str(d / "k.ptx"), "-o", str(d / "k.cubin")], what),
+                            program, t)
+        cap = register_cap(program, t)
+        if cap is None:
+            return costs
+        uncapped = {c.kernel: c.registers for c in costs}
+        report = _run([tc.ptxas, f"-arch={t.name}", "-v", f"--maxrregcount={cap}", str(d / "k.ptx"), "-o",
+                       str(d / "k.cubin")], what)
+        return [replace(c, register_cap=cap, uncapped_registers=uncapped.get(c.kernel))
+                for c in parse_ptxas(report, program, t)]
     _run([tc.llc, *t.llc_args, str(d / "o.bc"), "-o", str(d / "k.s")], what)
     return parse_amdgcn((d / "k.s").read_text(), program, t)
 

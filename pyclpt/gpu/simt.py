@@ -201,11 +201,12 @@ def trace_paths(scene, *, spp: int = 1, max_depth: int | None = None, width: int
 
 # -- the machine and the cost model ---------------------------------------------------------------------
 #: Registers per thread of each kernel on sm_90, the occupancy input: the GPU layout's kernels of the Cornell
-#: box without the G-buffer (`pyclpt gpu-isa`, docs/benchmarks/gpu-isa.json; docs/gpu.md). Scenes with more
-#: material kinds need more (bench/gpu/simt_model.py --isa takes each scene's from a gpu-isa report).
+#: box without the G-buffer (`pyclpt gpu-isa`, docs/benchmarks/gpu-isa.json; docs/gpu.md; process_hit and
+#: sample_bsdf in steps, "The shading stages in steps"; the megakernel and finish_paths without the driver's cap).
+#: Scenes with more material kinds need more (bench/gpu/simt_model.py --isa takes each scene's from a gpu-isa report).
 REGISTERS: dict[str, int] = {
-    "megakernel": 113, "finish_paths": 114, "intersect": 47, "shadow_test": 40, "sample_bsdf": 58,
-    "process_hit": 60, "path_init": 27, "miss": 17, "light_contribution": 20, "compact_count": 19,
+    "megakernel": 113, "finish_paths": 114, "intersect": 47, "shadow_test": 40, "sample_bsdf": 51,
+    "process_hit": 44, "path_init": 27, "miss": 17, "light_contribution": 20, "compact_count": 19,
     "compact_scatter": 30, "compact": 24,  # compact: the scan compaction of the what-if (_scan_compaction)
 }
 #: The same before the GPU layout (the CPU's 8-wide BVH with a 1.5 KB stack), for comparison.
@@ -265,6 +266,8 @@ class CostModel:
     camera: float = 140.0         # camera_path: one draw + the camera ray
     miss: float = 40.0            # path_miss (constant environment, MIS)
     surface: float = 90.0         # surface_hit: vertices, normals, uvs, frame
+    surface_kept: float = 55.0    # surface_hit_shaded: vertices, uvs, the frame of the kept normal (GPU steps)
+    step: float = 6.0             # a step boundary of the GPU's shading stages: the flag store, the entry read again
     emission: float = 25.0        # path_hit_emission (mostly not an emitter)
     bsdf_at: float = 40.0         # the material record (textures not counted)
     nee: float = 200.0            # path_sample_light minus the material: 1 draw (rng_light), light_sample, MIS, spawn
@@ -393,7 +396,8 @@ def _expand(names: tuple[str, ...]) -> list[str]:
 
 
 #: What each wavefront stage reads and writes of the path state, read off cl/integrators/wavefront/*.cl and
-#: wavefront.h (path_load_shading, path_store_ray, path_store_hit, path_store_shadow, path_key), without
+#: wavefront.h (path_load_shading, path_store_ray, path_store_hit, path_store_shadow, path_key, the GPU steps'
+#: path_keep_hit_normal and path_hit_surface), as the GPU layout builds them (-DDEVICE_CLASS_GPU), without
 #: -DAOVS: (predicate, "r"/"w", fields). Predicates: "all" lanes of the queue, "hit" (intersect's hits),
 #: "next" (the depth limit allows light and BSDF sampling), "shadow", "continued", "ended" (sample_bsdf's
 #: paths that end), "env_lit" (shadow_test's unoccluded environment samples, whose contribution it multiplies by
@@ -407,13 +411,15 @@ STAGE_ACCESS: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
     "miss": [("all", "r", ("dir", "beta", "L", "flags", "prev_pdf", "film_slot"))],
     "process_hit": [("all", "r", ("dir", "beta", "L", "flags", "prev_pdf", "hit_prim", "hit_u", "hit_v",
                                   "hit_t")),
-                    ("all", "w", ("L",)),
+                    ("all", "w", ("L", "org")),  # org: the kept shading normal (wavefront.h, path_keep_hit_normal)
                     ("next", "r", ("film_slot",)),
-                    ("shadow", "w", ("shadow_org", "shadow_dir", "shadow_tmax", "shadow_contrib"))],
+                    # the light sample kept in the shadow ray's slots between two steps (the steps' reads of what
+                    # an earlier step wrote or read hit the same lines and are not counted again)
+                    ("next", "w", ("shadow_org", "shadow_dir", "shadow_tmax", "shadow_contrib"))],
     "shadow_test": [("all", "r", ("film_slot", "shadow_org", "shadow_dir", "shadow_tmax")),
                     ("env_lit", "r", ("shadow_contrib",)), ("env_lit", "w", ("shadow_contrib",))],
     "light_contribution": [("all", "r", ("L", "shadow_contrib")), ("all", "w", ("L",))],
-    "sample_bsdf": [("all", "r", ("dir", "beta", "rr_scale", "hit_prim", "hit_u", "hit_v", "film_slot")),
+    "sample_bsdf": [("all", "r", ("dir", "beta", "rr_scale", "hit_prim", "hit_u", "hit_v", "org", "film_slot")),
                     ("continued", "w", ("org", "dir", "beta", "rr_scale", "prev_pdf", "flags", "depth")),
                     ("ended", "r", ("L",))],
 }
@@ -512,15 +518,21 @@ def _stage_terms(stage: str, trace: PathTrace, c: CostModel, b: int, idx: np.nda
         return [("any", v, c.stage + c.key + c.ray_setup), ("max", v, closest)]
     if stage == "miss":
         return [("any", v, c.stage + c.miss + c.commit)]
-    if stage == "process_hit":
-        return [("any", v, c.stage + c.surface + c.emission), ("any", masks["next"], c.key + c.bsdf_at + c.nee),
+    if stage == "process_hit":  # in steps (cl/integrators/wavefront/process_hit.cl, DEVICE_CLASS_GPU): the normal
+        # kept, the emission, the light sample, the textures, the BSDF at it, each on a surface rebuilt from the
+        # kept normal after a step boundary
+        return [("any", v, c.stage + c.surface + c.step + c.surface_kept + c.emission),
+                ("any", masks["next"], c.key + 3 * (c.step + c.surface_kept) + c.bsdf_at + c.nee),
                 ("kinds", masks["next"], (kinds, c.material_eval))]
     if stage == "shadow_test":
         return [("any", v, c.stage + c.key + c.ray_setup), ("max", v, shadow_cost)]
     if stage == "light_contribution":
         return [("any", v, c.stage + c.light_add)]
     if stage == "sample_bsdf":
-        return [("any", v, c.stage + c.key + c.surface + c.bsdf_at), ("any", masks["next"], c.sample),
+        # in steps (sample_bsdf.cl, DEVICE_CLASS_GPU): the textures, the BSDF's sample, the next ray, each on a
+        # surface rebuilt from the kept normal after a step boundary
+        return [("any", v, c.stage + 2 * c.step),
+                ("any", masks["next"], c.key + 3 * c.surface_kept + c.step + c.bsdf_at + c.sample),
                 ("kinds", masks["next"], (kinds, c.material_sample)), ("any", masks["ended"], c.commit)]
     raise ValueError(stage)
 

@@ -70,6 +70,61 @@ static inline int compact_lane_count(__global const uchar* flags, int lo, int hi
 }
 #endif
 
+#ifdef DEVICE_CLASS_GPU
+/* GPUs: the shading stages build a hit's surface in each of their steps (process_hit.cl, sample_bsdf.cl). The first
+ * keeps the shading normal (the vertex normals interpolated, the bump map applied) in the path's ray origin, which
+ * no stage reads between intersect and sample_bsdf's next ray (path_store_ray), and the others take it from there
+ * (surface_hit_shaded): the same surface without the normal's lookups again. Not in scenes with anisotropic
+ * materials, whose frame is more than its normal (uv_frame in scene/scene.h). */
+#ifndef SCENE_HAS_ANISOTROPY
+#define HIT_NORMAL_KEPT 1
+#endif
+
+/* The surface a path in the hit queue hit (its kept normal's, where HIT_NORMAL_KEPT). */
+static inline GPU_INLINE Surface path_hit_surface(const Scene* sc, const PathStore* P, int slot) {
+#ifdef HIT_NORMAL_KEPT
+    return surface_hit_shaded(sc, path_get_hit_prim(P, slot), path_get_hit_u(P, slot), path_get_hit_v(P, slot),
+                              path_get_dir(P, slot), path_get_org(P, slot));
+#else
+    return surface_hit(sc, path_get_hit_prim(P, slot), path_get_hit_u(P, slot), path_get_hit_v(P, slot),
+                       path_get_dir(P, slot));
+#endif
+}
+
+/* The first step of process_hit: the hit's shading normal kept for path_hit_surface. */
+static inline GPU_INLINE void path_keep_hit_normal(const Scene* sc, const PathStore* P, int slot) {
+#ifdef HIT_NORMAL_KEPT
+    Surface s = surface_hit(sc, path_get_hit_prim(P, slot), path_get_hit_u(P, slot), path_get_hit_v(P, slot),
+                            path_get_dir(P, slot));
+    path_set_org(P, slot, s.sh.n);
+#endif
+}
+
+/* A stage's step boundary on GPUs: the work-item's flag cleared (a uchar store, which may alias every buffer, so
+ * that the compiler reads what the next step needs afresh instead of holding it in registers across the step) and
+ * its queue entry read again. The stage stores the flag's value at its end. */
+static inline int queue_reread(__global uchar* flags, __global const int* queue, int i) {
+    flags[i] = 0;
+    return queue[i];
+}
+
+/* The textures of the material a path in the queue hit (bsdf_textures), looked up in a step of their own; *slot is
+ * its queue entry, read again after the step. Without textures (-DSCENE_HAS_TEXTURES unset) nothing. */
+static inline GPU_INLINE BsdfTextures path_hit_textures(const Scene* sc, const PathStore* P, __global uchar* flags,
+                                                        __global const int* queue, int i, int* slot) {
+    BsdfTextures f;
+#ifdef SCENE_HAS_TEXTURES
+    Surface s = path_hit_surface(sc, P, *slot);
+    f = bsdf_textures(sc, &s);
+    *slot = queue_reread(flags, queue, i);
+#else
+    f.color = f.spec = v3_splat(1.0f);
+#endif
+    return f;
+}
+#endif
+
+
 /* The random-number key of the path in a slot: (seed, pixel, sample), from its film slot. */
 static inline RngKey path_key(const PathStore* P, const Scene* sc, int slot, uint seed, uint first_sample) {
     int f = path_get_film_slot(P, slot);

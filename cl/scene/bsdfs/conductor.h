@@ -1,5 +1,5 @@
 /* conductor.h: Mitsuba 3's `conductor` (MAT_CONDUCTOR, src/bsdfs/conductor.cpp): delta reflection
- * weighted by the complex Fresnel reflectance of (b->eta, b->k) times b->spec. Delta only (no
+ * weighted by the complex Fresnel reflectance of (bsdf_eta(b), b->k) times b->spec. Delta only (no
  * eval). One-sided: scene/bsdf.h, which includes this file, calls it with wi.z > 0. */
 #ifndef PYCLPT_BSDFS_CONDUCTOR_H
 #define PYCLPT_BSDFS_CONDUCTOR_H
@@ -11,7 +11,7 @@ static inline bool conductor_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 u
     s->wo = reflect_local(wi);
     s->pdf = 1.0f;
     s->delta = true;
-    s->weight = v3_mul(fresnel_conductor(wi.z, b->eta, b->k), b->spec);
+    s->weight = v3_mul(fresnel_conductor(wi.z, bsdf_eta(b), b->k), b->spec);
     return true;
 }
 

@@ -21,7 +21,7 @@ static inline bool dielectric_sample(const Bsdf* b, vec3 wi, float u_lobe, vec2 
         s->pdf = 1.0f - f;
         s->eta = 1.0f / eta_ti;
         /* radiance is compressed into a smaller solid angle on entering */
-        s->weight = v3_scale(b->trans, eta_ti * eta_ti);
+        s->weight = v3_scale(bsdf_trans(b), eta_ti * eta_ti);
     }
     return s->pdf > 0.0f;
 }

@@ -165,7 +165,7 @@ static inline vec2 beckmann_sample_visible_11(float cos_i, vec2 u) {
 }
 
 /* A visible normal for wi (wi.z > 0), distributed as D(m) G1(wi, m) max(0, wi.m) / wi.z. */
-static inline vec3 mf_sample_visible(Microfacet d, vec3 wi, vec2 u) {
+static inline GPU_INLINE vec3 mf_sample_visible(Microfacet d, vec3 wi, vec2 u) {
     float ay = mf_alpha_v(d);
     vec3 vh = m_normalize(v3(d.alpha * wi.x, ay * wi.y, wi.z));
     vec3 m;

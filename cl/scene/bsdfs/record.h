@@ -67,10 +67,11 @@ typedef __global const float* Material;
 typedef struct {
     int type;
     int flags;
-    vec3 color;    /* diffuse reflectance */
+    vec3 color;    /* the diffuse reflectance (diffuse, plastics); a dielectric's specular transmittance
+                      (bsdf_trans) and a conductor's eta (bsdf_eta) share its place: no material has two of the
+                      three, and a kernel then holds one vec3 for them (mat_color_at) */
     vec3 spec;     /* specular reflectance */
-    vec3 trans;    /* specular transmittance */
-    vec3 eta, k;   /* conductor */
+    vec3 k;        /* conductor */
     float ior;     /* interior / exterior */
     float alpha;   /* roughness (alpha_u of an anisotropic one) */
 #ifdef SCENE_HAS_ANISOTROPY
@@ -88,6 +89,20 @@ typedef struct {
     bool delta;
 } BsdfSample;
 
+static inline bool mat_is_dielectric(int t) {
+    return t == MAT_DIELECTRIC || t == MAT_ROUGHDIELECTRIC || t == MAT_THINDIELECTRIC;
+}
+static inline bool mat_is_conductor(int t) { return t == MAT_CONDUCTOR || t == MAT_ROUGHCONDUCTOR; }
+
+/* Where a material of kind t keeps the parameter of Bsdf.color (its diffuse reflectance, transmittance or eta) in
+ * its record, and the texture that multiplies it (-1: none; a conductor's eta has no texture). */
+static inline int mat_color_at(int t) {
+    return mat_is_dielectric(t) ? MAT_TRANS : mat_is_conductor(t) ? MAT_ETA : MAT_COLOR;
+}
+static inline int mat_color_texture(Material m, int t) {
+    return mat_is_conductor(t) ? -1 : (int)m[mat_is_dielectric(t) ? MAT_TRANS_TEX : MAT_COLOR_TEX];
+}
+
 static inline int mat_type(Material m) { return (int)m[MAT_TYPE]; }
 static inline int mat_flags(Material m) { return (int)m[MAT_FLAGS]; }
 static inline vec3 mat_rgb(Material m, int at, int unit) { return rgb_at(m + at, unit); }
@@ -97,10 +112,8 @@ static inline Bsdf bsdf_from(Material m, int unit) {
     Bsdf b;
     b.type = mat_type(m);
     b.flags = mat_flags(m);
-    b.color = mat_rgb(m, MAT_COLOR, unit);
+    b.color = mat_rgb(m, mat_color_at(b.type), unit);
     b.spec = mat_rgb(m, MAT_SPEC, unit);
-    b.trans = mat_rgb(m, MAT_TRANS, unit);
-    b.eta = mat_rgb(m, MAT_ETA, unit);
     b.k = mat_rgb(m, MAT_K, unit);
     b.ior = m[MAT_IOR];
     b.alpha = m[MAT_ALPHA];
@@ -112,10 +125,15 @@ static inline Bsdf bsdf_from(Material m, int unit) {
     return b;
 }
 
+/* A dielectric's specular transmittance, a conductor's eta (Bsdf.color's place). */
+static inline vec3 bsdf_trans(const Bsdf* b) { return b->color; }
+static inline vec3 bsdf_eta(const Bsdf* b) { return b->color; }
+
 static inline bool bsdf_twosided(const Bsdf* b) { return (b->flags & MAT_FLAG_TWOSIDED) != 0; }
 
 /* A rough dielectric between equal indices: nothing but straight-through transmission. */
-static inline bool bsdf_index_matched(const Bsdf* b) { return m_abs(b->ior - 1.0f) < BSDF_INDEX_MATCHED_EPS; }
+static inline bool ior_index_matched(float ior) { return m_abs(ior - 1.0f) < BSDF_INDEX_MATCHED_EPS; }
+static inline bool bsdf_index_matched(const Bsdf* b) { return ior_index_matched(b->ior); }
 
 /* The microfacet distribution of a rough material (bsdfs/microfacet.h). */
 static inline Microfacet microfacet_of(const Bsdf* b) {

@@ -16,7 +16,7 @@ static inline vec3 roughconductor_eval(const Bsdf* b, vec3 wi, vec3 wo, float* p
     if (dh == 0.0f) return v3_splat(0.0f);
     float g1_i = mf_g1(d, wi, h);
     float g = g1_i * mf_g1(d, wo, h);
-    vec3 f = v3_mul(fresnel_conductor(m_dot(wi, h), b->eta, b->k), b->spec);
+    vec3 f = v3_mul(fresnel_conductor(m_dot(wi, h), bsdf_eta(b), b->k), b->spec);
     /* pdf_visible(h) / (4 wo.h) with wi.h = wo.h */
     *pdf = dh * g1_i / (4.0f * wi.z);
     return v3_scale(f, dh * g / (4.0f * wi.z));
@@ -29,7 +29,7 @@ static inline bool roughconductor_sample(const Bsdf* b, vec3 wi, float u_lobe, v
     s->wo = v3_sub(v3_scale(h, 2.0f * m_dot(wi, h)), wi);
     if (s->wo.z <= 0.0f) return false;
     s->pdf = mf_pdf_visible(d, wi, h) / (4.0f * m_dot(s->wo, h));
-    vec3 f = v3_mul(fresnel_conductor(m_dot(wi, h), b->eta, b->k), b->spec);
+    vec3 f = v3_mul(fresnel_conductor(m_dot(wi, h), bsdf_eta(b), b->k), b->spec);
     /* with visible-normal sampling, weight = F * G1(wo) */
     s->weight = v3_scale(f, mf_g1(d, s->wo, h));
     return true;

@@ -40,7 +40,7 @@ static inline vec3 roughdielectric_eval(const Bsdf* b, vec3 wi, vec3 wo, float* 
     float denom = wi_m + eta * wo_m;
     float denom2 = denom * denom;
     *pdf = prob * (1.0f - f) * (eta * eta * m_abs(wo_m) / denom2);
-    return v3_scale(b->trans, (1.0f - f) * dm * g1_i * g1_o * m_abs(wi_m * wo_m) / (aci * denom2));
+    return v3_scale(bsdf_trans(b), (1.0f - f) * dm * g1_i * g1_o * m_abs(wi_m * wo_m) / (aci * denom2));
 }
 
 /* A visible normal of wi's side, then reflection with probability F(wi.m), else refraction
@@ -52,7 +52,7 @@ static inline bool roughdielectric_sample(const Bsdf* b, vec3 wi, float u_lobe, 
         s->wo = v3_neg(wi);
         s->pdf = 1.0f;
         s->delta = true;
-        s->weight = b->trans;
+        s->weight = bsdf_trans(b);
         return true;
     }
     Microfacet d = microfacet_of(b);
@@ -75,7 +75,7 @@ static inline bool roughdielectric_sample(const Bsdf* b, vec3 wi, float u_lobe, 
         float denom = wi_m + eta * wo_m;
         s->pdf = pdf_m * (1.0f - f) * (eta * eta * m_abs(wo_m) / (denom * denom));
         s->eta = eta;
-        s->weight = v3_scale(b->trans, eta_ti * eta_ti);
+        s->weight = v3_scale(bsdf_trans(b), eta_ti * eta_ti);
     }
     float g1_o = mf_g1(d, s->wo, m);
     if (g1_o == 0.0f) return false; /* wo on the wrong side of the macrosurface */

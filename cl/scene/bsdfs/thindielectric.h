@@ -21,7 +21,7 @@ static inline bool thindielectric_sample(const Bsdf* b, vec3 wi, float u_lobe, v
     } else {
         s->wo = v3_neg(wi);
         s->pdf = 1.0f - r;
-        s->weight = b->trans;
+        s->weight = bsdf_trans(b);
     }
     return s->pdf > 0.0f;
 }
