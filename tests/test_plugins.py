@@ -24,7 +24,7 @@ def _bsdf_h() -> str:
 
 
 def _function_body(text: str, name: str) -> str:
-    start = re.search(rf"static inline \w+ {name}\(", text)
+    start = re.search(rf"static inline (?:GPU_INLINE )?\w+ {name}\(", text)
     assert start, name
     return text[start.start():text.index("\n}\n", start.start())]
 
