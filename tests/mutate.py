@@ -495,7 +495,8 @@ MUTANTS: list[Mutant] = [
            "an instanced anisotropic material's tangent frame rebuilt from the normal, not turned with it",
            after="Surface s = surface_local(sc, surface_local_prim(sc, prim), u, v);"),
     # the GPU's shading stages in steps (docs/gpu.md, "The shading stages in steps"), run on PoCL with the GPU layout
-    Mutant("gpu-kept-normal-unwritten", "    path_set_org(P, slot, s.sh.n);", "    (void)s;", (T_GPU_STEPS,),
+    Mutant("gpu-kept-normal-unwritten", "    path_set_org(P, slot, path_hit_surface_whole(sc, P, slot).sh.n);",
+           "    (void)P;", (T_GPU_STEPS,),
            "the wavefront's GPU steps rebuild the surface from a shading normal that was never kept"),
     Mutant("gpu-textures-not-applied", "    b.color = v3_mul(b.color, f.color);", "    (void)f;", (T_GPU_STEPS,),
            "the GPU steps' material without its looked-up texture (the diffuse reflectance or transmittance)",

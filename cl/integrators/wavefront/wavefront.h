@@ -80,23 +80,26 @@ static inline int compact_lane_count(__global const uchar* flags, int lo, int hi
 #define HIT_NORMAL_KEPT 1
 #endif
 
+/* The surface a path in the hit queue hit, built whole (surface_hit). */
+static inline GPU_INLINE Surface path_hit_surface_whole(const Scene* sc, const PathStore* P, int slot) {
+    return surface_hit(sc, path_get_hit_prim(P, slot), path_get_hit_u(P, slot), path_get_hit_v(P, slot),
+                       path_get_dir(P, slot));
+}
+
 /* The surface a path in the hit queue hit (its kept normal's, where HIT_NORMAL_KEPT). */
 static inline GPU_INLINE Surface path_hit_surface(const Scene* sc, const PathStore* P, int slot) {
 #ifdef HIT_NORMAL_KEPT
     return surface_hit_shaded(sc, path_get_hit_prim(P, slot), path_get_hit_u(P, slot), path_get_hit_v(P, slot),
                               path_get_dir(P, slot), path_get_org(P, slot));
 #else
-    return surface_hit(sc, path_get_hit_prim(P, slot), path_get_hit_u(P, slot), path_get_hit_v(P, slot),
-                       path_get_dir(P, slot));
+    return path_hit_surface_whole(sc, P, slot);
 #endif
 }
 
 /* The first step of process_hit: the hit's shading normal kept for path_hit_surface. */
 static inline GPU_INLINE void path_keep_hit_normal(const Scene* sc, const PathStore* P, int slot) {
 #ifdef HIT_NORMAL_KEPT
-    Surface s = surface_hit(sc, path_get_hit_prim(P, slot), path_get_hit_u(P, slot), path_get_hit_v(P, slot),
-                            path_get_dir(P, slot));
-    path_set_org(P, slot, s.sh.n);
+    path_set_org(P, slot, path_hit_surface_whole(sc, P, slot).sh.n);
 #endif
 }
 
@@ -123,7 +126,6 @@ static inline GPU_INLINE BsdfTextures path_hit_textures(const Scene* sc, const P
     return f;
 }
 #endif
-
 
 /* The random-number key of the path in a slot: (seed, pixel, sample), from its film slot. */
 static inline RngKey path_key(const PathStore* P, const Scene* sc, int slot, uint seed, uint first_sample) {
