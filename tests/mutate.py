@@ -59,6 +59,8 @@ T_BACK_BLACK = "tests/test_analytic.py::test_camera_behind_an_area_light_sees_it
 T_GLASS_INSIDE = "tests/test_analytic.py::test_camera_inside_glass_sphere_sees_eta_squared"
 T_FURNACE = "tests/test_render.py::test_interior_furnace"
 T_GPU_STEPS = "tests/test_gpu_layout.py::test_gpu_shading_steps_give_the_megakernels_image_and_gbuffer"
+T_PIPELINED = "tests/test_wavefront.py::test_pipelined_schedule_waits_on_no_bounce"
+T_SIMT_GPU_BUILD = "tests/test_simt.py::test_the_gpu_builds_compaction_and_schedule"
 T_ROULETTE = "tests/test_wavefront.py::test_roulette_keeps_paths_by_their_throughput_relative_to_the_first_bounce"
 T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
 T_GRAD_FD = "tests/test_gradients.py::test_backward_matches_finite_differences"
@@ -503,6 +505,15 @@ MUTANTS: list[Mutant] = [
            after="static inline GPU_INLINE Bsdf bsdf_textured("),
     Mutant("gpu-light-delta-sign-lost", "n.ls.delta = pdf < 0.0f;", "n.ls.delta = false;", (T_GPU_STEPS,),
            "the GPU steps forget that the kept light sample was a delta light's (MIS against BSDF sampling)"),
+    Mutant("pipelined-bound-is-the-expected-count",
+           "        return last, max(1, last * last // max(1, before)) if last else 0",
+           "        return max(1, last * last // max(1, before)) if last else 0, last", (T_PIPELINED,),
+           "the pipelined schedule launches a bounce over the count it expects, which can be below the real one",
+           root="host"),
+    Mutant("simt-exit-warps-free", "        return np.full(max(0, -(-launched // width) - -(-size // width)), c.exit)",
+           "        return np.zeros(0)", (T_SIMT_GPU_BUILD,),
+           "the SIMT model launches each stage over its own queue, not the bounce's bound as Wavefront does",
+           root="host"),
 ]
 
 

@@ -181,3 +181,47 @@ def test_synthetic_trace_with_equal_work_has_full_lanes():
     assert p.utilisation["megakernel"]["megakernel"] == pytest.approx(1.0)
     assert p.utilisation["wavefront_soa"]["intersect"] == pytest.approx(1.0)
     assert p.utilisation["wavefront_soa"]["miss"] == pytest.approx(1.0)
+
+
+def test_the_gpu_builds_compaction_and_schedule():
+    """The GPU class's compaction (a work-group of 256 lanes a block of 1,024 entries, each lane 4 entries) and
+    the pipelined schedule (launches over the bounce before's ray count, the lanes past a queue exiting), as
+    Wavefront runs them: hand-counted warps, the exit warps idle, no readback priced."""
+    from pyclpt.gpu.simt import CostModel, _compaction, _expected_rays, _group_compaction, wavefront_work
+
+    c = CostModel()
+    count, scatter = _group_compaction(5 * 1024, c, 32, launched=8 * 1024)
+    # 5 blocks of 256 lanes (40 warps, every lane 4 entries) and 3 launched blocks past the queue (24 warps)
+    assert count.warp.size == scatter.warp.size == 40 + 24
+    assert np.all(count.lane[:40] > 0) and np.all(count.lane[40:] == 0) and np.all(count.warp[40:] == c.exit)
+    assert count.warp[0] == c.stage + 4 * c.compact_flag + 8 * c.group_scan_step  # a scan of 256 lanes: 8 steps
+    # a lane of block k sums its share of the k earlier blocks' counts: more work in later blocks
+    assert scatter.warp[39] == scatter.warp[0] + c.compact_block
+    # on a GPU the group's longest warp is a few entries long, the CPU's one work-item a block 1,024
+    assert count.warp.max() * 20 < _compaction(5 * 1024, c, 32)[0].warp.max()
+
+    n, bounces = 32, 4
+    alive = [32, 16, 8, 4]
+    flags = np.zeros((bounces, n), np.int32)
+    for b, k in enumerate(alive):
+        flags[b, :k] = ALIVE | (HIT if b < bounces - 1 else 0)
+    zeros = np.zeros((bounces, n), np.int32)
+    tr = PathTrace(flags, np.full((bounces, n), -1, np.int16), np.full((bounces, n), 3, np.int32), zeros, zeros,
+                   zeros, max_depth=bounces)
+    readback, _ = wavefront_work(tr, c, "soa", width=4, compaction="group")
+    pipelined, _ = wavefront_work(tr, c, "soa", width=4, compaction="group", schedule="pipelined")
+    # intersect's warps of 4 lanes per bounce: the queue's (readback), the bound's (pipelined: the wave at bounces
+    # 0 and 1, then the count of the bounce before)
+    assert [w.warp.size for w in readback["intersect"]] == [8, 4, 2, 1]
+    assert [w.warp.size for w in pipelined["intersect"]] == [8, 8, 4, 2]
+    assert np.all(pipelined["intersect"][1].warp[4:] == c.exit) and np.all(pipelined["intersect"][1].lane[4:] == 0)
+    # the tail's test under pipelined: the count of the bounce before times the ratio of the two before
+    counts = np.array(alive)
+    assert [_expected_rays(counts, b, "pipelined", n) for b in range(4)] == [32, 32, 8, 4]
+    assert [_expected_rays(counts, b, "readback", n) for b in range(4)] == alive
+    p = simulate(tr, wavefronts={"r": {"compaction": "group"}, "p": {"compaction": "group", "schedule": "pipelined"}})
+    # the host waits for none of the four bounces' counts; the exit warps cost a little
+    saved = p.times_ms["r"] - p.times_ms["p"]
+    assert 0 < saved <= 4 * c.readback_us / 1e3 and saved == pytest.approx(4 * c.readback_us / 1e3, rel=0.05)
+    with pytest.raises(ValueError, match="unknown schedule 'eager'"):
+        wavefront_work(tr, c, "soa", schedule="eager")

@@ -24,7 +24,7 @@ from scenes import interior_furnace, material_zoo, sensor
 
 def render(scene, **kw):
     r = pyclpt.Renderer(scene, **{k: kw.pop(k) for k in list(kw) if k in (
-        "integrator", "layout", "max_depth", "width", "height", "wave_size", "device", "tail_paths")})
+        "integrator", "layout", "max_depth", "width", "height", "wave_size", "device", "tail_paths", "schedule")})
     img = r.render(kw.pop("spp"), seed=kw.pop("seed", 0), progress=False)
     return img, r
 
@@ -84,7 +84,7 @@ def test_repeat_runs_are_bit_identical(cornell_box):
     assert np.array_equal(a, b)
 
 
-@pytest.mark.parametrize("schedule", ["readback", "capacity"])
+@pytest.mark.parametrize("schedule", ["readback", "pipelined", "capacity"])
 def test_queue_conservation(cornell_box, schedule):
     """Every path ends exactly once; counts add up at every bounce (every bounce through the queues:
     tail_paths=0)."""
@@ -134,7 +134,7 @@ def test_every_pixel_is_committed_once_per_sample(cornell_box):
 
 
 @pytest.mark.parametrize("name, max_depth", [("cornell-box", 6), ("cornell-bunny", 8)])
-@pytest.mark.parametrize("schedule", ["readback", "capacity"])
+@pytest.mark.parametrize("schedule", ["readback", "pipelined", "capacity"])
 def test_queue_counts_equal_those_of_the_megakernels_paths(name, max_depth, schedule, shared_scenes):
     """The order-preserving compaction routes the paths the megakernel follows: each bounce's rays, hits, misses,
     shadow rays and unoccluded ones over three waves equal the counts of the instrumented megakernel's trace of
@@ -384,6 +384,34 @@ def test_finish_paths_gives_the_megakernels_image(cornell_box, tail_paths, each_
     assert (len(tails) > 0) == (tail_paths > 0)
     if tail_paths == 10_000:
         assert r.stats.bounces[1]["tail"] == r.stats.bounces[1]["rays"]  # all of them from bounce 1
+
+
+@pytest.mark.parametrize("tail_paths", [0, 40, 10_000])
+def test_pipelined_schedule_waits_on_no_bounce(cornell_box, tail_paths, monkeypatch, each_device):
+    """The pipelined schedule sizes bounce b by bounce b - 1's ray count, read without blocking while bounce
+    b - 1's launches queue behind it: the host never waits for a bounce's own count, and the image is the
+    megakernel's bit for bit, in several waves, with the tail from the second bounce, later or never (its test
+    on the count expected from the two bounces before)."""
+    from pyclpt.integrators.wavefront import Wavefront
+
+    kw = dict(spp=3, max_depth=-1, width=24, height=24, seed=7, device=each_device, wave_size=700)
+    mega, _ = render(cornell_box, integrator="megakernel", **dict(kw))
+    blocking = []
+    read_count = Wavefront._read_count
+    monkeypatch.setattr(Wavefront, "_read_count", lambda self, *a: blocking.append(a) or read_count(self, *a))
+    wave, r = render(cornell_box, integrator="wavefront", schedule="pipelined", tail_paths=tail_paths, **dict(kw))
+    assert r.integrator.schedule == "pipelined" and blocking == []
+    np.testing.assert_array_equal(wave, mega)
+    rows = r.stats.bounces
+    assert rows[0]["rays"] == 24 * 24 * 3
+    tails = {b: row["tail"] for b, row in enumerate(rows) if row["tail"]}
+    assert (len(tails) > 0) == (tail_paths > 0)
+    if tail_paths == 10_000:  # every wave's n paths bound the second bounce: the tail takes them all there
+        assert tails == {1: rows[1]["rays"]}
+    if tail_paths == 40:  # never before the third bounce: the first two are sized by the wave
+        assert min(tails) >= 2
+    ended = sum(row["misses"] + row["hits"] - nxt["rays"] for row, nxt in zip(rows, [*rows[1:], {"rays": 0}]))
+    assert ended + sum(tails.values()) == 24 * 24 * 3
 
 
 def test_every_path_ends_once_with_a_tail(cornell_box):

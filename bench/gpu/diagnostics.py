@@ -86,7 +86,8 @@ def _frame_times(r: pyclpt.Renderer, frames: int) -> dict[str, float]:
     return {"wall_ms": 1e3 * float(np.median(walls)), "device_ms": float(np.median(devices))}
 
 
-VARIANTS = (("megakernel", {}), ("wavefront", {}), ("wavefront", {"tail_paths": 1 << 16}),
+VARIANTS = (("megakernel", {}), ("wavefront", {}), ("wavefront", {"schedule": "pipelined"}),
+            ("wavefront", {"tail_paths": 1 << 16}),
             ("wavefront", {"tail_paths": 1 << 13}), ("wavefront", {"tail_paths": 0}),
             ("wavefront", {"layout": "aos"}), ("wavefront", {"wave_size": 1 << 18}))
 

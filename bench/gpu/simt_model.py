@@ -39,6 +39,10 @@ VARIANTS = {
     "soa_scan": {"layout": "soa", "compaction": "scan"},        # a GPU's one-launch scan compaction
     "aos_scan": {"layout": "aos", "compaction": "scan"},
     "soa_scan_queue": {"layout": "soa", "compaction": "scan", "indexing": "queue"},  # state moved with the queue
+    # pyclpt as a GPU runs it: the GPU class's work-group compaction and the tail (readback schedule)
+    "soa_gpu": {"layout": "soa", "compaction": "group", "tail": 0.25},
+    "aos_gpu": {"layout": "aos", "compaction": "group", "tail": 0.25},
+    "soa_gpu_pipelined": {"layout": "soa", "compaction": "group", "tail": 0.25, "schedule": "pipelined"},
 }
 SENSITIVITY = {  # name: (CostModel changes, Gpu changes)
     "default": ({}, {}),
@@ -73,6 +77,8 @@ def speedups(p) -> dict[str, float]:
         out["soa_vs_aos"] = _r(p.times_ms["aos"] / p.times_ms["soa"])
     if "soa_scan" in p.times_ms and "aos_scan" in p.times_ms:
         out["soa_scan_vs_aos_scan"] = _r(p.times_ms["aos_scan"] / p.times_ms["soa_scan"])
+    if "soa_gpu" in p.times_ms and "aos_gpu" in p.times_ms:
+        out["soa_gpu_vs_aos_gpu"] = _r(p.times_ms["aos_gpu"] / p.times_ms["soa_gpu"])
     return out
 
 
@@ -156,8 +162,11 @@ def main() -> None:
             if not a.no_sensitivity:
                 sens = {}
                 for label, (cchg, gchg) in SENSITIVITY.items():
-                    p = simulate(tr, target_slots=target, cost=CostModel(**cchg), gpu=Gpu(**gchg),
-                                 wavefronts={k: VARIANTS[k] for k in ("soa", "aos", "soa_scan", "aos_scan")})
+                    changed = Gpu(**gchg)
+                    p = simulate(tr, target_slots=target, cost=CostModel(**cchg), gpu=changed,
+                                 occupancy=changed.occupancy(regs),
+                                 wavefronts={k: VARIANTS[k] for k in ("soa", "aos", "soa_scan", "aos_scan", "soa_gpu",
+                                                                      "aos_gpu")})
                     sens[label] = speedups(p)
                 res["sensitivity"] = sens
             entry["depths"][str(d)] = res
@@ -182,8 +191,9 @@ def print_tables(out: dict, rows: list) -> None:
     print("\nPredicted speed-up over the megakernel (megakernel time / wavefront time; warps of 32), beside the "
           "paper's (Table 1 at depth 3: FPS ratios; Fig. 6 at depth 64: 5.8-8.6x SoA, over its 11 scenes)\n")
     print("| scene | depth | paper AoS | paper SoA | AoS | SoA | SoA + tail | AoS, scan | SoA, scan | SoA, scan, "
-          "queue-indexed | SoA/AoS (scan) | megakernel lane util. |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "queue-indexed | SoA/AoS (scan) | GPU build: SoA | GPU build: AoS | GPU build: SoA, pipelined | "
+          "megakernel lane util. |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, d, res in rows:
         s = res["width32"]["speedups"]
         paper = out["paper"]["table1_fps"].get(name)
@@ -195,7 +205,8 @@ def print_tables(out: dict, rows: list) -> None:
             pa = ps = ""
         u = res["width32"]["utilisation"]["megakernel"]["megakernel"]
         print(f"| {name} | {d} | {pa} | {ps} | {s['aos']} | {s['soa']} | {s['soa_tail']} | {s['aos_scan']} | "
-              f"{s['soa_scan']} | {s['soa_scan_queue']} | {s['soa_scan_vs_aos_scan']} | {u:.2f} |")
+              f"{s['soa_scan']} | {s['soa_scan_queue']} | {s['soa_scan_vs_aos_scan']} | {s['soa_gpu']} | "
+              f"{s['aos_gpu']} | {s['soa_gpu_pipelined']} | {u:.2f} |")
     print("\nLane utilisation per kernel (warps of 32 / wavefronts of 64), SoA, pyclpt's compaction\n")
     stages = ["intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf"]
     print("| scene | depth | megakernel | " + " | ".join(stages) + " |")
@@ -211,20 +222,22 @@ def print_tables(out: dict, rows: list) -> None:
     for name, entry in out["scenes"].items():
         if "sweep" in entry:
             print(f"\nDepth sweep (Fig. 7 analog), {name}: predicted speed-up over the megakernel\n")
-            print("| depth | megakernel ms | SoA | AoS | SoA, scan | AoS, scan | SoA + tail |")
-            print("|---|---|---|---|---|---|---|")
+            print("| depth | megakernel ms | SoA | AoS | SoA, scan | AoS, scan | SoA + tail | GPU build: SoA |")
+            print("|---|---|---|---|---|---|---|---|")
             for d, v in entry["sweep"].items():
                 s = v["speedups"]
                 print(f"| {d} | {v['times_ms']['megakernel']} | {s['soa']} | {s['aos']} | {s['soa_scan']} | "
-                      f"{s['aos_scan']} | {s['soa_tail']} |")
+                      f"{s['aos_scan']} | {s['soa_tail']} | {s['soa_gpu']} |")
     sens_rows = [(n, d, r["sensitivity"]) for n, d, r in rows if "sensitivity" in r]
     if sens_rows:
         labels = list(sens_rows[0][2])
-        print("\nSensitivity: SoA (scan compaction) speed-up over the megakernel under each change\n")
-        print("| scene | depth | " + " | ".join(labels) + " |")
-        print("|---|---|" + "---|" * len(labels))
-        for n, d, s in sens_rows:
-            print(f"| {n} | {d} | " + " | ".join(str(s[k]["soa_scan"]) for k in labels) + " |")
+        for key, what in (("soa_gpu", "the GPU build's SoA (work-group compaction, tail)"),
+                          ("soa_scan", "SoA with the scan compaction")):
+            print(f"\nSensitivity: {what}, speed-up over the megakernel under each change\n")
+            print("| scene | depth | " + " | ".join(labels) + " |")
+            print("|---|---|" + "---|" * len(labels))
+            for n, d, s in sens_rows:
+                print(f"| {n} | {d} | " + " | ".join(str(s[k][key]) for k in labels) + " |")
 
 
 if __name__ == "__main__":

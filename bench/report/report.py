@@ -601,8 +601,8 @@ def build_document(res: dict, figures: dict[str, str]) -> Document:
         "The Fig. 6 analog renders the spp count with each method after its frames, as up to 4 render calls "
         "(consecutive sample ranges, together the same samples as one call) interleaved across the methods; "
         "the calls' times are summed.",
-        "Wavefront: default wave size and `readback` schedule; megakernel: one work-item per path. Both use "
-        "work-groups of 64.",
+        "Wavefront: the device's default wave size and the `readback` schedule; megakernel: one work-item per "
+        "path. Both use work-groups of 64.",
         "On a shared machine the load average above says how noisy the run was.",
     ]))
     doc.add(Heading(1, "Raw results"))

@@ -1,5 +1,6 @@
 """Which wavefront scheduling, wave size and work-group size? readback (SoA 0.78x of the megakernel, capacity
-0.71x), work-groups of 64 (16, 256: 2-15% slower), waves of 2^18, 2^16-2^20 alike (docs/wavefront.md, "Measured").
+0.71x; pipelined: docs/wavefront.md, "Scheduling"), work-groups of 64 (16, 256: 2-15% slower), waves of 2^18,
+2^16-2^20 alike (docs/wavefront.md, "Measured").
 
 Wavefront tuning on this device: scheduling, wave size and work-group size, all in one run.
 
@@ -34,7 +35,7 @@ def main() -> None:
     for ls in (16, 64, 256):
         variants.append((f"megakernel local {ls}", {"integrator": "megakernel", "local_size": ls}))
     for layout in ("aos", "soa"):
-        for schedule in ("readback", "capacity"):
+        for schedule in ("readback", "pipelined", "capacity"):
             for ls in (16, 64, 256):
                 variants.append((f"wavefront {layout} {schedule} local {ls}",
                                  {"integrator": "wavefront", "layout": layout, "schedule": schedule,

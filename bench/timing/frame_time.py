@@ -8,7 +8,7 @@ first-launch compilation) and scene setup are excluded and reported apart. Times
 are medians over --repeats frames after one warm-up frame, with min and max; the
 device time is the sum of the kernels' OpenCL profiling events. The wavefront's
 per-kernel profile and per-bounce queue sizes are printed for the SoA layout.
-Also compares the wavefront's scheduling (readback vs capacity) and wave sizes.
+Also compares the wavefront's scheduling (readback, pipelined, capacity) and wave sizes.
 """
 from __future__ import annotations
 
@@ -73,7 +73,7 @@ def main() -> None:
         depth = max(a.depths)
         print(f"| variant (wavefront-soa, depth {depth}) | median ms | device ms |")
         print("|---|---|---|")
-        for schedule in ("readback", "capacity"):
+        for schedule in ("readback", "pipelined", "capacity"):
             for wave in (1 << 16, 1 << 18, 1 << 20):
                 r = pyclpt.Renderer(scene, integrator="wavefront", layout="soa", max_depth=depth,
                                     width=a.size, height=a.size, device=dev, wave_size=wave)

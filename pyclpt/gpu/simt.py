@@ -47,6 +47,7 @@ from pyclpt.device.program import build_program
 from pyclpt.gpu.targets import resident_slots, target
 from pyclpt.integrators.megakernel import MEGAKERNEL_LAUNCH, Megakernel
 from pyclpt.integrators.path_state import FIELDS
+from pyclpt.integrators.wavefront import COMPACT_BLOCK, COMPACT_GROUP
 
 # -- the trace -------------------------------------------------------------------------------------
 # word 0's flags, as PATH_TRACE_* in cl/integrators/path.h
@@ -283,9 +284,12 @@ class CostModel:
     compact_entry: float = 6.0    # compact_scatter: per entry copied
     compact_block: float = 2.0    # compact_scatter: per earlier block's count summed
     scan: float = 30.0            # a GPU scan compaction per entry: ballot, popcount, look-back, store
+    group_scan_step: float = 8.0  # a step of the GPU class's work-group scan (compact_group_scan): load, add,
+    #                               two barriers, store, per lane; log2(COMPACT_GROUP) steps a scan
     warps_to_hide: float = 32.0   # resident warps per SM at which memory latency is hidden
     launch_us: float = 4.0        # per kernel launch, back to back in one queue
     readback_us: float = 15.0     # the host's read of the ray count before each bounce (readback schedule)
+    exit: float = 8.0             # a lane past its queue's count: id, the count's load, compare, return
 
     def hiding(self, warps: float) -> float:
         """Fraction of the SM's issue rate reached with ``warps`` resident warps: min(1, warps / warps_to_hide)."""
@@ -570,6 +574,38 @@ def _compaction(n: float, c: CostModel, width: int, line_bytes: int = 128, block
     return out[0], out[1]
 
 
+def _group_compaction(n: float, c: CostModel, width: int, line_bytes: int = 128, block: int = COMPACT_BLOCK,
+                      group: int = COMPACT_GROUP, launched: float = 0.0) -> tuple[Work, Work]:
+    """The GPU class's order-preserving compaction of n entries (``-DCOMPACT_GROUP``: compact_count and
+    compact_scatter with a work-group of ``group`` lanes a block of ``block`` entries, each lane owning
+    block / group consecutive entries): the count's lanes load their flags and scan the group's counts; the
+    scatter's lanes first sum the earlier blocks' counts (strided, then a scan), scan again for their own
+    offsets and copy their entries. Launched over ``launched`` entries (the bounce's bound), the work-groups
+    past the queue's blocks exit at once (``c.exit`` a warp)."""
+    per_lane = block // group
+    lanes = max(1, math.ceil(n / per_lane))
+    blocks = max(1, math.ceil(n / block))
+    warps = -(-lanes // width)
+    lane = np.arange(warps * width)
+    entries = np.clip(n - lane * per_lane, 0, per_lane).astype(float)
+    valid = (entries > 0).reshape(warps, width)
+    own_block = lane // group
+    steps = math.log2(group)
+    scan = c.group_scan_step * steps
+    count_lane = c.stage + c.compact_flag * entries + scan
+    earlier = np.ceil(own_block / group)  # the strided sum: a lane's share of the earlier blocks
+    scatter_lane = c.stage + c.compact_block * earlier + 2 * scan + (c.compact_flag + c.compact_entry) * entries
+    counts_read = 4 * blocks * (blocks - 1) / 2  # each block's group reads the earlier blocks' counts
+    idle = max(0, math.ceil(launched / block) - (blocks if n > 0 else 0)) * -(-group // width)
+    out = []
+    for per, lns in ((count_lane, (n + 4 * blocks) / line_bytes),
+                     (scatter_lane, (n + 4 * n + 4 * n + counts_read) / line_bytes)):
+        w, l_ = warp_cost([("max", valid, per.reshape(warps, width))], valid)
+        w, l_ = np.concatenate([w, np.full(idle, c.exit)]), np.concatenate([l_, np.zeros(idle)])
+        out.append(Work(w, l_, lines=lns, requests=lns, launches=1, width=width))
+    return out[0], out[1]
+
+
 def _scan_compaction(n: float, c: CostModel, width: int, moved_words: int = 0, line_bytes: int = 128) -> Work:
     """A GPU's order-preserving compaction of n entries in one launch (a warp-ballot prefix sum per warp and
     a decoupled look-back across warps: every entry one lane, ``c.scan`` instructions), moving
@@ -584,26 +620,37 @@ def _scan_compaction(n: float, c: CostModel, width: int, moved_words: int = 0, l
 
 def wavefront_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: int = 32, line_bytes: int = 128,
                    scale: float = 1.0, tail_from: int | None = None, compaction: str = "ordered",
-                   indexing: str = "slot") -> tuple[dict[str, list[Work]], dict]:
+                   indexing: str = "slot", schedule: str = "readback") -> tuple[dict[str, list[Work]], dict]:
     """The wavefront's launches: {kernel: [Work per launch]} and per bounce {stage: utilisation, queue
     sizes}. Stages run over their ordered queues (the trace's subsets in slot order); the path state is
     indexed by slot, as the stages do (``path_get_*(&P, slot)``). ``scale`` multiplies the queue sizes
     for the compaction (a traced wave standing for a larger one). ``tail_from``: from that bounce on the
     paths go to finish_paths (a megakernel loop over the queue's paths), as pyclpt's tail does.
-    ``compaction``: "ordered" (pyclpt's compact_count + compact_scatter, 4 pairs a bounce) or "scan" (a
-    GPU's one-launch scan, :func:`_scan_compaction`). ``indexing``: "slot" (pyclpt: state at the path's
-    slot) or "queue" (what if: the state moved with its queue, at the queue position, so a warp's
-    lanes read consecutive entries; the scan then moves every continuing path's record once a bounce)."""
-    if compaction not in ("ordered", "scan"):
-        raise ValueError(f"unknown compaction {compaction!r} (ordered, scan)")
+    ``compaction``: "ordered" (pyclpt's compact_count + compact_scatter on CPUs, a work-item a block of 1,024
+    entries, 4 pairs a bounce), "group" (the same pair as the GPU class builds it, a work-group of 256 lanes a
+    block: :func:`_group_compaction`) or "scan" (a GPU's one-launch scan, :func:`_scan_compaction`).
+    ``indexing``: "slot" (pyclpt: state at the path's slot) or "queue" (what if: the state moved with its
+    queue, at the queue position, so a warp's lanes read consecutive entries; the scan then moves every
+    continuing path's record once a bounce). ``schedule``: "readback" (each bounce's launches sized by its ray
+    count) or "pipelined" (by the ray count of the bounce before, from the third bounce; the wave's before:
+    the lanes past a queue's count exit, ``c.exit`` each; :class:`pyclpt.integrators.wavefront.Wavefront`)."""
+    if compaction not in ("ordered", "group", "scan"):
+        raise ValueError(f"unknown compaction {compaction!r} (ordered, group, scan)")
+    if schedule not in ("readback", "pipelined"):
+        raise ValueError(f"unknown schedule {schedule!r} (readback, pipelined)")
     if indexing not in ("slot", "queue"):
         raise ValueError(f"unknown indexing {indexing!r} (slot, queue)")
     launches: dict[str, list[Work]] = {s: [] for s in (*WAVEFRONT_STAGES, "compact", "finish_paths")}
     per_bounce: list[dict] = []
 
+    def exiting(size: int, launched: int) -> np.ndarray:
+        """The warps of a launch over ``launched`` lanes that hold none of the queue's ``size`` entries."""
+        return np.full(max(0, -(-launched // width) - -(-size // width)), c.exit)
+
     def run(stage: str, b: int, slots: np.ndarray) -> None:
+        idle = exiting(slots.size, bound)
         if slots.size == 0:  # launched all the same (readback: every stage over the ray count), all exit
-            launches[stage].append(Work(np.zeros(0), np.zeros(0), launches=1, width=width))
+            launches[stage].append(Work(idle, np.zeros(idle.size), launches=1, width=width))
             return
         idx, valid = _pack(slots, width)
         masks = _queue_masks(trace, b, idx, valid)
@@ -611,22 +658,29 @@ def wavefront_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: i
         where = idx if indexing == "slot" else _pack(np.arange(slots.size), width)[0]
         lines, requests = state_traffic(where, masks, STAGE_ACCESS[stage], layout, line_bytes)
         ql, qr = _queue_traffic(slots.size, width, line_bytes)
-        work = Work(warp + requests + qr, lane, lines=float(lines.sum() + ql.sum()),
-                    requests=float(requests.sum() + qr.sum()), launches=1, width=width,
-                    compute_issue=float(warp.sum()))
+        work = Work(np.concatenate([warp + requests + qr, idle]), np.concatenate([lane, np.zeros(idle.size)]),
+                    lines=float(lines.sum() + ql.sum()), requests=float(requests.sum() + qr.sum()), launches=1,
+                    width=width, compute_issue=float(warp.sum()))
         launches[stage].append(work)
         row[stage] = work.utilisation(work.compute)
 
     all_slots = np.arange(trace.slots)
     row: dict = {}
+    bound = trace.slots  # the pipelined schedule's launch size: the wave, then the ray count of the bounce before
     run("path_init", 0, all_slots)
+    alive = [int(np.count_nonzero(trace.flags[b] & ALIVE)) for b in range(trace.bounces)]
     for b in range(trace.bounces):
         f = trace.flags[b]
         rays = np.flatnonzero(f & ALIVE)
-        if rays.size == 0:
+        # every stage and compaction of a bounce is launched over the bound (Wavefront.bounce): the ray count
+        # (readback), or the ray count of the bounce before (pipelined; the wave's for the first two)
+        bound = rays.size if schedule == "readback" else trace.slots if b < 2 else alive[b - 1]
+        if bound == 0:
             break
         row = {"bounce": b, "rays": int(rays.size)}
-        if tail_from is not None and b >= tail_from:
+        if tail_from is not None and b >= tail_from:  # finish_paths over the bound: its lanes past the rays exit
+            if rays.size == 0:
+                break
             work, _ = megakernel_work(trace, c, width, rays, first_bounce=b)
             launches["finish_paths"].append(work)
             row["finish_paths"] = work.utilisation(work.compute)
@@ -645,8 +699,11 @@ def wavefront_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: i
         run("sample_bsdf", b, hits)
         # the four compactions of a bounce (wavefront.py: Wavefront.bounce), sized by their source queues
         for k, n in enumerate((rays.size, hits.size, shadows.size, hits.size)):
-            if compaction == "ordered":
-                cc, cs = _compaction(n * scale, c, width, line_bytes)
+            if compaction in ("ordered", "group"):
+                if compaction == "ordered":
+                    cc, cs = _compaction(n * scale, c, width, line_bytes)
+                else:
+                    cc, cs = _group_compaction(n * scale, c, width, line_bytes, launched=bound * scale)
                 launches["compact_count"].append(cc)
                 launches["compact_scatter"].append(cs)
             else:
@@ -679,6 +736,18 @@ def kernel_time_us(work: Work, occupancy: float, gpu: Gpu, c: CostModel, scale: 
     critical = work.warp.max() * max(c.warps_to_hide, per_sm) / gpu.schedulers / clock
     return {"issue_us": issue, "memory_us": memory, "critical_us": critical,
             "time_us": max(issue, memory, critical) + c.launch_us}
+
+
+def _expected_rays(counts: np.ndarray, b: int, schedule: str, n: int) -> int:
+    """The ray count the host expects at bounce ``b`` for the tail's test (Wavefront.render_frames): the count
+    itself (readback), or under the pipelined schedule the count of the bounce before times the ratio of the two
+    before (``n``, the wave, at bounces 0 and 1: Wavefront._pipelined_bound)."""
+    if schedule == "readback":
+        return int(counts[b])
+    if b < 2:
+        return n
+    last, before = int(counts[b - 1]), int(counts[b - 2]) if b > 2 else n
+    return max(1, last * last // max(1, before)) if last else 0
 
 
 #: The wavefront variants :func:`simulate` predicts by default.
@@ -745,8 +814,10 @@ def simulate(trace: PathTrace, *, width: int = 32, occupancy: dict[str, float] |
     for name, opts in (WAVEFRONTS if wavefronts is None else wavefronts).items():
         opts = dict(opts)
         tail = opts.pop("tail", None)
+        # from the first bounce after 0 whose expected ray count is at most the tail's paths (Wavefront.render_frames)
         tail_from = None if not tail else next(
-            (b for b in range(1, len(counts)) if 0 < counts[b] <= tail * trace.slots), None)
+            (b for b in range(1, len(counts)) if 0 < _expected_rays(counts, b, opts.get("schedule", "readback"),
+                                                                   trace.slots) <= tail * trace.slots), None)
         launches, info = wavefront_work(trace, c, opts.pop("layout", "soa"), width, gpu.line_bytes, scale, tail_from,
                                         **opts)
         total_us = 0.0
@@ -769,7 +840,8 @@ def simulate(trace: PathTrace, *, width: int = 32, occupancy: dict[str, float] |
             ls[stage] = float(sum(w.lines for w in works)) * (1.0 if compaction else scale)
             ls[stage + ":requests"] = float(sum(w.requests for w in works)) * (1.0 if compaction else scale)
         bounces = len(info["bounces"])
-        total_us += bounces * c.readback_us
+        if opts.get("schedule", "readback") == "readback":  # pipelined: the host reads behind the device
+            total_us += bounces * c.readback_us
         times[name] = total_us / 1e3
         kernels[name] = ks
         util[name] = us

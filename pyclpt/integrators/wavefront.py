@@ -44,7 +44,7 @@ COMPACT_BLOCK = 1024  # queue entries per work-item of the compaction (-DCOMPACT
 COMPACT_GROUP = 256
 # six int queues and one flag byte per path
 QUEUE_BYTES_PER_PATH = 6 * 4 + 1
-SCHEDULES = ("readback", "capacity")
+SCHEDULES = ("readback", "pipelined", "capacity")
 DEFAULT_WAVE_SIZE = 1 << 18
 #: GPUs: a wave holds a whole 1920x1080 frame. Every wave pays each stage's launch (about 15-100 us of host
 #: time on NVIDIA's OpenCL, docs/gpu.md) and its tail's latency, and a GPU needs ~10^5 paths in flight to
@@ -82,7 +82,7 @@ class Wavefront:
         self.max_depth, self.layout, self.schedule = max_depth, layout, schedule
         self.local_size = local_size
         self.capacity = min(wave_size, film.pixels * film.batch)
-        # paths left at which finish_paths takes over (the readback schedule; 0: never)
+        # paths left at which finish_paths takes over (the readback and pipelined schedules; 0: never)
         self.tail_paths = self.capacity // TAIL_FRACTION if tail_paths is None else int(tail_paths)
         if self.tail_paths < 0:
             raise ValueError(f"tail_paths must be >= 0, got {tail_paths}")
@@ -113,6 +113,9 @@ class Wavefront:
         self._tail_alive = np.zeros(max_depth + 2, np.int32)
         fill_buffer(device.queue, self.tail_counts, np.int32(0), 0, self._tail_alive.nbytes)
         self._counts = np.zeros((max_depth + 2, Q_COUNT), np.int32)
+        # the pipelined schedule: each bounce's ray count, read without blocking, and the reads' events
+        self._ray_counts = np.zeros(max_depth + 2, np.int32)
+        self._ray_reads: list[cl.Event | None] = []
         self._args_set: dict[str, tuple] = {}  # per stage, the arguments its kernel holds (_set_args)
 
     @property
@@ -271,27 +274,37 @@ class Wavefront:
             fill_buffer(q, self.counters, np.int32(0), 0, self._counts.nbytes)
             self.path_init(n, seed, first_sample, offset)
             rays = n if self.max_depth != 0 else 0
+            self._ray_reads = [None] * (self.max_depth + 2)
+            tail_bounce = -1
             for bounce in range(self.max_depth):
-                if self.schedule == "readback":
-                    rays = self._read_count(bounce, 0)
-                    if rays == 0:
-                        break
-                    if bounce > 0 and rays <= self.tail_paths:
-                        self.finish_paths(rays, bounce, seed, first_sample)
-                        self._tail_totals[bounce] += rays
-                        cl.enqueue_copy(q, self._tail_alive, self.tail_counts)
-                        fill_buffer(q, self.tail_counts, np.int32(0), 0, self._tail_alive.nbytes)
-                        self._tail_alive_totals += self._tail_alive
-                        break
-                else:
+                if self.schedule == "capacity":
                     # launch at capacity; kernels read their counts on the device. The host
                     # looks at the ray count only every CAPACITY_CHECK bounces to stop early.
                     rays = n
                     if bounce and bounce % CAPACITY_CHECK == 0 and self._read_count(bounce, 0) == 0:
                         break
+                else:
+                    # readback: this bounce's ray count; pipelined: a bound (_pipelined_bound)
+                    if self.schedule == "readback":
+                        rays = expected = self._read_count(bounce, Q_RAY)
+                    else:
+                        rays, expected = self._pipelined_bound(bounce, n)
+                    if rays == 0:
+                        break
+                    if bounce > 0 and expected <= self.tail_paths:
+                        self.finish_paths(rays, bounce, seed, first_sample)
+                        tail_bounce = bounce
+                        cl.enqueue_copy(q, self._tail_alive, self.tail_counts)
+                        fill_buffer(q, self.tail_counts, np.int32(0), 0, self._tail_alive.nbytes)
+                        self._tail_alive_totals += self._tail_alive
+                        break
                 self.bounce(rays, bounce, seed, first_sample)
+                if self.schedule == "pipelined":
+                    self._start_ray_count(bounce + 1)
             cl.enqueue_copy(q, self._counts, self.counters)
             self._bounce_totals += self._counts
+            if tail_bounce >= 0:  # the paths finish_paths took: that bounce's ray count
+                self._tail_totals[tail_bounce] += self._counts[tail_bounce, Q_RAY]
         self.film.count_dropped(frames)
 
     def _read_count(self, bounce: int, queue: int) -> int:
@@ -299,6 +312,34 @@ class Wavefront:
         cl.enqueue_copy(self.device.queue, out, self.counters,
                         src_offset=4 * (bounce * Q_COUNT + queue))
         return int(out[0])
+
+    def _pipelined_bound(self, bounce: int, n: int) -> tuple[int, int]:
+        """The pipelined schedule's launch size for ``bounce`` and the ray count it expects there (for the tail's
+        test): the ray count of the bounce before, an upper bound (queues only shrink) whose read was queued
+        ahead of the bounce before's launches, and that count times the ratio of the two bounces before (the
+        wave's ``n`` paths at bounces 0 and 1)."""
+        if bounce < 2:
+            return n, n
+        last = self._await_ray_count(bounce - 1)
+        before = int(self._ray_counts[bounce - 2]) if bounce > 2 else n
+        return last, max(1, last * last // max(1, before)) if last else 0
+
+    def _start_ray_count(self, bounce: int) -> None:
+        """Start reading the ray count of ``bounce`` (written by the last compaction of the bounce before)
+        without waiting for it, and submit what is queued, so the device runs on while the host goes on."""
+        self._ray_reads[bounce] = cl.enqueue_copy(self.device.queue, self._ray_counts[bounce:bounce + 1],
+                                                  self.counters, src_offset=4 * (bounce * Q_COUNT + Q_RAY),
+                                                  is_blocking=False)
+        self.device.queue.flush()
+
+    def _await_ray_count(self, bounce: int) -> int:
+        """The ray count of ``bounce`` from its read started by :meth:`_start_ray_count`, waiting for it: the
+        launches of ``bounce`` were queued behind it, so the device has work while the host waits."""
+        event = self._ray_reads[bounce]
+        if event is None:
+            raise RuntimeError(f"no read of bounce {bounce}'s ray count was started")
+        event.wait()
+        return int(self._ray_counts[bounce])
 
     def bounce_stats(self) -> list[dict[str, int]]:
         """Per bounce since the last reset: paths alive (rays), hits, misses, shadow rays, unoccluded, and
