@@ -47,7 +47,7 @@ from pyclpt.device.program import build_program
 from pyclpt.gpu.targets import resident_slots, target
 from pyclpt.integrators.megakernel import MEGAKERNEL_LAUNCH, Megakernel
 from pyclpt.integrators.path_state import FIELDS
-from pyclpt.integrators.wavefront import COMPACT_BLOCK, COMPACT_GROUP
+from pyclpt.integrators.wavefront import COMPACT_BLOCK, COMPACT_GROUP, expected_rays
 
 # -- the trace -------------------------------------------------------------------------------------
 # word 0's flags, as PATH_TRACE_* in cl/integrators/path.h
@@ -668,13 +668,13 @@ def wavefront_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: i
     row: dict = {}
     bound = trace.slots  # the pipelined schedule's launch size: the wave, then the ray count of the bounce before
     run("path_init", 0, all_slots)
-    alive = [int(np.count_nonzero(trace.flags[b] & ALIVE)) for b in range(trace.bounces)]
+    alive = trace.alive_counts()
     for b in range(trace.bounces):
         f = trace.flags[b]
         rays = np.flatnonzero(f & ALIVE)
         # every stage and compaction of a bounce is launched over the bound (Wavefront.bounce): the ray count
         # (readback), or the ray count of the bounce before (pipelined; the wave's for the first two)
-        bound = rays.size if schedule == "readback" else trace.slots if b < 2 else alive[b - 1]
+        bound = rays.size if schedule == "readback" else trace.slots if b < 2 else int(alive[b - 1])
         if bound == 0:
             break
         row = {"bounce": b, "rays": int(rays.size)}
@@ -746,8 +746,7 @@ def _expected_rays(counts: np.ndarray, b: int, schedule: str, n: int) -> int:
         return int(counts[b])
     if b < 2:
         return n
-    last, before = int(counts[b - 1]), int(counts[b - 2]) if b > 2 else n
-    return max(1, last * last // max(1, before)) if last else 0
+    return expected_rays(int(counts[b - 1]), int(counts[b - 2]) if b > 2 else n)
 
 
 #: The wavefront variants :func:`simulate` predicts by default.

@@ -55,6 +55,13 @@ CAPACITY_CHECK = 4
 TAIL_FRACTION = 4  # default tail_paths: a quarter of the wave (docs/wavefront.md, "The tail")
 
 
+def expected_rays(last: int, before: int) -> int:
+    """The pipelined schedule's guess at a bounce's ray count, for the tail's test: the last bounce's count
+    ``last`` times the ratio of the two bounces before (``before``: the count of the bounce before the last);
+    0 only when no ray is left."""
+    return max(1, last * last // max(1, before)) if last else 0
+
+
 def default_wave_size(device: Device) -> int:
     """The wave size a renderer uses on ``device`` when none is given: DEFAULT_WAVE_SIZE on a CPU,
     GPU_WAVE_SIZE on other devices unless an eighth of their memory (or their largest buffer, the AoS
@@ -322,7 +329,7 @@ class Wavefront:
             return n, n
         last = self._await_ray_count(bounce - 1)
         before = int(self._ray_counts[bounce - 2]) if bounce > 2 else n
-        return last, max(1, last * last // max(1, before)) if last else 0
+        return last, expected_rays(last, before)
 
     def _start_ray_count(self, bounce: int) -> None:
         """Start reading the ray count of ``bounce`` (written by the last compaction of the bounce before)
