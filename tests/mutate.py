@@ -605,7 +605,7 @@ def check_copy_is_used(tree: Path, env: dict[str, str]) -> None:
 
 def run_pytest(tree: Path, env: dict[str, str], tests: tuple[str, ...], timeout: float) -> tuple[str, str, float]:
     """('passed' | 'failed' | 'error' | 'timeout', first failing test or a hint, seconds)."""
-    cmd = [sys.executable, "-m", "pytest", "-n", "0", "-x", "-q", "-p", "no:cacheprovider", "-p", "no:randomly",
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-p", "no:randomly",
            "--no-header", "-rfE", *tests]
     t0 = time.perf_counter()
     try:
