@@ -25,6 +25,15 @@ from pyclpt.common import env  # noqa: E402
 from pyclpt.device.context import DeviceError  # noqa: E402
 from pyclpt.scene.library import scenes_root  # noqa: E402
 
+#: Test files started first: pytest-xdist (``--dist loadfile``, setup.cfg) runs each file whole in one worker, handing
+#: files out in collection order, and the GPU ISA check's fixture (minutes of compiling) started last would keep one
+#: worker busy long after the other has finished.
+FIRST_FILES = ("test_gpu_isa.py",)
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    items.sort(key=lambda item: item.path.name not in FIRST_FILES)  # stable: the files' own order otherwise
+
 
 @pytest.fixture(scope="session")
 def device() -> pyclpt.Device:

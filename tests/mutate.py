@@ -60,6 +60,7 @@ T_GLASS_INSIDE = "tests/test_analytic.py::test_camera_inside_glass_sphere_sees_e
 T_FURNACE = "tests/test_render.py::test_interior_furnace"
 T_GPU_STEPS = "tests/test_gpu_layout.py::test_gpu_shading_steps_give_the_megakernels_image_and_gbuffer"
 T_PIPELINED = "tests/test_wavefront.py::test_pipelined_schedule_waits_on_no_bounce"
+T_SIMT_REGENERATION = "tests/test_simt.py::test_regeneration_keeps_the_pool_full_in_slot_order"
 T_SIMT_GPU_BUILD = "tests/test_simt.py::test_the_gpu_builds_compaction_and_schedule"
 T_ROULETTE = "tests/test_wavefront.py::test_roulette_keeps_paths_by_their_throughput_relative_to_the_first_bounce"
 T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
@@ -510,10 +511,15 @@ MUTANTS: list[Mutant] = [
            "        return expected_rays(last, before), last", (T_PIPELINED,),
            "the pipelined schedule launches a bounce over the count it expects, which can be below the real one",
            root="host"),
-    Mutant("simt-exit-warps-free", "        return np.full(max(0, -(-launched // width) - -(-size // width)), c.exit)",
-           "        return np.zeros(0)", (T_SIMT_GPU_BUILD,),
+    Mutant("simt-exit-warps-free",
+           "    idle = np.full(max(0, -(-launched // width) - -(-slots.size // width)), c.exit)",
+           "    idle = np.zeros(0)", (T_SIMT_GPU_BUILD,),
            "the SIMT model launches each stage over its own queue, not the bounce's bound as Wavefront does",
            root="host"),
+    Mutant("simt-regeneration-queue-unsorted", "        queue = np.sort(np.concatenate([queue[going], new]))",
+           "        queue = np.concatenate([queue[going], new])", (T_SIMT_REGENERATION,),
+           "the regeneration design's ray queue keeps the new paths after the continuing ones, its order mixing "
+           "bounce after bounce", root="host"),
 ]
 
 
@@ -605,7 +611,7 @@ def check_copy_is_used(tree: Path, env: dict[str, str]) -> None:
 
 def run_pytest(tree: Path, env: dict[str, str], tests: tuple[str, ...], timeout: float) -> tuple[str, str, float]:
     """('passed' | 'failed' | 'error' | 'timeout', first failing test or a hint, seconds)."""
-    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-p", "no:randomly",
+    cmd = [sys.executable, "-m", "pytest", "-n", "0", "-x", "-q", "-p", "no:cacheprovider", "-p", "no:randomly",
            "--no-header", "-rfE", *tests]
     t0 = time.perf_counter()
     try:

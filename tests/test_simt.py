@@ -10,6 +10,7 @@ import pyclpt
 from pyclpt.gpu.simt import (
     ALIVE,
     COMPONENTS,
+    CONTINUED,
     ENV_LIT,
     HIT,
     LIT,
@@ -225,3 +226,45 @@ def test_the_gpu_builds_compaction_and_schedule():
     assert 0 < saved <= 4 * c.readback_us / 1e3 and saved == pytest.approx(4 * c.readback_us / 1e3, rel=0.05)
     with pytest.raises(ValueError, match="unknown schedule 'eager'"):
         wavefront_work(tr, c, "soa", schedule="eager")
+
+
+def _lengths_trace(lengths: list[int], bounces: int) -> PathTrace:
+    """Paths that each trace ``lengths[i]`` rays, each hitting, the last one ending the path."""
+    n = len(lengths)
+    flags = np.zeros((bounces, n), np.int32)
+    for p, k in enumerate(lengths):
+        flags[:k - 1, p] = ALIVE | HIT | CONTINUED
+        flags[k - 1, p] = ALIVE | HIT
+    zeros = np.zeros((bounces, n), np.int32)
+    return PathTrace(flags, np.full((bounces, n), -1, np.int16), np.full((bounces, n), 3, np.int32), zeros, zeros,
+                     zeros, max_depth=bounces)
+
+
+def test_regeneration_keeps_the_pool_full_in_slot_order():
+    """The regeneration design (regenerating_work): every step runs a bounce of every slot of the pool while the
+    stream lasts, ended paths replaced by the stream's next ones and the ray queue in slot order; only the steps
+    after the pool's first turn-over are priced, with the paths that ended in them."""
+    from pyclpt.gpu.simt import CostModel, regenerating_work
+
+    c = CostModel()
+    one = _lengths_trace([1] * 16, 2)  # every path a single ray: the whole pool is replaced each step
+    launches, info = regenerating_work(one, c, "soa", width=4, pool=4, passes=3)
+    assert [s["rays"] for s in info["steps"]] == [4] * 11 and [s["new"] for s in info["steps"]] == [4] * 11
+    assert info["window"] == (1, 11) and info["paths"] == 40  # 48 paths, the first pool's 4 and 4 more unpriced
+    assert len(launches["intersect"]) == len(launches["path_init"]) == 10
+    assert all(w.warp.size == 1 and w.utilisation(w.compute) == 1.0 for w in launches["intersect"])
+    # 3 compactions between the stages, 2 over the pool (its free slots, its live ones) a step
+    assert len(launches["compact_count"]) == 5 * 10
+
+    mixed = _lengths_trace([1, 3] * 64, 3)
+    launches, info = regenerating_work(mixed, c, "soa", width=8, pool=64, passes=4)
+    first, end = info["window"]
+    assert all(s["rays"] == 64 for s in info["steps"])  # full while the stream lasts
+    assert sum(s["ended"] for s in info["steps"][first:end]) == info["paths"]
+    # the ray queue is the pool in slot order: a warp's 8 lanes read each component from one 128-byte line
+    assert {w.lines for w in launches["intersect"]} == {launches["intersect"][0].lines}
+    p = simulate(mixed, wavefronts={"slots": {"layout": "soa", "tail": 0.25},
+                                    "regen": {"layout": "soa", "regenerate": 0.5, "passes": 4}})
+    assert np.isfinite(p.times_ms["regen"]) and p.times_ms["regen"] > 0
+    with pytest.raises(ValueError, match="pool must be 1..128"):
+        regenerating_work(mixed, c, pool=129)

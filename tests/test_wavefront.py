@@ -511,3 +511,14 @@ def test_launches_set_only_the_arguments_that_changed(cornell_box, monkeypatch):
     # against a fresh renderer (every argument set once): the same image
     fresh = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=3, width=16, height=16, tail_paths=0)
     assert np.array_equal(fresh.render(1, seed=4, progress=False), other)
+
+
+def test_the_compaction_is_one_program_for_every_scene(cornell_box):
+    """compact_count and compact_scatter know queues only (cl/integrators/wavefront/compact.h): built with the block
+    size alone, every scene and film shares their program, while the stages get the scene's specialisation."""
+    box = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=3, width=8, height=8).integrator
+    zoo = pyclpt.Renderer(material_zoo(4), integrator="wavefront", layout="aos", max_depth=5, width=12, height=8,
+                          aovs=True).integrator
+    for stage in ("compact_count", "compact_scatter"):
+        assert box.kernels[stage].program.int_ptr == zoo.kernels[stage].program.int_ptr, stage
+    assert box.kernels["process_hit"].program.int_ptr != zoo.kernels["process_hit"].program.int_ptr

@@ -44,6 +44,13 @@ VARIANTS = {
     "aos_gpu": {"layout": "aos", "compaction": "group", "tail": 0.25},
     "soa_gpu_pipelined": {"layout": "soa", "compaction": "group", "tail": 0.25, "schedule": "pipelined"},
 }
+# A design ahead of the code, at the deepest depth and warps of 32 only (the paper's Fig. 6 renders 1,024 spp):
+# the wavefront regenerating paths into a pool of a GPU wave's slots (pyclpt.gpu.simt.regenerating_work), priced
+# per path in a render of many samples per pixel.
+REGENERATION = {
+    "soa_regen": {"layout": "soa", "regenerate": 0.25, "passes": 4},
+    "aos_regen": {"layout": "aos", "regenerate": 0.25, "passes": 4},
+}
 SENSITIVITY = {  # name: (CostModel changes, Gpu changes)
     "default": ({}, {}),
     "hide@16 warps": ({"warps_to_hide": 16}, {}),
@@ -79,6 +86,8 @@ def speedups(p) -> dict[str, float]:
         out["soa_scan_vs_aos_scan"] = _r(p.times_ms["aos_scan"] / p.times_ms["soa_scan"])
     if "soa_gpu" in p.times_ms and "aos_gpu" in p.times_ms:
         out["soa_gpu_vs_aos_gpu"] = _r(p.times_ms["aos_gpu"] / p.times_ms["soa_gpu"])
+    if "soa_regen" in p.times_ms and "aos_regen" in p.times_ms:
+        out["soa_regen_vs_aos_regen"] = _r(p.times_ms["aos_regen"] / p.times_ms["soa_regen"])
     return out
 
 
@@ -129,7 +138,8 @@ def main() -> None:
     gpu, cost = Gpu(), CostModel()
     out = {"settings": {"size": [w, h], "target": [tw, th], "spp": a.spp, "depths": a.depths, "seed": a.seed,
                         "traced_depth": deepest, "gpu": asdict(gpu), "cost": asdict(cost), "registers": REGISTERS,
-                        "occupancy": gpu.occupancy(), "variants": VARIANTS, "git": git_revision()},
+                        "occupancy": gpu.occupancy(), "variants": VARIANTS, "regeneration": REGENERATION,
+                        "git": git_revision()},
            "paper": {"table1_fps": PAPER_TABLE1, "fig6": PAPER_FIG6}, "scenes": {}, "skipped": {}}
     t_all = time.perf_counter()
     rows = []
@@ -151,7 +161,8 @@ def main() -> None:
             regs = isa_registers(isa, scene.name)
             entry["registers"] = regs
             for width in (32, 64):
-                p = simulate(tr, width=width, target_slots=target, wavefronts=VARIANTS, occupancy=gpu.occupancy(regs))
+                variants = {**VARIANTS, **REGENERATION} if width == 32 and d == max(a.depths) else VARIANTS
+                p = simulate(tr, width=width, target_slots=target, wavefronts=variants, occupancy=gpu.occupancy(regs))
                 res[f"width{width}"] = {
                     "times_ms": {k: _r(v, 3) for k, v in p.times_ms.items()}, "speedups": speedups(p),
                     "utilisation": {k: {s: _r(u, 3) for s, u in v.items()} for k, v in p.utilisation.items()},
@@ -192,8 +203,8 @@ def print_tables(out: dict, rows: list) -> None:
           "paper's (Table 1 at depth 3: FPS ratios; Fig. 6 at depth 64: 5.8-8.6x SoA, over its 11 scenes)\n")
     print("| scene | depth | paper AoS | paper SoA | AoS | SoA | SoA + tail | AoS, scan | SoA, scan | SoA, scan, "
           "queue-indexed | SoA/AoS (scan) | GPU build: SoA | GPU build: AoS | GPU build: SoA, pipelined | "
-          "megakernel lane util. |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "regeneration, many spp: SoA | regeneration: AoS | megakernel lane util. |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, d, res in rows:
         s = res["width32"]["speedups"]
         paper = out["paper"]["table1_fps"].get(name)
@@ -206,7 +217,8 @@ def print_tables(out: dict, rows: list) -> None:
         u = res["width32"]["utilisation"]["megakernel"]["megakernel"]
         print(f"| {name} | {d} | {pa} | {ps} | {s['aos']} | {s['soa']} | {s['soa_tail']} | {s['aos_scan']} | "
               f"{s['soa_scan']} | {s['soa_scan_queue']} | {s['soa_scan_vs_aos_scan']} | {s['soa_gpu']} | "
-              f"{s['aos_gpu']} | {s['soa_gpu_pipelined']} | {u:.2f} |")
+              f"{s['aos_gpu']} | {s['soa_gpu_pipelined']} | {s.get('soa_regen', '')} | {s.get('aos_regen', '')} | "
+              f"{u:.2f} |")
     print("\nLane utilisation per kernel (warps of 32 / wavefronts of 64), SoA, pyclpt's compaction\n")
     stages = ["intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf"]
     print("| scene | depth | megakernel | " + " | ".join(stages) + " |")

@@ -86,12 +86,14 @@ class IsaReport:
 
 
 def check_programs(programs: Sequence[tuple[ProgramSource, list[str]]], targets: Iterable[str | Target] = TARGETS,
-                   *, jobs: int | None = None, toolchain: Toolchain | None = None) -> IsaReport:
+                   *, jobs: int | None = None, toolchain: Toolchain | None = None,
+                   uncapped: bool = True) -> IsaReport:
     """Compile ``programs`` (collect_programs' list) for ``targets``; an IsaReport of every kernel.
 
     Every program goes through the target's front end; programs whose optimised bitcode is the same
     (a define that a stage never reads, another scene with the same specialisation) are linked, code
-    generated and assembled once."""
+    generated and assembled once. ``uncapped``: also assemble the programs NVIDIA's driver builds under a register
+    cap without it (:func:`pyclpt.gpu.isa.back_end`)."""
     tc = toolchain or find_toolchain()
     ts = [target(t) if isinstance(t, str) else t for t in targets]
     if any(t.vendor == "nvidia" for t in ts) and tc.ptxas is None:
@@ -128,7 +130,7 @@ def check_programs(programs: Sequence[tuple[ProgramSource, list[str]]], targets:
             p, names = programs[i]
             what = f"{p.label} for {t.name}"
             try:
-                costs = check_kernels(back_end(t, tc, folder(i, t), what, p.label), p.text, what)
+                costs = check_kernels(back_end(t, tc, folder(i, t), what, p.label, uncapped=uncapped), p.text, what)
                 return [replace(c, scenes=tuple(names), options=tuple(gpu_options(p.options))) for c in costs], None
             except IsaCompileError as exc:
                 return [], Failure(p.label, t.name, list(names), list(p.options), str(exc))

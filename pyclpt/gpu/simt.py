@@ -47,7 +47,7 @@ from pyclpt.device.program import build_program
 from pyclpt.gpu.targets import resident_slots, target
 from pyclpt.integrators.megakernel import MEGAKERNEL_LAUNCH, Megakernel
 from pyclpt.integrators.path_state import FIELDS
-from pyclpt.integrators.wavefront import COMPACT_BLOCK, COMPACT_GROUP, expected_rays
+from pyclpt.integrators.wavefront import COMPACT_BLOCK, COMPACT_GROUP, GPU_WAVE_SIZE, expected_rays
 
 # -- the trace -------------------------------------------------------------------------------------
 # word 0's flags, as PATH_TRACE_* in cl/integrators/path.h
@@ -460,8 +460,8 @@ def state_traffic(index: np.ndarray, masks: dict[str, np.ndarray], accesses, lay
 
 # -- the two integrators, warp by warp ---------------------------------------------------------------------
 def _lane_steps(trace: PathTrace, c: CostModel, b: int, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    closest = trace.closest_nodes[b][idx] * c.node + trace.closest_prims[b][idx] * c.prim
-    shadow = trace.shadow_nodes[b][idx] * c.node + trace.shadow_prims[b][idx] * c.prim
+    closest = trace.closest_nodes[b, idx] * c.node + trace.closest_prims[b, idx] * c.prim
+    shadow = trace.shadow_nodes[b, idx] * c.node + trace.shadow_prims[b, idx] * c.prim
     return closest, shadow
 
 
@@ -506,7 +506,7 @@ def megakernel_work(trace: PathTrace, c: CostModel, width: int = 32, slots: np.n
 
 
 def _queue_masks(trace: PathTrace, b: int, idx: np.ndarray, valid: np.ndarray) -> dict[str, np.ndarray]:
-    f = trace.flags[b][idx]
+    f = trace.flags[b, idx]
     hit, cont = (f & HIT) != 0, (f & CONTINUED) != 0
     return {"all": valid, "hit": valid & hit, "next": valid & ((f & NEXT) != 0), "shadow": valid & ((f & SHADOW) != 0),
             "continued": valid & cont, "ended": valid & hit & ~cont, "env_lit": valid & ((f & ENV_LIT) != 0)}
@@ -515,7 +515,7 @@ def _queue_masks(trace: PathTrace, b: int, idx: np.ndarray, valid: np.ndarray) -
 def _stage_terms(stage: str, trace: PathTrace, c: CostModel, b: int, idx: np.ndarray, masks: dict) -> list[tuple]:
     v = masks["all"]
     closest, shadow_cost = _lane_steps(trace, c, b, idx)
-    kinds = trace.material[b][idx]
+    kinds = trace.material[b, idx]
     if stage == "path_init":
         return [("any", v, c.stage + c.camera)]
     if stage == "intersect":
@@ -618,6 +618,27 @@ def _scan_compaction(n: float, c: CostModel, width: int, moved_words: int = 0, l
     return Work(w, l_, lines=lines, requests=lines, launches=1, width=width)
 
 
+def _stage_work(stage: str, trace: PathTrace, c: CostModel, slots: np.ndarray, bounce, paths: np.ndarray,
+                layout: str, width: int, line_bytes: int, launched: int, where: np.ndarray | None = None) -> Work:
+    """One launch of a wavefront stage over the queue ``slots`` (the path-state slots, in queue order) holding the
+    traced ``paths`` at ``bounce`` (an int, or one per entry), launched over ``launched`` lanes: the warps past the
+    queue exit (``c.exit`` each). ``where``: the state's index when it is not the slot (the queue-indexed what-if)."""
+    idle = np.full(max(0, -(-launched // width) - -(-slots.size // width)), c.exit)
+    if slots.size == 0:  # launched all the same (readback: every stage over the ray count), all exit
+        return Work(idle, np.zeros(idle.size), launches=1, width=width)
+    idx, valid = _pack(slots, width)
+    pidx = idx if paths is slots else _pack(paths, width)[0]
+    b = bounce if np.isscalar(bounce) else _pack(np.asarray(bounce), width)[0]
+    masks = _queue_masks(trace, b, pidx, valid)
+    warp, lane = warp_cost(_stage_terms(stage, trace, c, b, pidx, masks), valid)
+    lines, requests = state_traffic(idx if where is None else _pack(where, width)[0], masks, STAGE_ACCESS[stage],
+                                    layout, line_bytes)
+    ql, qr = _queue_traffic(slots.size, width, line_bytes)
+    return Work(np.concatenate([warp + requests + qr, idle]), np.concatenate([lane, np.zeros(idle.size)]),
+                lines=float(lines.sum() + ql.sum()), requests=float(requests.sum() + qr.sum()), launches=1,
+                width=width, compute_issue=float(warp.sum()))
+
+
 def wavefront_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: int = 32, line_bytes: int = 128,
                    scale: float = 1.0, tail_from: int | None = None, compaction: str = "ordered",
                    indexing: str = "slot", schedule: str = "readback") -> tuple[dict[str, list[Work]], dict]:
@@ -643,26 +664,12 @@ def wavefront_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: i
     launches: dict[str, list[Work]] = {s: [] for s in (*WAVEFRONT_STAGES, "compact", "finish_paths")}
     per_bounce: list[dict] = []
 
-    def exiting(size: int, launched: int) -> np.ndarray:
-        """The warps of a launch over ``launched`` lanes that hold none of the queue's ``size`` entries."""
-        return np.full(max(0, -(-launched // width) - -(-size // width)), c.exit)
-
     def run(stage: str, b: int, slots: np.ndarray) -> None:
-        idle = exiting(slots.size, bound)
-        if slots.size == 0:  # launched all the same (readback: every stage over the ray count), all exit
-            launches[stage].append(Work(idle, np.zeros(idle.size), launches=1, width=width))
-            return
-        idx, valid = _pack(slots, width)
-        masks = _queue_masks(trace, b, idx, valid)
-        warp, lane = warp_cost(_stage_terms(stage, trace, c, b, idx, masks), valid)
-        where = idx if indexing == "slot" else _pack(np.arange(slots.size), width)[0]
-        lines, requests = state_traffic(where, masks, STAGE_ACCESS[stage], layout, line_bytes)
-        ql, qr = _queue_traffic(slots.size, width, line_bytes)
-        work = Work(np.concatenate([warp + requests + qr, idle]), np.concatenate([lane, np.zeros(idle.size)]),
-                    lines=float(lines.sum() + ql.sum()), requests=float(requests.sum() + qr.sum()), launches=1,
-                    width=width, compute_issue=float(warp.sum()))
+        work = _stage_work(stage, trace, c, slots, b, slots, layout, width, line_bytes, bound,
+                           None if indexing == "slot" else np.arange(slots.size))
         launches[stage].append(work)
-        row[stage] = work.utilisation(work.compute)
+        if slots.size:
+            row[stage] = work.utilisation(work.compute)
 
     all_slots = np.arange(trace.slots)
     row: dict = {}
@@ -716,6 +723,83 @@ def wavefront_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: i
                    unoccluded=int(lit.size), continued=int(nxt.size))
         per_bounce.append(row)
     return launches, {"bounces": per_bounce}
+
+
+def regenerating_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: int = 32, line_bytes: int = 128,
+                      pool: int | None = None, passes: int = 4,
+                      scale: float = 1.0) -> tuple[dict[str, list[Work]], dict]:
+    """What if the wavefront regenerated paths (a design, not pyclpt's code; docs/gpu.md, "Regeneration"): a pool
+    of ``pool`` slots (default: a quarter of the trace) fed from a stream of ``passes`` times the traced paths, as
+    a render of many samples per pixel would be, the paper's Fig. 6 (1,024 spp). Each step runs one bounce of every
+    path in the pool, whatever its own bounce: intersect, miss, process_hit, shadow_test, light_contribution and
+    sample_bsdf over their queues, and the three compactions between them as now; then the slots whose path ended
+    (its miss, or sample_bsdf ending it) are listed (a compaction over the pool), path_init starts the stream's
+    next paths in them (their camera rays), and the next ray queue is the pool's live slots in slot order (a
+    second compaction over the pool): a queue that kept the new paths apart would mix its order bounce after
+    bounce, and SoA's loads with it. Launches are sized by their queues (the readback schedule). ``scale``
+    multiplies the compactions' sizes (a traced pool standing for a larger one).
+
+    Only the steady steps are returned, {kernel: [Work]}: from the step at which the pool has turned over once
+    (the first pool's paths started in step and bounce lockstep) to the step at which the stream runs out (then
+    the pool drains); a render of many samples per pixel is nearly all such steps. The second value:
+    {"steps": per step simulated, its rays, new paths and ended paths, "window": (first, last + 1) step priced,
+    "paths": the paths that ended in those steps}."""
+    paths = trace.slots
+    slots = paths // 4 if pool is None else int(pool)
+    if not 1 <= slots <= paths:
+        raise ValueError(f"pool must be 1..{paths} (the traced paths), got {pool}")
+    if passes < 3:
+        raise ValueError(f"passes must be at least 3 (a turn-over of the pool, then steady steps), got {passes}")
+    total = paths * passes
+    launches: dict[str, list[Work]] = {s: [] for s in (*WAVEFRONT_STAGES, "compact_count", "compact_scatter")}
+    instance = np.arange(slots)  # the stream's path each slot holds (the traced path instance % paths)
+    bounce = np.zeros(slots, np.int64)
+    started, priced = slots, 0
+    steps: list[dict] = []
+    first = None
+
+    def run(stage: str, q: np.ndarray) -> None:
+        if q.size and first is not None:
+            launches[stage].append(_stage_work(stage, trace, c, q, bounce[q], instance[q] % paths, layout, width,
+                                               line_bytes, q.size))
+
+    def compaction(n: int) -> None:
+        if first is not None:
+            cc, cs = _group_compaction(n * scale, c, width, line_bytes, launched=n * scale)
+            launches["compact_count"].append(cc)
+            launches["compact_scatter"].append(cs)
+
+    queue = np.arange(slots)
+    while started < total:
+        if first is None and started >= 2 * slots:
+            first = len(steps)
+        f = trace.flags[bounce[queue], instance[queue] % paths]
+        hit = (f & HIT) != 0
+        going = (f & CONTINUED) != 0
+        for stage, q in (("intersect", queue), ("miss", queue[~hit]), ("process_hit", queue[hit]),
+                         ("shadow_test", queue[(f & SHADOW) != 0]), ("light_contribution", queue[(f & LIT) != 0]),
+                         ("sample_bsdf", queue[hit])):
+            run(stage, q)
+        for n in (queue.size, int(hit.sum()), int(((f & SHADOW) != 0).sum())):
+            compaction(n)
+        ended = np.sort(queue[~going])
+        new = ended[:min(ended.size, total - started)]
+        bounce[queue[going]] += 1
+        compaction(slots)  # the free slots
+        instance[new] = np.arange(started, started + new.size)
+        bounce[new] = 0
+        started += new.size
+        run("path_init", new)
+        compaction(slots)  # the live slots: the next ray queue
+        if first is not None:
+            priced += ended.size
+        steps.append({"rays": int(queue.size), "new": int(new.size), "ended": int(ended.size)})
+        queue = np.sort(np.concatenate([queue[going], new]))
+        if queue.size == 0:
+            raise ValueError("the pool emptied while the stream had paths left")
+    if first is None or priced == 0:
+        raise ValueError(f"no steady step: a longer stream (passes > {passes}) or a smaller pool")
+    return launches, {"steps": steps, "window": (first, len(steps)), "paths": priced}
 
 
 # -- time -----------------------------------------------------------------------------------------------------
@@ -788,8 +872,11 @@ def simulate(trace: PathTrace, *, width: int = 32, occupancy: dict[str, float] |
     ``wavefronts``: {name: options} of the wavefront variants to predict, options being ``layout`` ("soa",
     "aos"), ``compaction`` and ``indexing`` (:func:`wavefront_work`) and ``tail`` (a fraction of the wave:
     finish_paths takes the paths from the first bounce after 0 whose ray queue holds at most that many,
-    as pyclpt's tail, default 1/4; None: no tail). Default: :data:`WAVEFRONTS`, pyclpt's code as written
-    less the tail (the paper's structure) in both layouts."""
+    as pyclpt's tail, default 1/4; None: no tail) or ``regenerate`` (a design, :func:`regenerating_work`: the
+    fraction of the traced paths its pool holds, standing for a GPU wave of GPU_WAVE_SIZE slots, with ``passes``;
+    its time is that of a frame's paths in a render of many samples per pixel, the megakernel's a 1-spp frame's,
+    which is the same per path). Default: :data:`WAVEFRONTS`, pyclpt's code as written less the tail (the paper's
+    structure) in both layouts."""
     gpu = gpu or Gpu()
     c = cost or CostModel()
     occ = {**gpu.occupancy(), **(occupancy or {})}
@@ -813,12 +900,20 @@ def simulate(trace: PathTrace, *, width: int = 32, occupancy: dict[str, float] |
     for name, opts in (WAVEFRONTS if wavefronts is None else wavefronts).items():
         opts = dict(opts)
         tail = opts.pop("tail", None)
+        regenerate = opts.pop("regenerate", None)
         # from the first bounce after 0 whose expected ray count is at most the tail's paths (Wavefront.render_frames)
         tail_from = None if not tail else next(
             (b for b in range(1, len(counts)) if 0 < _expected_rays(counts, b, opts.get("schedule", "readback"),
                                                                    trace.slots) <= tail * trace.slots), None)
-        launches, info = wavefront_work(trace, c, opts.pop("layout", "soa"), width, gpu.line_bytes, scale, tail_from,
-                                        **opts)
+        if regenerate:  # a pool of a GPU wave's slots, the traced pool standing for it (regenerating_work)
+            pool = max(1, int(trace.slots * regenerate))
+            wave_scale = GPU_WAVE_SIZE / pool
+            launches, info = regenerating_work(trace, c, opts.pop("layout", "soa"), width, gpu.line_bytes, pool,
+                                               scale=wave_scale, **opts)
+        else:
+            wave_scale = scale
+            launches, info = wavefront_work(trace, c, opts.pop("layout", "soa"), width, gpu.line_bytes, scale,
+                                            tail_from, **opts)
         total_us = 0.0
         ks: dict[str, dict] = {}
         us: dict[str, float] = {}
@@ -829,22 +924,28 @@ def simulate(trace: PathTrace, *, width: int = 32, occupancy: dict[str, float] |
             agg = {"time_us": 0.0, "issue_us": 0.0, "memory_us": 0.0, "critical_us": 0.0, "launches": len(works)}
             compaction = stage.startswith("compact")
             for w in works:
-                tt = kernel_time_us(w, occ[stage], gpu, c, scale, scaled_compaction=compaction)
+                tt = kernel_time_us(w, occ[stage], gpu, c, wave_scale, scaled_compaction=compaction)
                 for k in ("time_us", "issue_us", "memory_us", "critical_us"):
                     agg[k] += tt[k]
             ks[stage] = agg
             total_us += agg["time_us"]
             issue = sum(w.compute for w in works)
             us[stage] = float(sum(w.lane.sum() for w in works) / (width * issue)) if issue else 1.0
-            ls[stage] = float(sum(w.lines for w in works)) * (1.0 if compaction else scale)
-            ls[stage + ":requests"] = float(sum(w.requests for w in works)) * (1.0 if compaction else scale)
-        bounces = len(info["bounces"])
-        if opts.get("schedule", "readback") == "readback":  # pipelined: the host reads behind the device
-            total_us += bounces * c.readback_us
+            ls[stage] = float(sum(w.lines for w in works)) * (1.0 if compaction else wave_scale)
+            ls[stage + ":requests"] = float(sum(w.requests for w in works)) * (1.0 if compaction else wave_scale)
+        if regenerate:  # the steady steps' time per path, for a frame's paths; a read of the ray count a step
+            first, end = info["window"]
+            per_frame = target / (info["paths"] * wave_scale)
+            total_us = (total_us + (end - first) * c.readback_us) * per_frame
+            for agg in ks.values():  # the kernels' times per frame too
+                for k in ("time_us", "issue_us", "memory_us", "critical_us"):
+                    agg[k] *= per_frame
+        elif opts.get("schedule", "readback") == "readback":  # pipelined: the host reads behind the device
+            total_us += len(info["bounces"]) * c.readback_us
         times[name] = total_us / 1e3
         kernels[name] = ks
         util[name] = us
-        per_bounce[name] = info["bounces"]
+        per_bounce[name] = info["bounces"] if "bounces" in info else info["steps"]
         lines[name] = ls
     return Prediction(trace.scene, trace.max_depth, width, trace.slots, target, times, kernels, util, per_bounce, lines)
 

@@ -38,7 +38,7 @@ STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light
 QUEUES = ("rays", "hits", "misses", "shadow_rays", "unoccluded")
 Q_COUNT = len(QUEUES)
 Q_RAY, Q_HIT, Q_MISS, Q_SHADOW, Q_LIGHT = range(Q_COUNT)
-COMPACT_BLOCK = 1024  # queue entries per work-item of the compaction (-DCOMPACT_BLOCK for the stages)
+COMPACT_BLOCK = 1024  # queue entries per work-item of the compaction (-DCOMPACT_BLOCK for compact_*.cl)
 #: GPU class: lanes of the work-group that compacts one block (-DCOMPACT_GROUP; cl/integrators/wavefront/
 #: wavefront.h), instead of one work-item looping over its COMPACT_BLOCK entries as CPUs prefer.
 COMPACT_GROUP = 256
@@ -108,11 +108,17 @@ class Wavefront:
         generated = {"path_state.h": opencl_header(layout)}
         # GPU class (the scene's layout): a work-group per compaction block (COMPACT_GROUP)
         self.compact_group = COMPACT_GROUP if scene.defines.get("DEVICE_CLASS_GPU") else 0
-        defines = {**scene.defines, **film.defines, "COMPACT_BLOCK": COMPACT_BLOCK,
-                   "COMPACT_GROUP": self.compact_group or None}
-        self.kernels = {s: cl.Kernel(build_program(device, [f"integrators/wavefront/{s}.cl"], generated=generated,
-                                                   defines=defines, options=register_cap_options(device, s)), s)
-                        for s in STAGES}
+        stage_defines = {**scene.defines, **film.defines}
+        # the compaction knows queues only (cl/integrators/wavefront/compact.h): one program for every scene
+        compact_defines = {"COMPACT_BLOCK": COMPACT_BLOCK, "COMPACT_GROUP": self.compact_group or None}
+        self.kernels = {}
+        for s in STAGES:
+            compaction = s.startswith("compact_")
+            program = build_program(device, [f"integrators/wavefront/{s}.cl"],
+                                    generated=None if compaction else generated,
+                                    defines=compact_defines if compaction else stage_defines,
+                                    options=register_cap_options(device, s))
+            self.kernels[s] = cl.Kernel(program, s)
         self.profile = KernelProfile()
         self._bounce_totals = np.zeros((max_depth + 2, Q_COUNT), np.int64)
         self._tail_totals = np.zeros(max_depth + 2, np.int64)  # paths finish_paths took at each bounce

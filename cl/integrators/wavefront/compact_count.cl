@@ -5,7 +5,7 @@
  *           n = counters[bounce * Q_COUNT + src_q].
  * Produces: block_counts[block], the flagged entries of each block.
  * With -DCOMPACT_GROUP (GPU class) a work-group of lanes does each block's work. */
-#include "integrators/wavefront/wavefront.h"
+#include "integrators/wavefront/compact.h"
 
 #ifdef COMPACT_GROUP
 /* GPU class: a work-group per block, each lane counting its COMPACT_PER_LANE entries (wavefront.h). */

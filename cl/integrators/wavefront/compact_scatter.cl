@@ -8,7 +8,7 @@
  * Produces: out_queue and its count counters[out_bounce * Q_COUNT + out_q]; if rest_q >= 0,
  *           rest_queue and its count counters[bounce * Q_COUNT + rest_q].
  * With -DCOMPACT_GROUP (GPU class) a work-group of lanes does each block's work. */
-#include "integrators/wavefront/wavefront.h"
+#include "integrators/wavefront/compact.h"
 
 #ifdef COMPACT_GROUP
 /* GPU class: a work-group per block. The group sums the earlier blocks' counts (a strided partial sum a

@@ -1,74 +1,17 @@
 /* wavefront.h: what the seven wavefront stages share — the path state accessors
- * (generated from pyclpt/path_state.py for the SoA or AoS layout), the queues
- * and the per-bounce counters.
+ * (generated from pyclpt/path_state.py for the SoA or AoS layout), the queues and
+ * their per-bounce counters (queues.h), and the GPU class's shading steps.
  *
- * Queues hold path slots (0 .. wave size - 1). Each is compacted: a producer
- * takes the next free entry with atomic_inc on its counter. Counters live in
- * one int buffer, Q_COUNT per bounce (counters[bounce * Q_COUNT + queue]), all
- * zeroed on the device before a wave; so the counts of every bounce remain for
- * the statistics. The ray queue is double-buffered across bounces: bounce b
- * reads ray queue b % 2 and sample_bsdf fills (b + 1) % 2. */
+ * The stages read their queue's entries below its count; the order-preserving
+ * compaction (compact.h) builds the next queues from the flags they write. The ray
+ * queue is double-buffered across bounces: bounce b reads ray queue b % 2 and the
+ * compaction after sample_bsdf fills (b + 1) % 2. */
 #ifndef PYCLPT_WAVEFRONT_H
 #define PYCLPT_WAVEFRONT_H
 
 #include "integrators/path.h"
+#include "integrators/wavefront/queues.h"
 #include "path_state.h"
-
-#define Q_RAY 0     /* rays to intersect (bounce b) */
-#define Q_HIT 1     /* paths that hit a surface: hit processing, then BSDF sampling */
-#define Q_MISS 2    /* paths that left the scene */
-#define Q_SHADOW 3  /* shadow rays to test */
-#define Q_LIGHT 4   /* unoccluded shadow rays: light contribution */
-#define Q_COUNT 5
-
-#define QUEUE_ARGS __global int *counters, int bounce
-
-static inline int queue_count(__global const int* counters, int bounce, int q) {
-    return counters[bounce * Q_COUNT + q];
-}
-
-/* Entries of a queue that one work-item of the compaction stages handles: -DCOMPACT_BLOCK from
- * pyclpt/integrators/wavefront.py, which sizes the block-count buffer by it. */
-#ifndef COMPACT_BLOCK
-#error "COMPACT_BLOCK must be defined (-DCOMPACT_BLOCK=...)"
-#endif
-
-/* COMPACT_GROUP (-D, GPU class only: pyclpt/integrators/wavefront.py): the compaction runs one
- * work-group of COMPACT_GROUP lanes per block instead of one work-item, each lane owning
- * COMPACT_BLOCK / COMPACT_GROUP consecutive entries, so a GPU keeps its lanes busy (docs/gpu.md).
- * The counts are integers: the queues are the one-work-item version's, entry for entry. */
-#ifdef COMPACT_GROUP
-#if COMPACT_BLOCK % COMPACT_GROUP != 0
-#error "COMPACT_BLOCK must be a multiple of COMPACT_GROUP"
-#endif
-#define COMPACT_PER_LANE (COMPACT_BLOCK / COMPACT_GROUP)
-
-/* The work-group's exclusive prefix sum of v (Hillis-Steele in local memory `scratch`, COMPACT_GROUP
- * ints); *total receives the group's sum. Every lane of the group must call it. always_inline: PoCL 3.0
- * crashes when it runs a barrier inside a function it kept out of line (two calls in one kernel). */
-static inline __attribute__((always_inline)) int compact_group_scan(int v, __local int* scratch, int* total) {
-    int lid = (int)get_local_id(0);
-    scratch[lid] = v;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    for (int off = 1; off < COMPACT_GROUP; off <<= 1) {
-        int t = lid >= off ? scratch[lid - off] : 0;
-        barrier(CLK_LOCAL_MEM_FENCE);
-        scratch[lid] += t;
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    int inclusive = scratch[lid];
-    *total = scratch[COMPACT_GROUP - 1];
-    barrier(CLK_LOCAL_MEM_FENCE); /* scratch is free again for the next call */
-    return inclusive - v;
-}
-
-/* The flagged entries among this lane's entries [lo, hi) of a block. */
-static inline int compact_lane_count(__global const uchar* flags, int lo, int hi) {
-    int sum = 0;
-    for (int i = lo; i < hi; ++i) sum += flags[i];
-    return sum;
-}
-#endif
 
 #ifdef DEVICE_CLASS_GPU
 /* GPUs: the shading stages build a hit's surface in each of their steps (process_hit.cl, sample_bsdf.cl). The first
