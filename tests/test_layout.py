@@ -170,3 +170,12 @@ def test_bench_is_organised_by_question():
     for p in (bench / "studies").glob("[!_]*.py"):
         first = p.read_text().split('"""')[1].split("\n\n")[0]
         assert "?" in first and "docs/" in first, f"{p.relative_to(ROOT)}: question, answer, figure first"
+
+
+def test_the_files_started_first_exist():
+    """conftest.FIRST_FILES (handed to a pytest-xdist worker first) names test files that exist: a renamed file
+    would silently lose its place at the front."""
+    from conftest import FIRST_FILES
+
+    here = Path(__file__).parent
+    assert FIRST_FILES and all((here / name).is_file() for name in FIRST_FILES), FIRST_FILES
