@@ -618,16 +618,17 @@ def _scan_compaction(n: float, c: CostModel, width: int, moved_words: int = 0, l
     return Work(w, l_, lines=lines, requests=lines, launches=1, width=width)
 
 
-def _stage_work(stage: str, trace: PathTrace, c: CostModel, slots: np.ndarray, bounce, paths: np.ndarray,
+def _stage_work(stage: str, trace: PathTrace, c: CostModel, slots: np.ndarray, bounce, paths: np.ndarray | None,
                 layout: str, width: int, line_bytes: int, launched: int, where: np.ndarray | None = None) -> Work:
     """One launch of a wavefront stage over the queue ``slots`` (the path-state slots, in queue order) holding the
-    traced ``paths`` at ``bounce`` (an int, or one per entry), launched over ``launched`` lanes: the warps past the
-    queue exit (``c.exit`` each). ``where``: the state's index when it is not the slot (the queue-indexed what-if)."""
+    traced ``paths`` (None: the slots' own, as in pyclpt's wavefront) at ``bounce`` (an int, or one per entry),
+    launched over ``launched`` lanes: the warps past the queue exit (``c.exit`` each). ``where``: the state's index
+    when it is not the slot (the queue-indexed what-if)."""
     idle = np.full(max(0, -(-launched // width) - -(-slots.size // width)), c.exit)
     if slots.size == 0:  # launched all the same (readback: every stage over the ray count), all exit
         return Work(idle, np.zeros(idle.size), launches=1, width=width)
     idx, valid = _pack(slots, width)
-    pidx = idx if paths is slots else _pack(paths, width)[0]
+    pidx = idx if paths is None else _pack(paths, width)[0]
     b = bounce if np.isscalar(bounce) else _pack(np.asarray(bounce), width)[0]
     masks = _queue_masks(trace, b, pidx, valid)
     warp, lane = warp_cost(_stage_terms(stage, trace, c, b, pidx, masks), valid)
@@ -665,7 +666,7 @@ def wavefront_work(trace: PathTrace, c: CostModel, layout: str = "soa", width: i
     per_bounce: list[dict] = []
 
     def run(stage: str, b: int, slots: np.ndarray) -> None:
-        work = _stage_work(stage, trace, c, slots, b, slots, layout, width, line_bytes, bound,
+        work = _stage_work(stage, trace, c, slots, b, None, layout, width, line_bytes, bound,
                            None if indexing == "slot" else np.arange(slots.size))
         launches[stage].append(work)
         if slots.size:
@@ -782,7 +783,7 @@ def regenerating_work(trace: PathTrace, c: CostModel, layout: str = "soa", width
             run(stage, q)
         for n in (queue.size, int(hit.sum()), int(((f & SHADOW) != 0).sum())):
             compaction(n)
-        ended = np.sort(queue[~going])
+        ended = queue[~going]  # in slot order, as the queue is
         new = ended[:min(ended.size, total - started)]
         bounce[queue[going]] += 1
         compaction(slots)  # the free slots
@@ -937,9 +938,10 @@ def simulate(trace: PathTrace, *, width: int = 32, occupancy: dict[str, float] |
             first, end = info["window"]
             per_frame = target / (info["paths"] * wave_scale)
             total_us = (total_us + (end - first) * c.readback_us) * per_frame
-            for agg in ks.values():  # the kernels' times per frame too
+            for agg in ks.values():  # the kernels' times and lines per frame too
                 for k in ("time_us", "issue_us", "memory_us", "critical_us"):
                     agg[k] *= per_frame
+            ls = {k: v * per_frame for k, v in ls.items()}
         elif opts.get("schedule", "readback") == "readback":  # pipelined: the host reads behind the device
             total_us += len(info["bounces"]) * c.readback_us
         times[name] = total_us / 1e3

@@ -40,7 +40,7 @@ Q_COUNT = len(QUEUES)
 Q_RAY, Q_HIT, Q_MISS, Q_SHADOW, Q_LIGHT = range(Q_COUNT)
 COMPACT_BLOCK = 1024  # queue entries per work-item of the compaction (-DCOMPACT_BLOCK for compact_*.cl)
 #: GPU class: lanes of the work-group that compacts one block (-DCOMPACT_GROUP; cl/integrators/wavefront/
-#: wavefront.h), instead of one work-item looping over its COMPACT_BLOCK entries as CPUs prefer.
+#: compact.h), instead of one work-item looping over its COMPACT_BLOCK entries as CPUs prefer.
 COMPACT_GROUP = 256
 # six int queues and one flag byte per path
 QUEUE_BYTES_PER_PATH = 6 * 4 + 1
