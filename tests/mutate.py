@@ -67,6 +67,8 @@ T_SKY_CUBE = "tests/test_render.py::test_diffuse_cube_under_constant_sky"
 T_GRAD_FD = "tests/test_gradients.py::test_backward_matches_finite_differences"
 T_UV_TRANSFORMS = "tests/test_plugins.py::test_plugin_matches_mitsuba[uv-transforms]"
 T_EMITTER_TEXTURES = "tests/test_plugins.py::test_plugin_matches_mitsuba[emitter-textures]"
+T_STAGE_DEFINES = "tests/test_gpu_isa.py::test_each_stage_is_built_with_the_defines_it_reads"
+T_RFILTER_WAVEFRONT = "tests/test_rfilter.py::test_megakernel_equals_wavefront_and_gradient_primal"
 
 MUTANTS: list[Mutant] = [
     # ---- the mutants of issue 16: each must be killed -------------------------------------------
@@ -520,6 +522,11 @@ MUTANTS: list[Mutant] = [
            "        queue = np.concatenate([queue[going], new])", (T_SIMT_REGENERATION,),
            "the regeneration design's ray queue keeps the new paths after the continuing ones, its order mixing "
            "bounce after bounce", root="host"),
+    Mutant("stage-defines-path-init-without-filter",
+           '    "path_init": frozenset({"SCENE_CAMERA", "SCENE_FILTER", "FILM_CROP"}),',
+           '    "path_init": frozenset({"SCENE_CAMERA", "FILM_CROP"}),', (T_STAGE_DEFINES, T_RFILTER_WAVEFRONT),
+           "path_init is built without the pixel filter's define, so its camera rays are the box filter's",
+           root="host"),
 ]
 
 

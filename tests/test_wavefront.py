@@ -2,6 +2,8 @@
 same image; queues conserve paths; the launch sequence is the design's."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pyopencl as cl
 import pytest
@@ -513,12 +515,40 @@ def test_launches_set_only_the_arguments_that_changed(cornell_box, monkeypatch):
     assert np.array_equal(fresh.render(1, seed=4, progress=False), other)
 
 
-def test_the_compaction_is_one_program_for_every_scene(cornell_box):
-    """compact_count and compact_scatter know queues only (cl/integrators/wavefront/compact.h): built with the block
-    size alone, every scene and film shares their program, while the stages get the scene's specialisation."""
-    box = pyclpt.Renderer(cornell_box, integrator="wavefront", max_depth=3, width=8, height=8).integrator
-    zoo = pyclpt.Renderer(material_zoo(4), integrator="wavefront", layout="aos", max_depth=5, width=12, height=8,
-                          aovs=True).integrator
+def test_stages_share_a_program_where_the_defines_they_read_agree(cornell_box):
+    """Each stage is built with the scene's and film's defines its code reads (STAGE_DEFINES, checked against the
+    compiled code by tests/test_gpu_isa.py): compact_count and compact_scatter know queues only
+    (cl/integrators/wavefront/compact.h) and light_contribution the path state only, so every scene and film of a
+    layout shares them; the box with another material shares the traversal stages and path_init, not the shading
+    ones; the zoo (masks, other lights, a G-buffer) shares path_init alone."""
+    import copy
+
+    from pyclpt.device.context import open_device
+    from pyclpt.device.program import record_programs
+
+    device = open_device("pocl")  # its own: the dry programs (recorded, not compiled) never meet a renderer's
+
+    def wavefront(scene, **kw):
+        with record_programs(dry=True) as programs:
+            pyclpt.Renderer(scene, integrator="wavefront", max_depth=3, width=8, height=8, device=device, **kw)
+        return {Path(p.label).stem: p.key for p in programs}
+
+    metal = copy.deepcopy(cornell_box)
+    metal.materials[0] = pyclpt.Conductor()
+    box, other, zoo = wavefront(cornell_box), wavefront(metal), wavefront(material_zoo(4), aovs=True)
+    aos = wavefront(material_zoo(4), layout="aos", aovs=True)
+    assert set(STAGES) <= set(box)
+
+    def same(a, b, stage):  # the same program: the same source and options (the device's cache key)
+        return a[stage] == b[stage]
+
     for stage in ("compact_count", "compact_scatter"):
-        assert box.kernels[stage].program.int_ptr == zoo.kernels[stage].program.int_ptr, stage
-    assert box.kernels["process_hit"].program.int_ptr != zoo.kernels["process_hit"].program.int_ptr
+        assert same(box, zoo, stage) and same(box, aos, stage), stage
+    assert same(box, zoo, "light_contribution") and not same(zoo, aos, "light_contribution")  # the layouts' state
+    for stage in ("path_init", "intersect", "miss", "shadow_test", "light_contribution"):
+        assert same(box, other, stage), stage
+    for stage in ("miss", "process_hit", "sample_bsdf", "finish_paths"):
+        assert not same(box, zoo, stage), stage
+    for stage in ("process_hit", "sample_bsdf", "finish_paths"):
+        assert not same(box, other, stage), stage
+    assert same(box, zoo, "path_init") and not same(box, zoo, "intersect")

@@ -131,6 +131,14 @@ def pack_appearance(scene: Scene, bvh: FlatBVH, bounds: np.ndarray) -> tuple[Mat
     return mats, lights
 
 
+#: Every -D name :func:`scene_defines` gives (SCENE_HAS_INSTANCES only for instanced scenes): the integrators' stages
+#: each take the ones their code reads (pyclpt.integrators.wavefront.STAGE_DEFINES).
+SCENE_DEFINES = ("SCENE_HAS_INSTANCES", "SCENE_HAS_MASKS", "SCENE_HAS_BUMPMAPS", "SCENE_HAS_TEXTURES",
+                 "SCENE_MATERIALS", "SCENE_HAS_ANISOTROPY", "SCENE_HAS_BACK_MATERIALS", "SCENE_LIGHTS", "BVH_WIDTH",
+                 "BVH_LEAF_PACKETS", "BVH_STACK_DISTANCES", "DEVICE_CLASS_GPU", "SCENE_CAMERA", "SCENE_FILTER",
+                 "SCENE_HAS_EMITTER_TEXTURES")
+
+
 def scene_defines(mats: MaterialArrays, lights: LightArrays, bvh: FlatBVH, packets: bool, scene: Scene,
                   geometry: dict | None = None, device_class: str = "cpu") -> dict:
     # BVH_STACK_DISTANCES, DEVICE_CLASS_GPU: passed for the GPU class only, so CPU programs keep their options

@@ -42,6 +42,8 @@ DEFAULT_PRECISION = "double"
 COUNT_CHUNK = 1024  # marks summed per work-item of cl/film/count_dropped.cl (-DCOUNT_CHUNK)
 
 
+#: Every -D name :attr:`Film.defines` gives.
+FILM_DEFINES = ("AOVS", "FILM_CROP")
 MAX_BATCH = 64  # frames a batch holds at most (frames_per_batch)
 
 

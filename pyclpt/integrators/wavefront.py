@@ -25,11 +25,11 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from pyclpt.buffers.scene import SceneBuffers
+from pyclpt.buffers.scene import SCENE_DEFINES, SceneBuffers
 from pyclpt.device.context import Device, alloc, fill_buffer
 from pyclpt.device.profile import KernelProfile
 from pyclpt.device.program import build_program, register_cap_options
-from pyclpt.film.film import Film
+from pyclpt.film.film import FILM_DEFINES, Film
 from pyclpt.integrators.path_state import PathStorage, bytes_per_path, opencl_header
 
 STAGES = ("path_init", "intersect", "miss", "process_hit", "shadow_test", "light_contribution", "sample_bsdf",
@@ -53,6 +53,34 @@ GPU_WAVE_SIZE = 1 << 21
 GPU_WAVE_MEMORY_FRACTION = 8  # at most an eighth of the device's memory for the path state and queues
 CAPACITY_CHECK = 4
 TAIL_FRACTION = 4  # default tail_paths: a quarter of the wave (docs/wavefront.md, "The tail")
+
+
+_TRAVERSAL = frozenset({"BVH_WIDTH", "BVH_LEAF_PACKETS", "BVH_STACK_DISTANCES", "SCENE_HAS_MASKS",
+                        "SCENE_HAS_INSTANCES", "DEVICE_CLASS_GPU", "FILM_CROP"})
+_SHADING = frozenset({"SCENE_MATERIALS", "SCENE_HAS_TEXTURES", "SCENE_HAS_BUMPMAPS", "SCENE_HAS_INSTANCES",
+                      "SCENE_HAS_ANISOTROPY", "SCENE_HAS_BACK_MATERIALS", "AOVS", "FILM_CROP", "DEVICE_CLASS_GPU"})
+#: Of the scene's and the film's -D specialisations (SCENE_DEFINES, FILM_DEFINES), the ones each stage's code reads.
+#: A stage is built with those alone: the others leave its compiled code as it is (tests/test_gpu_isa.py switches them
+#: all and compares the front end's optimised code), so scenes and films that differ only there share the stage's
+#: program: light_contribution's is one for every scene, path_init's one per camera, filter and crop, intersect's one
+#: per BVH layout, mask and instancing. Fewer programs to compile when the scene or the film changes. A define named in
+#: neither tuple reaches every stage.
+STAGE_DEFINES: dict[str, frozenset[str]] = {
+    "path_init": frozenset({"SCENE_CAMERA", "SCENE_FILTER", "FILM_CROP"}),
+    "intersect": _TRAVERSAL,
+    "miss": frozenset({"SCENE_LIGHTS", "SCENE_CAMERA", "AOVS", "DEVICE_CLASS_GPU"}),
+    "process_hit": _SHADING | {"SCENE_LIGHTS", "SCENE_HAS_EMITTER_TEXTURES", "SCENE_CAMERA"},
+    "shadow_test": _TRAVERSAL | {"SCENE_LIGHTS"},  # an environment's deferred radiance (lights.h, ENV_DEFERRED)
+    "light_contribution": frozenset(),
+    "sample_bsdf": _SHADING,
+    "finish_paths": frozenset(SCENE_DEFINES + FILM_DEFINES),  # the whole path loop
+}
+
+
+def stage_defines(stage: str, defines: dict) -> dict:
+    """The -D specialisations of ``defines`` (a scene's and a film's) that ``stage`` is built with (STAGE_DEFINES)."""
+    known = set(SCENE_DEFINES + FILM_DEFINES)
+    return {k: v for k, v in defines.items() if k in STAGE_DEFINES[stage] or k not in known}
 
 
 def expected_rays(last: int, before: int) -> int:
@@ -108,7 +136,7 @@ class Wavefront:
         generated = {"path_state.h": opencl_header(layout)}
         # GPU class (the scene's layout): a work-group per compaction block (COMPACT_GROUP)
         self.compact_group = COMPACT_GROUP if scene.defines.get("DEVICE_CLASS_GPU") else 0
-        stage_defines = {**scene.defines, **film.defines}
+        defines = {**scene.defines, **film.defines}
         # the compaction knows queues only (cl/integrators/wavefront/compact.h): one program for every scene
         compact_defines = {"COMPACT_BLOCK": COMPACT_BLOCK, "COMPACT_GROUP": self.compact_group or None}
         self.kernels = {}
@@ -116,7 +144,7 @@ class Wavefront:
             compaction = s.startswith("compact_")
             program = build_program(device, [f"integrators/wavefront/{s}.cl"],
                                     generated=None if compaction else generated,
-                                    defines=compact_defines if compaction else stage_defines,
+                                    defines=compact_defines if compaction else stage_defines(s, defines),
                                     options=register_cap_options(device, s))
             self.kernels[s] = cl.Kernel(program, s)
         self.profile = KernelProfile()
