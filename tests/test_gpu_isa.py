@@ -221,8 +221,9 @@ def test_capped_programs_are_assembled_under_the_drivers_cap(toolchain):
 
 
 def test_merged_specialisations_hold_every_scenes_code():
-    """merge_specialisations: one kernel's programs that differ in kind masks and feature flags become one, with the
-    masks OR-ed and the flags' union, naming every scene; another camera kind or other code stays apart."""
+    """merge_specialisations: one kernel's programs that differ in kind masks and feature flags (the scene's and the
+    gradients' kinds) become one, with the masks OR-ed and the flags' union, naming every scene; another camera kind,
+    the rigid-geometry switch or other code stays apart."""
     from pyclpt.device.program import ProgramSource
 
     def p(label, *options, text="k"):
@@ -232,16 +233,101 @@ def test_merged_specialisations_hold_every_scenes_code():
         (p("megakernel", "-DSCENE_HAS_TEXTURES", "-DSCENE_LIGHTS=5", "-DSCENE_MATERIALS=1"), ["a"]),
         (p("megakernel", "-DSCENE_HAS_INSTANCES", "-DSCENE_LIGHTS=48", "-DSCENE_MATERIALS=4"), ["b", "c"]),
         (p("megakernel", "-DSCENE_CAMERA=2", "-DSCENE_LIGHTS=1", "-DSCENE_MATERIALS=1"), ["d"]),
-        (p("backward", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=1"), ["a"]),
+        (p("backward", "-DGRAD_COLOR=1", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=1"), ["a"]),
+        (p("backward", "-DGRAD_INSTANCES=1", "-DSCENE_HAS_INSTANCES", "-DSCENE_LIGHTS=1", "-DSCENE_MATERIALS=1"),
+         ["b"]),
+        (p("backward", "-DGEO_NORMALS_FOLLOW_FACES=1", "-DGRAD_GEOMETRY=1", "-DSCENE_LIGHTS=1", "-DSCENE_MATERIALS=1"),
+         ["f"]),
         (p("megakernel", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=8", text="other"), ["e"]),
     ])
     assert [(q.label, q.options, names) for q, names in merged] == [
         ("megakernel", ("-cl-std=CL1.2", "-DSCENE_HAS_INSTANCES", "-DSCENE_HAS_TEXTURES", "-DSCENE_LIGHTS=53",
                         "-DSCENE_MATERIALS=5"), ["a", "b", "c"]),
         ("megakernel", ("-cl-std=CL1.2", "-DSCENE_CAMERA=2", "-DSCENE_LIGHTS=1", "-DSCENE_MATERIALS=1"), ["d"]),
-        ("backward", ("-cl-std=CL1.2", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=1"), ["a"]),
+        ("backward", ("-cl-std=CL1.2", "-DGRAD_COLOR=1", "-DGRAD_INSTANCES=1", "-DSCENE_HAS_INSTANCES",
+                      "-DSCENE_LIGHTS=3", "-DSCENE_MATERIALS=1"), ["a", "b"]),
+        ("backward", ("-cl-std=CL1.2", "-DGEO_NORMALS_FOLLOW_FACES=1", "-DGRAD_GEOMETRY=1", "-DSCENE_LIGHTS=1",
+                      "-DSCENE_MATERIALS=1"), ["f"]),
         ("megakernel", ("-cl-std=CL1.2", "-DSCENE_LIGHTS=2", "-DSCENE_MATERIALS=8"), ["e"]),
     ]
+
+
+#: The stage-define check's values: the tuple a define's values cycle through when it is switched (None: not defined;
+#: a name not here is a flag, defined or not), and three starting points: every feature on in the GPU class and in the
+#: CPU class, and every feature off.
+SWITCHED = {"SCENE_MATERIALS": (0xFF, 1), "SCENE_LIGHTS": (0x3F, 1), "SCENE_CAMERA": (None, 1, 2),
+            "SCENE_FILTER": (None, 2, 1), "BVH_WIDTH": (2, 4, 8), "BVH_STACK_DISTANCES": (None, 0)}
+ALL_ON = {"SCENE_HAS_INSTANCES": True, "SCENE_HAS_MASKS": True, "SCENE_HAS_BUMPMAPS": True, "SCENE_HAS_TEXTURES": True,
+          "SCENE_HAS_ANISOTROPY": True, "SCENE_HAS_BACK_MATERIALS": True, "SCENE_HAS_EMITTER_TEXTURES": True,
+          "AOVS": True, "FILM_CROP": True, "SCENE_MATERIALS": 0xFF, "SCENE_LIGHTS": 0x3F, "SCENE_CAMERA": 1,
+          "SCENE_FILTER": 2}
+STARTS = {"gpu": {**ALL_ON, "DEVICE_CLASS_GPU": True, "BVH_STACK_DISTANCES": 0, "BVH_WIDTH": 2},
+          "cpu": {**ALL_ON, "BVH_LEAF_PACKETS": True, "BVH_WIDTH": 8},
+          "off": {"BVH_LEAF_PACKETS": True, "BVH_WIDTH": 8, "SCENE_MATERIALS": 1, "SCENE_LIGHTS": 1}}
+#: The kind masks' kinds (cl/scene/lights.h LIGHT_*, cl/scene/bsdfs/record.h MAT_*): a mask's code can hang on a
+#: combination (lights.h's ENV_DEFERRED: an environment and no directional light), so a stage that does not read a
+#: mask is also built with each kind alone: against every kind, that switches each kind on its own and each pair.
+MASK_KINDS = {"SCENE_LIGHTS": 6, "SCENE_MATERIALS": 8}
+
+
+def _switched(defines: dict, names) -> dict:
+    out = dict(defines)
+    for name in names:
+        values = SWITCHED.get(name, (None, True))
+        out[name] = values[(values.index(defines.get(name)) + 1) % len(values)]
+    return out
+
+
+def test_each_stage_is_built_with_the_defines_it_reads(toolchain, tmp_path):
+    """STAGE_DEFINES (pyclpt/integrators/wavefront.py): switching every scene and film define a stage is built without
+    (on or off, another value) leaves the front end's optimised code of the stage as it is, from every feature on in
+    either device class and from every feature off, and so does each kind alone in the masks it does not read;
+    switching the ones it reads changes it. So sharing a stage's program between scenes that differ
+    only there gives each the code its own defines would."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pyclpt.buffers.scene import SCENE_DEFINES
+    from pyclpt.device.program import assemble, define_options
+    from pyclpt.film.film import FILM_DEFINES
+    from pyclpt.gpu.isa import front_end
+    from pyclpt.gpu.targets import target
+    from pyclpt.integrators.path_state import opencl_header
+    from pyclpt.integrators.wavefront import STAGE_DEFINES
+
+    known = SCENE_DEFINES + FILM_DEFINES
+    assert set(SWITCHED) | set(ALL_ON) | {"DEVICE_CLASS_GPU", "BVH_LEAF_PACKETS"} == set(known)
+    jobs = []
+    for stage, reads in STAGE_DEFINES.items():
+        unread = [n for n in known if n not in reads]
+        if not unread:  # finish_paths: the whole path loop
+            continue
+        for start, defines in STARTS.items():
+            jobs.append((stage, start, "as built", defines))
+            jobs.append((stage, start, "unread switched", _switched(defines, unread)))
+        if reads:
+            jobs.append((stage, "gpu", "read switched", _switched(STARTS["gpu"], reads)))
+        masks = [m for m in MASK_KINDS if m in unread]
+        for k in range(max((MASK_KINDS[m] for m in masks), default=0)):
+            alone = {m: 1 << (k % MASK_KINDS[m]) for m in masks}
+            jobs.append((stage, "gpu", f"unread switched: kind {k} alone", {**STARTS["gpu"], **alone}))
+
+    def code(job):
+        stage, start, what, defines = job
+        folder = tmp_path / f"{stage}-{start}-{''.join(c if c.isalnum() else '-' for c in what)}"
+        folder.mkdir()
+        text = assemble([f"integrators/wavefront/{stage}.cl"], generated={"path_state.h": opencl_header("soa")})
+        return front_end(text, ["-cl-std=CL1.2", *define_options(defines)], target("sm_90"), toolchain, folder,
+                         f"{stage} ({start}, {what})")
+
+    with ThreadPoolExecutor() as pool:
+        bitcode = {job[:3]: bc for job, bc in zip(jobs, pool.map(code, jobs))}
+    assert len(jobs) > 60
+    for (stage, start, what), bc in bitcode.items():
+        built = bitcode[(stage, start, "as built")]
+        if what.startswith("unread switched"):
+            assert bc == built, f"{stage} reads a define it is built without ({start}, {what})"
+        elif what == "read switched":
+            assert bc != built, stage
 
 
 def test_collection_sees_what_a_render_builds():

@@ -94,8 +94,9 @@ def collect_programs(scenes: Iterable[Scene | str], *, device_class: str | None 
 #: The defines that say which kinds a scene has, as bit masks (cl/scene/lights.h, cl/scene/bsdf.h): a program
 #: built with the OR of two scenes' masks holds the code of both.
 MASK_DEFINES = ("SCENE_LIGHTS", "SCENE_MATERIALS")
-#: The defines that switch one feature's code on (pyclpt/buffers/scene.py): ``SCENE_HAS_*``.
-FLAG_PREFIX = "SCENE_HAS_"
+#: The defines that switch one feature's code on: the scene's ``SCENE_HAS_*`` (pyclpt/buffers/scene.py) and the
+#: gradients' kinds, ``GRAD_*`` (pyclpt.gradients.replay.GRAD_DEFINES).
+FLAG_PREFIXES = ("SCENE_HAS_", "GRAD_")
 
 
 def _define(option: str) -> tuple[str, str | None] | None:
@@ -108,11 +109,12 @@ def _define(option: str) -> tuple[str, str | None] | None:
 def merge_specialisations(programs: Iterable[tuple[ProgramSource, list[str]]]) -> list[tuple[ProgramSource, list[str]]]:
     """``programs`` (collect_programs' list) with each kernel's scene specialisations switched on together:
     the programs of the same source whose options differ only in the kind masks (``MASK_DEFINES``: OR-ed) and
-    the ``SCENE_HAS_*`` flags (their union) become one program, which holds the code of every one of them and
-    names all their scenes. Every other option (the camera kind, the G-buffer, the gradients' kinds, the BVH
-    layout) still tells programs apart. What is compiled is a superset of each merged program's code but for
-    code that a define turns *off* (the texture-free or environment-free paths), which a scene without the
-    feature among the unmerged programs keeps compiled (the GPU ISA test: the Cornell box's every variant).
+    the feature flags (``FLAG_PREFIXES``: the scene's features, the gradients' kinds; their union) become one program,
+    which holds the code of every one of them and names all their scenes. Every other option (the camera kind, the
+    G-buffer, the rigid-geometry switch, the BVH layout) still tells programs apart. What is compiled is a superset of
+    each merged program's code but for code that a define turns *off* (the texture-free or environment-free paths),
+    which a scene without the feature among the unmerged programs keeps compiled (the GPU ISA test: the Cornell box's
+    every variant).
     The GPU ISA test compiles the scenes beyond the box this way, in half the programs."""
     programs = list(programs)
     # (label, text, the other options, the mask names) -> (the masks OR-ed, the flags, the scenes)
@@ -125,7 +127,7 @@ def merge_specialisations(programs: Iterable[tuple[ProgramSource, list[str]]]) -
             d = _define(o)
             if d and d[0] in MASK_DEFINES and d[1] is not None:
                 masks[d[0]] = int(d[1], 0)
-            elif d and d[0].startswith(FLAG_PREFIX):
+            elif d and d[0].startswith(FLAG_PREFIXES):
                 flags.append(o)
             else:
                 rest.append(o)
