@@ -8,14 +8,19 @@ the runtime the Intel cases are skipped with the reason, unless ``PYCLPT_REQUIRE
 it) makes them fail: a failed download cannot turn them off unseen."""
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import pytest
 
-# Caches (meshes, BVHs) go to a folder of this test session, never the user's.
-os.environ.setdefault("PYCLPT_CACHE_DIR", tempfile.mkdtemp(prefix="pyclpt-test-cache-"))
+# Caches (meshes, BVHs) go to a folder of this test session, never the user's: made by the process that starts the
+# session (pytest-xdist's workers inherit it) and removed when that process ends.
+if "PYCLPT_CACHE_DIR" not in os.environ:
+    os.environ["PYCLPT_CACHE_DIR"] = tempfile.mkdtemp(prefix="pyclpt-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["PYCLPT_CACHE_DIR"], ignore_errors=True)
 # The session's device is PoCL (the default device is the fastest installed: Intel's CPU runtime where CI
 # installs it); child processes (the CLI tests) inherit it. PYCLPT_DEVICE=intel runs the suite there.
 os.environ.setdefault("PYCLPT_DEVICE", "pocl")
@@ -25,14 +30,19 @@ from pyclpt.common import env  # noqa: E402
 from pyclpt.device.context import DeviceError  # noqa: E402
 from pyclpt.scene.library import scenes_root  # noqa: E402
 
-#: Test files started first: pytest-xdist (``--dist loadfile``, setup.cfg) runs each file whole in one worker, handing
-#: files out in collection order, and the GPU ISA check's fixture (minutes of compiling) started last would keep one
-#: worker busy long after the other has finished.
-FIRST_FILES = ("test_gpu_isa.py",)
+#: Test files started first, longest first: pytest-xdist (``--dist loadfile``, setup.cfg) runs each file whole in one
+#: worker, handing files out in collection order, so a long file handed out last keeps one worker busy long after the
+#: other has finished (the GPU ISA check's fixture alone compiles for minutes). Longest first, the short files fill in
+#: at the end. Their order: a cold run's per-file times (docs/testing.md); the other files keep theirs after them.
+FIRST_FILES = ("test_gpu_isa.py", "test_docs.py", "test_interior.py", "test_gradients.py", "test_gpu_layout.py",
+               "test_rfilter.py", "test_shadows.py", "test_instance_gradients.py", "test_plugins.py",
+               "test_instances.py", "test_wavefront.py", "test_scenes.py", "test_edges.py", "test_bench.py",
+               "test_distributed.py")
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    items.sort(key=lambda item: item.path.name not in FIRST_FILES)  # stable: the files' own order otherwise
+    first = {name: k for k, name in enumerate(FIRST_FILES)}
+    items.sort(key=lambda item: first.get(item.path.name, len(first)))  # stable: the files' own order otherwise
 
 
 @pytest.fixture(scope="session")
