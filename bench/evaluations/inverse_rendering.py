@@ -117,14 +117,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("inverse-rendering"),
                     help="folder for curves.png and inverse-rendering.json")
-    ap.add_argument("--steps", type=int, default=50)
+    ap.add_argument("--steps", type=int, default=50, help="Adam steps of the red wall")
+    ap.add_argument("--size", type=int, default=128, help="the red wall's image, SIZE x SIZE pixels")
+    ap.add_argument("--texture-steps", type=int, default=40, help="Adam steps of the texture")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    results = {"red_wall": recover_red_wall(steps=args.steps), "texture": recover_texture()}
+    results = {"red_wall": recover_red_wall(steps=args.steps, size=args.size),
+               "texture": recover_texture(steps=args.texture_steps)}
     plot(results, args.out / "curves.png")
     summary = {
         "device": pyclpt.default_device().name,
-        "red_wall": {"steps": args.steps, "final": results["red_wall"]["values"][-1].tolist(),
+        "red_wall": {"steps": args.steps, "size": args.size, "final": results["red_wall"]["values"][-1].tolist(),
                      "error": float(np.abs(results["red_wall"]["values"][-1] - RED_TRUTH).max()),
                      "seconds": results["red_wall"]["seconds"]},
         "texture": {"steps": len(results["texture"]["losses"]),
