@@ -17,10 +17,15 @@ from pathlib import Path
 import pytest
 
 # Caches (meshes, BVHs) go to a folder of this test session, never the user's: made by the process that starts the
-# session (pytest-xdist's workers inherit it) and removed when that process ends.
+# session (pytest-xdist's workers inherit it) and removed when that process ends (not a forked child's exit).
 if "PYCLPT_CACHE_DIR" not in os.environ:
     os.environ["PYCLPT_CACHE_DIR"] = tempfile.mkdtemp(prefix="pyclpt-test-cache-")
-    atexit.register(shutil.rmtree, os.environ["PYCLPT_CACHE_DIR"], ignore_errors=True)
+
+    def _remove_cache(folder: str = os.environ["PYCLPT_CACHE_DIR"], owner: int = os.getpid()) -> None:
+        if os.getpid() == owner:
+            shutil.rmtree(folder, ignore_errors=True)
+
+    atexit.register(_remove_cache)
 # The session's device is PoCL (the default device is the fastest installed: Intel's CPU runtime where CI
 # installs it); child processes (the CLI tests) inherit it. PYCLPT_DEVICE=intel runs the suite there.
 os.environ.setdefault("PYCLPT_DEVICE", "pocl")

@@ -42,9 +42,9 @@ DEFAULT_PRECISION = "double"
 COUNT_CHUNK = 1024  # marks summed per work-item of cl/film/count_dropped.cl (-DCOUNT_CHUNK)
 
 
+MAX_BATCH = 64  # frames a batch holds at most (frames_per_batch)
 #: Every -D name :attr:`Film.defines` gives.
 FILM_DEFINES = ("AOVS", "FILM_CROP")
-MAX_BATCH = 64  # frames a batch holds at most (frames_per_batch)
 
 
 def frames_per_batch(pixels: int, paths: int) -> int:
