@@ -232,6 +232,33 @@ def test_backward_matches_finite_differences(case):
     assert forward == pytest.approx(backward, rel=1e-3)
 
 
+def test_each_texel_gets_its_bilinear_share_of_a_pixel():
+    """The gradient of one pixel with respect to each texel of a bilinear bitmap is that texel's share of the pixel:
+    every texel against central differences of it alone. The quad under a constant sky is linear in its texels, so
+    with the same seed the differences are exact; a texel given its neighbour's weight is far off (the random loss
+    weights of test_backward_matches_finite_differences average such a swap away)."""
+    scene = textured_quad(np.random.default_rng(4).random((4, 4, 1)).astype(np.float32) * 0.6 + 0.2)
+    name = "tex.reflectance.data"
+    params = pyclpt.traverse(scene)
+    v0 = np.array(params[name], np.float32)
+    opts = dict(spp=16, seed=3, max_depth=2, width=SIZE, height=SIZE)
+    w = np.zeros((SIZE, SIZE, 3), np.float32)
+    w[5, 9] = 1.0  # a pixel between texel centres, nearer one column than one row
+    grad = pyclpt.render_backward(scene, w, params=[name], **opts)[name]
+    fd = np.zeros_like(v0)
+    for idx in np.ndindex(v0.shape):
+        loss = []
+        for sign in (1.0, -1.0):
+            v = v0.copy()
+            v[idx] += sign * 0.05
+            params.update({name: v})
+            loss.append(float((w * pyclpt.render(scene, **opts)).sum(dtype=np.float64)))
+        fd[idx] = (loss[0] - loss[1]) / 0.1
+    params.update({name: v0})
+    assert (fd > 1e-3 * fd.max()).sum() >= 3  # the pixel's samples read several texels
+    np.testing.assert_allclose(grad, fd, rtol=0, atol=2e-3 * fd.max())
+
+
 @pytest.mark.parametrize("deferred", [0, 2])
 def test_replay_gives_the_gradients_of_the_deferred_pass(box, device, deferred):
     """Vertices past DEFERRED_VERTICES are done by replaying the path (0: all of them, Mitsuba's prb as
