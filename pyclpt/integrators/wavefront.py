@@ -55,6 +55,7 @@ CAPACITY_CHECK = 4
 TAIL_FRACTION = 4  # default tail_paths: a quarter of the wave (docs/wavefront.md, "The tail")
 
 
+_KNOWN_DEFINES = frozenset(SCENE_DEFINES + FILM_DEFINES)
 _TRAVERSAL = frozenset({"BVH_WIDTH", "BVH_LEAF_PACKETS", "BVH_STACK_DISTANCES", "SCENE_HAS_MASKS",
                         "SCENE_HAS_INSTANCES", "DEVICE_CLASS_GPU", "FILM_CROP"})
 _SHADING = frozenset({"SCENE_MATERIALS", "SCENE_HAS_TEXTURES", "SCENE_HAS_BUMPMAPS", "SCENE_HAS_INSTANCES",
@@ -73,14 +74,13 @@ STAGE_DEFINES: dict[str, frozenset[str]] = {
     "shadow_test": _TRAVERSAL | {"SCENE_LIGHTS"},  # an environment's deferred radiance (lights.h, ENV_DEFERRED)
     "light_contribution": frozenset(),
     "sample_bsdf": _SHADING,
-    "finish_paths": frozenset(SCENE_DEFINES + FILM_DEFINES),  # the whole path loop
+    "finish_paths": _KNOWN_DEFINES,  # the whole path loop
 }
 
 
 def stage_defines(stage: str, defines: dict) -> dict:
     """The -D specialisations of ``defines`` (a scene's and a film's) that ``stage`` is built with (STAGE_DEFINES)."""
-    known = set(SCENE_DEFINES + FILM_DEFINES)
-    return {k: v for k, v in defines.items() if k in STAGE_DEFINES[stage] or k not in known}
+    return {k: v for k, v in defines.items() if k in STAGE_DEFINES[stage] or k not in _KNOWN_DEFINES}
 
 
 def expected_rays(last: int, before: int) -> int:
